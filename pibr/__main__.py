@@ -1,0 +1,5 @@
+import sys
+
+from pibr.cli import main
+
+sys.exit(main())

@@ -1,0 +1,97 @@
+"""Every exception pibr raises on purpose, in one place.
+
+::
+
+    PibrError
+    ├── ProtocolError            a peer sent something the protocol does not allow
+    │   ├── BadMagic             the stream does not start a pibr frame
+    │   ├── UnsupportedVersion   framing or handshake version mismatch
+    │   ├── MessageTooLarge      a length on the wire exceeds the configured limit
+    │   ├── UnknownMessageType   the frame's type byte names no message
+    │   ├── MalformedMessage     the payload does not parse as its message type
+    │   ├── TruncatedMessage     the connection ended in the middle of a frame
+    │   └── UnexpectedMessage    a valid message at the wrong moment of the session
+    ├── InvalidPose              NaN/inf components or a zero quaternion
+    ├── TraceError               a head-trace file or its columns do not parse (names the line)
+    ├── SceneError               unknown scene, unreadable asset, bad scene description
+    ├── CodecError               a video or edge-codec payload does not decode
+    └── ConfigError              a command-line or configuration value is out of range
+
+Every :class:`ProtocolError` carries a numeric ``code`` that goes on the wire in an
+``Error`` message, so the peer learns what was wrong before the connection closes.
+"""
+from __future__ import annotations
+
+
+class PibrError(Exception):
+    """Base of all errors pibr raises on purpose."""
+
+
+class ProtocolError(PibrError):
+    code = 1
+
+
+class BadMagic(ProtocolError):
+    code = 2
+
+
+class UnsupportedVersion(ProtocolError):
+    code = 3
+
+
+class MessageTooLarge(ProtocolError):
+    code = 4
+
+
+class UnknownMessageType(ProtocolError):
+    code = 5
+
+
+class MalformedMessage(ProtocolError):
+    code = 6
+
+
+class TruncatedMessage(ProtocolError):
+    code = 7
+
+
+class UnexpectedMessage(ProtocolError):
+    code = 8
+
+
+class InvalidPose(PibrError, ValueError):
+    code = 9
+
+
+class TraceError(PibrError, ValueError):
+    """A trace file does not parse; the message names the file and line."""
+
+
+class SceneError(PibrError):
+    code = 10
+
+
+class CodecError(PibrError):
+    code = 11
+
+
+class ConfigError(PibrError, ValueError):
+    code = 12
+
+
+#: Wire code -> exception class, for turning a received ``Error`` back into an exception.
+ERROR_CODES = {
+    cls.code: cls
+    for cls in (ProtocolError, BadMagic, UnsupportedVersion, MessageTooLarge, UnknownMessageType,
+                MalformedMessage, TruncatedMessage, UnexpectedMessage, InvalidPose, SceneError,
+                CodecError, ConfigError)
+}
+
+
+class RemoteError(PibrError):
+    """The peer closed the session with an ``Error`` message."""
+
+    def __init__(self, code: int, text: str):
+        super().__init__(f"peer reported error {code}: {text}")
+        self.code = code
+        self.text = text

@@ -1,0 +1,463 @@
+"""Protocol messages: dataclasses with ``serialize()`` (payload bytes) and ``parse(payload)``.
+
+Handshake and rare messages (``Hello``, ``Welcome``, ``Stats``, ``Bye``) carry UTF-8 JSON
+objects whose fields are validated here, so both ends see the same typed values. Hot-path
+messages (``Pose``, ``Frame``, ``Clock``, ``ProxyChunk``) are fixed binary layouts,
+little-endian. Every parse error is a :class:`MalformedMessage` naming the message and field.
+
+A session: client ``Hello`` -> server ``Welcome`` (or ``Error``) -> server ``ProxyChunk``s
+(when asked for) -> client ``Pose``/``Clock`` and server ``Frame``/``Clock`` -> either side
+``Bye``. ``Stats`` may flow either way at any time.
+"""
+from __future__ import annotations
+
+import json
+import math
+import struct
+from dataclasses import dataclass, field
+from typing import ClassVar
+
+from .errors import InvalidPose, MalformedMessage
+from .pose import Pose
+
+PROTOCOL_VERSION = 1
+CLOCKS = ("virtual", "real")
+MAX_TEXT = 4096
+
+
+class Message:
+    TYPE: ClassVar[int]
+    NAME: ClassVar[str]
+
+    def serialize(self) -> bytes:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    @classmethod
+    def parse(cls, payload: bytes):  # pragma: no cover - abstract
+        raise NotImplementedError
+
+
+# ---------------------------------------------------------------- JSON helpers
+
+def _load_json(name: str, payload: bytes) -> dict:
+    try:
+        obj = json.loads(payload.decode("utf-8"))
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise MalformedMessage(f"{name}: payload is not UTF-8 JSON ({exc})") from None
+    if not isinstance(obj, dict):
+        raise MalformedMessage(f"{name}: payload must be a JSON object, got {type(obj).__name__}")
+    return obj
+
+
+def _dump_json(obj: dict) -> bytes:
+    return json.dumps(obj, separators=(",", ":"), sort_keys=True, allow_nan=False).encode("utf-8")
+
+
+_MISSING = object()
+
+
+def _get(name: str, obj: dict, key: str, kind, default=_MISSING, lo=None, hi=None, choices=None):
+    """Typed field of a JSON object, with a clear error naming message, field and problem."""
+    if key not in obj:
+        if default is _MISSING:
+            raise MalformedMessage(f"{name}: missing field {key!r}")
+        return default
+    v = obj[key]
+    if kind is float:
+        ok = isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+        v = float(v) if ok else v
+    elif kind is int:
+        ok = isinstance(v, int) and not isinstance(v, bool)
+    elif kind is dict:
+        ok = isinstance(v, dict)
+    elif kind is list:
+        ok = isinstance(v, list)
+    else:
+        ok = isinstance(v, kind)
+    if not ok:
+        raise MalformedMessage(f"{name}: field {key!r} must be {getattr(kind, '__name__', kind)}, got {v!r:.80}")
+    if kind is str and len(v) > MAX_TEXT:
+        raise MalformedMessage(f"{name}: field {key!r} is longer than {MAX_TEXT} characters")
+    if lo is not None and v < lo or hi is not None and v > hi:
+        raise MalformedMessage(f"{name}: field {key!r} = {v} is outside [{lo}, {hi}]")
+    if choices is not None and v not in choices:
+        raise MalformedMessage(f"{name}: field {key!r} = {v!r} is not one of {', '.join(map(str, choices))}")
+    return v
+
+
+# ---------------------------------------------------------------- handshake
+
+@dataclass(frozen=True)
+class OutputConfig:
+    """The client's display: ``width`` x ``height`` pixels, horizontal field of view, output rate."""
+
+    width: int = 960
+    height: int = 540
+    fov_deg: float = 90.0
+    rate_hz: float = 60.0
+
+    def to_json(self) -> dict:
+        return {"width": self.width, "height": self.height, "fov_deg": self.fov_deg, "rate_hz": self.rate_hz}
+
+    @classmethod
+    def from_json(cls, name: str, o: dict) -> "OutputConfig":
+        return cls(
+            width=_get(name, o, "width", int, lo=16, hi=8192),
+            height=_get(name, o, "height", int, lo=16, hi=8192),
+            fov_deg=_get(name, o, "fov_deg", float, lo=1.0, hi=170.0),
+            rate_hz=_get(name, o, "rate_hz", float, lo=1.0, hi=1000.0),
+        )
+
+
+@dataclass(frozen=True)
+class Hello(Message):
+    """Client -> server, first message. ``scene`` empty: the server's default."""
+
+    TYPE: ClassVar[int] = 1
+    NAME: ClassVar[str] = "Hello"
+    client: str = "pibr-client"
+    scene: str = ""
+    clock: str = "virtual"
+    output: OutputConfig = field(default_factory=OutputConfig)
+    want_proxies: bool = False
+    depth_codec: str = ""   # "" = the server's choice
+    time_us: int = 0        # client clock when sent (real clock: offset estimate)
+    protocol: int = PROTOCOL_VERSION
+
+    def serialize(self) -> bytes:
+        return _dump_json({"protocol": self.protocol, "client": self.client, "scene": self.scene,
+                           "clock": self.clock, "output": self.output.to_json(),
+                           "want_proxies": self.want_proxies, "depth_codec": self.depth_codec,
+                           "time_us": self.time_us})
+
+    @classmethod
+    def parse(cls, payload: bytes) -> "Hello":
+        o = _load_json(cls.NAME, payload)
+        return cls(
+            protocol=_get(cls.NAME, o, "protocol", int, lo=0, hi=65535),
+            client=_get(cls.NAME, o, "client", str, ""),
+            scene=_get(cls.NAME, o, "scene", str, ""),
+            clock=_get(cls.NAME, o, "clock", str, "virtual", choices=CLOCKS),
+            output=OutputConfig.from_json(cls.NAME + ".output", _get(cls.NAME, o, "output", dict, {})
+                                          or OutputConfig().to_json()),
+            want_proxies=_get(cls.NAME, o, "want_proxies", bool, False),
+            depth_codec=_get(cls.NAME, o, "depth_codec", str, ""),
+            time_us=_get(cls.NAME, o, "time_us", int, 0),
+        )
+
+
+@dataclass(frozen=True)
+class Welcome(Message):
+    """Server -> client: the session's fixed parameters.
+
+    ``config`` holds everything the client needs to decode and re-render (scene info,
+    views, projection, atlas layout, codecs, server rate and the virtual-time model); its
+    keys are documented and validated by :class:`~pibr.protocol.session.SessionConfig`.
+    """
+
+    TYPE: ClassVar[int] = 2
+    NAME: ClassVar[str] = "Welcome"
+    server: str
+    session: int
+    config: dict
+    time_us: int = 0
+    protocol: int = PROTOCOL_VERSION
+
+    def serialize(self) -> bytes:
+        return _dump_json({"protocol": self.protocol, "server": self.server, "session": self.session,
+                           "config": self.config, "time_us": self.time_us})
+
+    @classmethod
+    def parse(cls, payload: bytes) -> "Welcome":
+        o = _load_json(cls.NAME, payload)
+        return cls(
+            protocol=_get(cls.NAME, o, "protocol", int, lo=0, hi=65535),
+            server=_get(cls.NAME, o, "server", str, ""),
+            session=_get(cls.NAME, o, "session", int, lo=0),
+            config=_get(cls.NAME, o, "config", dict),
+            time_us=_get(cls.NAME, o, "time_us", int, 0),
+        )
+
+
+# ---------------------------------------------------------------- poses and frames
+
+_POSE = struct.Struct("<Iq7d")
+
+
+def _pose_from(name: str, values) -> Pose:
+    try:
+        return Pose.make(values[:3], values[3:])
+    except InvalidPose as exc:
+        raise MalformedMessage(f"{name}: invalid pose: {exc}") from None
+
+
+@dataclass(frozen=True)
+class PoseMsg(Message):
+    """Client -> server: the head pose sampled at client time ``t_us`` (sequence number ``seq``)."""
+
+    TYPE: ClassVar[int] = 3
+    NAME: ClassVar[str] = "Pose"
+    seq: int
+    t_us: int
+    pose: Pose
+
+    def serialize(self) -> bytes:
+        return _POSE.pack(self.seq, self.t_us, *self.pose.position, *self.pose.orientation)
+
+    @classmethod
+    def parse(cls, payload: bytes) -> "PoseMsg":
+        if len(payload) != _POSE.size:
+            raise MalformedMessage(f"Pose: payload must be {_POSE.size} bytes, got {len(payload)}")
+        seq, t_us, *v = _POSE.unpack(payload)
+        return cls(seq, t_us, _pose_from(cls.NAME, v))
+
+
+class PayloadKind:
+    """What a ``Frame`` payload holds."""
+
+    H264_ATLAS = 1        # one H.264 access unit of the colour (+ 8-bit disparity) atlas
+    EDGE_DEPTH = 2        # edge-codec depth of the primary view
+    EDGE_DEPTH_EXTRA = 3  # edge-codec depth of the extra view
+    EDGE_MOTION = 4       # edge-codec motion of moving objects (primary view)
+    ALL = (H264_ATLAS, EDGE_DEPTH, EDGE_DEPTH_EXTRA, EDGE_MOTION)
+    NAMES = {1: "h264-atlas", 2: "edge-depth", 3: "edge-depth-extra", 4: "edge-motion"}
+
+
+_FRAME_HEAD = struct.Struct("<IqqIqI7d7ddd4fB")
+_PAYLOAD_HEAD = struct.Struct("<BI")
+FRAME_HAS_EXTRA = 1
+FRAME_KEYFRAME = 2
+
+
+@dataclass(frozen=True)
+class Frame(Message):
+    """Server -> client: one rendered server frame.
+
+    frame_id      : counts the session's frames from 0
+    render_t_us   : server time of the render (virtual clock: the frame's tick; also the
+                    scene-animation time); the header's vtime says when it is usable
+    pose_t_us     : client time of the pose it was rendered for; pose_seq its sequence number
+    scene_t_us    : scene (animation) time the frame shows
+    primary_pose  : camera-to-world pose of the primary view
+    extra_pose    : of the extra view (None when the frame has none)
+    near, far     : clip spheres of both views
+    timings_ms    : server stage times (render, read back, pack, encode)
+    payloads      : tuple of (PayloadKind, bytes)
+    """
+
+    TYPE: ClassVar[int] = 4
+    NAME: ClassVar[str] = "Frame"
+    frame_id: int
+    render_t_us: int
+    pose_t_us: int
+    pose_seq: int
+    scene_t_us: int
+    primary_pose: Pose
+    extra_pose: Pose | None
+    near: float
+    far: float
+    timings_ms: tuple = (0.0, 0.0, 0.0, 0.0)
+    payloads: tuple = ()
+    keyframe: bool = False
+
+    MAX_PAYLOADS: ClassVar[int] = 8
+
+    def payload(self, kind: int) -> bytes | None:
+        for k, data in self.payloads:
+            if k == kind:
+                return data
+        return None
+
+    def serialize(self) -> bytes:
+        flags = (FRAME_HAS_EXTRA if self.extra_pose is not None else 0) | (FRAME_KEYFRAME if self.keyframe else 0)
+        extra = self.extra_pose if self.extra_pose is not None else Pose.identity()
+        parts = [_FRAME_HEAD.pack(self.frame_id, self.render_t_us, self.pose_t_us, self.pose_seq,
+                                  self.scene_t_us, flags, *self.primary_pose.position,
+                                  *self.primary_pose.orientation, *extra.position, *extra.orientation,
+                                  self.near, self.far, *self.timings_ms, len(self.payloads))]
+        for kind, data in self.payloads:
+            parts.append(_PAYLOAD_HEAD.pack(kind, len(data)))
+            parts.append(bytes(data))
+        return b"".join(parts)
+
+    @classmethod
+    def parse(cls, payload: bytes) -> "Frame":
+        n = cls.NAME
+        if len(payload) < _FRAME_HEAD.size:
+            raise MalformedMessage(f"{n}: payload of {len(payload)} bytes is shorter than its {_FRAME_HEAD.size}-byte header")
+        v = _FRAME_HEAD.unpack_from(payload, 0)
+        frame_id, render_t, pose_t, pose_seq, scene_t, flags = v[:6]
+        if flags & ~(FRAME_HAS_EXTRA | FRAME_KEYFRAME):
+            raise MalformedMessage(f"{n}: unknown flags {flags:#x}")
+        primary = _pose_from(n + ".primary_pose", v[6:13])
+        extra = _pose_from(n + ".extra_pose", v[13:20]) if flags & FRAME_HAS_EXTRA else None
+        near, far = v[20], v[21]
+        if not (math.isfinite(near) and math.isfinite(far) and 0 < near < far):
+            raise MalformedMessage(f"{n}: need 0 < near < far, got near={near}, far={far}")
+        timings = tuple(v[22:26])
+        count = v[26]
+        if count > cls.MAX_PAYLOADS:
+            raise MalformedMessage(f"{n}: {count} payloads exceed the limit of {cls.MAX_PAYLOADS}")
+        pos = _FRAME_HEAD.size
+        payloads = []
+        for i in range(count):
+            if len(payload) - pos < _PAYLOAD_HEAD.size:
+                raise MalformedMessage(f"{n}: payload {i} header is truncated")
+            kind, length = _PAYLOAD_HEAD.unpack_from(payload, pos)
+            pos += _PAYLOAD_HEAD.size
+            if kind not in PayloadKind.ALL:
+                raise MalformedMessage(f"{n}: payload {i} has unknown kind {kind}")
+            if length > len(payload) - pos:
+                raise MalformedMessage(f"{n}: payload {i} claims {length} bytes but only {len(payload) - pos} remain")
+            payloads.append((kind, payload[pos:pos + length]))
+            pos += length
+        if pos != len(payload):
+            raise MalformedMessage(f"{n}: {len(payload) - pos} trailing bytes after the last payload")
+        kinds = [k for k, _ in payloads]
+        if len(set(kinds)) != len(kinds):
+            raise MalformedMessage(f"{n}: a payload kind appears twice")
+        return cls(frame_id, render_t, pose_t, pose_seq, scene_t, primary, extra, near, far, timings,
+                   tuple(payloads), bool(flags & FRAME_KEYFRAME))
+
+
+@dataclass(frozen=True)
+class Clock(Message):
+    """Either way: a promise that no later message from this sender has an earlier virtual time.
+
+    It has no payload; the frame header's ``vtime_us`` carries the promise. On the virtual
+    clock this is what lets each end advance without waiting for a message that never comes
+    (conservative discrete-event simulation's null message).
+    """
+
+    TYPE: ClassVar[int] = 8
+    NAME: ClassVar[str] = "Clock"
+
+    def serialize(self) -> bytes:
+        return b""
+
+    @classmethod
+    def parse(cls, payload: bytes) -> "Clock":
+        if payload:
+            raise MalformedMessage(f"Clock: payload must be empty, got {len(payload)} bytes")
+        return cls()
+
+
+# ---------------------------------------------------------------- proxies (issue 4)
+
+_PROXY = struct.Struct("<III")
+
+
+@dataclass(frozen=True)
+class ProxyChunk(Message):
+    """Server -> client: chunk ``index`` of ``count`` of the zstd-compressed proxy bundle."""
+
+    TYPE: ClassVar[int] = 9
+    NAME: ClassVar[str] = "ProxyChunk"
+    index: int
+    count: int
+    total_size: int
+    data: bytes = b""
+
+    def serialize(self) -> bytes:
+        return _PROXY.pack(self.index, self.count, self.total_size) + self.data
+
+    @classmethod
+    def parse(cls, payload: bytes) -> "ProxyChunk":
+        if len(payload) < _PROXY.size:
+            raise MalformedMessage(f"ProxyChunk: payload of {len(payload)} bytes is shorter than its header")
+        index, count, total = _PROXY.unpack_from(payload, 0)
+        if count == 0 or index >= count:
+            raise MalformedMessage(f"ProxyChunk: chunk index {index} is not below the count {count}")
+        return cls(index, count, total, payload[_PROXY.size:])
+
+
+# ---------------------------------------------------------------- control
+
+@dataclass(frozen=True)
+class Stats(Message):
+    """Either way: named numbers (e.g. the client's missed deadlines, the server's drops)."""
+
+    TYPE: ClassVar[int] = 5
+    NAME: ClassVar[str] = "Stats"
+    values: dict = field(default_factory=dict)
+
+    MAX_ENTRIES: ClassVar[int] = 256
+
+    def serialize(self) -> bytes:
+        return _dump_json({"values": {str(k): float(v) for k, v in self.values.items()}})
+
+    @classmethod
+    def parse(cls, payload: bytes) -> "Stats":
+        o = _load_json(cls.NAME, payload)
+        vals = _get(cls.NAME, o, "values", dict)
+        if len(vals) > cls.MAX_ENTRIES:
+            raise MalformedMessage(f"Stats: {len(vals)} entries exceed the limit of {cls.MAX_ENTRIES}")
+        out = {}
+        for k, v in vals.items():
+            out[k] = _get(cls.NAME, vals, k, float)
+        return cls(out)
+
+
+@dataclass(frozen=True)
+class Bye(Message):
+    """Either way: orderly end of the session."""
+
+    TYPE: ClassVar[int] = 6
+    NAME: ClassVar[str] = "Bye"
+    reason: str = ""
+
+    def serialize(self) -> bytes:
+        return _dump_json({"reason": self.reason[:MAX_TEXT]})
+
+    @classmethod
+    def parse(cls, payload: bytes) -> "Bye":
+        return cls(_get(cls.NAME, _load_json(cls.NAME, payload), "reason", str, ""))
+
+
+_ERROR = struct.Struct("<H")
+
+
+@dataclass(frozen=True)
+class Error(Message):
+    """Either way: the sender is closing the connection because of ``text`` (wire ``code``, see errors.py)."""
+
+    TYPE: ClassVar[int] = 7
+    NAME: ClassVar[str] = "Error"
+    code: int
+    text: str
+
+    def serialize(self) -> bytes:
+        return _ERROR.pack(self.code) + self.text.encode("utf-8")[:MAX_TEXT]
+
+    @classmethod
+    def parse(cls, payload: bytes) -> "Error":
+        if len(payload) < _ERROR.size:
+            raise MalformedMessage("Error: payload shorter than its 2-byte code")
+        if len(payload) - _ERROR.size > MAX_TEXT:
+            raise MalformedMessage(f"Error: text longer than {MAX_TEXT} bytes")
+        (code,) = _ERROR.unpack_from(payload, 0)
+        try:
+            text = payload[_ERROR.size:].decode("utf-8")
+        except UnicodeDecodeError:
+            raise MalformedMessage("Error: text is not UTF-8") from None
+        return cls(code, text)
+
+
+MESSAGE_TYPES: dict[int, type[Message]] = {
+    m.TYPE: m for m in (Hello, Welcome, PoseMsg, Frame, Stats, Bye, Error, Clock, ProxyChunk)
+}
+
+
+def parse_message(msg_type: int, payload: bytes) -> Message:
+    """Payload bytes of a frame of type ``msg_type`` -> message. Raises UnknownMessageType / MalformedMessage."""
+    from .errors import UnknownMessageType
+
+    cls = MESSAGE_TYPES.get(msg_type)
+    if cls is None:
+        raise UnknownMessageType(f"unknown message type {msg_type}")
+    try:
+        return cls.parse(payload)
+    except MalformedMessage:
+        raise
+    except (struct.error, ValueError, TypeError, KeyError) as exc:  # any other parse failure names the message
+        raise MalformedMessage(f"{cls.NAME}: {exc}") from None

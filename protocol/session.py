@@ -1,0 +1,167 @@
+"""The session's fixed parameters, sent by the server in ``Welcome.config``.
+
+Everything the client needs to decode frames and re-render them, and nothing about the
+scene's geometry (the client learns geometry only from proxies on the wire). Validated on
+parse like every other wire input.
+
+Virtual time (DESIGN.md, Time and latency). Both ends share one timeline in integer
+microseconds; 0 is the client's first displayed tick. Server frame k is rendered at
+``t_k = k * frame_interval_us`` with the newest pose whose *arrival* (send time + uplink,
+stamped by the relay) is <= t_k, once the server knows no earlier-arriving pose can come
+(a client message with a later virtual time has arrived). The frame is sent stamped
+``t_k + server_delay_us`` (the model of render + encode time); the relay adds the downlink
+(and bandwidth, jitter). The client may use a frame at every output tick at or after that
+stamp. Each end follows its messages with a ``Clock`` promise so the other never waits for
+a message that will not come.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+from .atlas import AtlasLayout
+from .errors import MalformedMessage
+from .pose import Pose
+
+DEPTH_CODECS = ("h264", "edge")
+
+
+def _num(o, key, lo, hi, kind=float, path="Welcome.config"):
+    if key not in o:
+        raise MalformedMessage(f"{path}: missing field {key!r}")
+    v = o[key]
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or (kind is int and not isinstance(v, int)):
+        raise MalformedMessage(f"{path}: field {key!r} must be a number, got {v!r:.60}")
+    if not math.isfinite(v) or not (lo <= v <= hi):
+        raise MalformedMessage(f"{path}: field {key!r} = {v} is outside [{lo}, {hi}]")
+    return kind(v)
+
+
+@dataclass(frozen=True)
+class ViewConfig:
+    width: int
+    height: int
+
+    def to_json(self):
+        return {"width": self.width, "height": self.height}
+
+    @classmethod
+    def from_json(cls, o, path):
+        if not isinstance(o, dict):
+            raise MalformedMessage(f"{path}: must be an object")
+        return cls(_num(o, "width", 16, 8192, int, path), _num(o, "height", 16, 8192, int, path))
+
+
+@dataclass(frozen=True)
+class SessionConfig:
+    """What ``Welcome.config`` holds (see the module docstring for the time model).
+
+    scene            : scene info (name, near, far, viewer_origin, bounds, dynamic, ...)
+    clock            : "virtual" or "real"
+    server_fps       : server frame rate
+    server_delay_us  : virtual time from a frame's render to its send (render + encode model)
+    primary, extra   : view sizes (extra None when the session has no extra view)
+    extra_offset     : the extra view's pose relative to the primary (pose ∘ offset)
+    atlas            : where the views sit in the H.264 image
+    video_bitrate_kbps, keyint : H.264 settings
+    depth_codec      : "h264" (8-bit disparity in the atlas) or "edge" (edge codec payloads)
+    depth_bits, depth_min_code : quantization of the depth transport
+    motion           : the frame carries motion of moving objects
+    proxies          : {"count": objects, "bytes": compressed size} or None when none are sent
+    """
+
+    scene: dict
+    clock: str
+    server_fps: float
+    server_delay_us: int
+    primary: ViewConfig
+    extra: ViewConfig | None
+    extra_offset: Pose | None
+    atlas: AtlasLayout
+    video_bitrate_kbps: float
+    keyint: int
+    depth_codec: str = "h264"
+    depth_bits: int = 8
+    depth_min_code: int = 16
+    motion: bool = False
+    proxies: dict | None = None
+    options: dict = field(default_factory=dict)
+
+    @property
+    def frame_interval_us(self) -> int:
+        return int(round(1e6 / self.server_fps))
+
+    @property
+    def near(self) -> float:
+        return float(self.scene["near"])
+
+    @property
+    def far(self) -> float:
+        return float(self.scene["far"])
+
+    @property
+    def viewer_origin(self) -> Pose:
+        return Pose.from_array(self.scene["viewer_origin"])
+
+    def to_json(self) -> dict:
+        return {
+            "scene": self.scene, "clock": self.clock, "server_fps": self.server_fps,
+            "server_delay_us": self.server_delay_us, "primary": self.primary.to_json(),
+            "extra": None if self.extra is None else self.extra.to_json(),
+            "extra_offset": None if self.extra_offset is None else list(self.extra_offset.as_array()),
+            "atlas": self.atlas.to_json(), "video_bitrate_kbps": self.video_bitrate_kbps,
+            "keyint": self.keyint, "depth_codec": self.depth_codec, "depth_bits": self.depth_bits,
+            "depth_min_code": self.depth_min_code, "motion": self.motion, "proxies": self.proxies,
+            "options": self.options,
+        }
+
+    @classmethod
+    def from_json(cls, o: dict) -> "SessionConfig":
+        p = "Welcome.config"
+        if not isinstance(o, dict):
+            raise MalformedMessage(f"{p}: must be an object")
+        scene = o.get("scene")
+        if not isinstance(scene, dict):
+            raise MalformedMessage(f"{p}: field 'scene' must be an object")
+        near = _num(scene, "near", 1e-9, 1e12, path=p + ".scene")
+        far = _num(scene, "far", 1e-9, 1e15, path=p + ".scene")
+        if not near < far:
+            raise MalformedMessage(f"{p}.scene: need near < far, got {near} and {far}")
+        vo = scene.get("viewer_origin")
+        try:
+            Pose.from_array(vo)
+        except Exception as exc:  # InvalidPose, shape or type problems all mean the same here
+            raise MalformedMessage(f"{p}.scene: bad viewer_origin ({exc})") from None
+        clock = o.get("clock")
+        if clock not in ("virtual", "real"):
+            raise MalformedMessage(f"{p}: field 'clock' must be 'virtual' or 'real', got {clock!r:.40}")
+        extra = None if o.get("extra") is None else ViewConfig.from_json(o["extra"], p + ".extra")
+        offset = None
+        if o.get("extra_offset") is not None:
+            try:
+                offset = Pose.from_array(o["extra_offset"])
+            except Exception as exc:
+                raise MalformedMessage(f"{p}: bad extra_offset ({exc})") from None
+        codec = o.get("depth_codec", "h264")
+        if codec not in DEPTH_CODECS:
+            raise MalformedMessage(f"{p}: depth_codec must be one of {', '.join(DEPTH_CODECS)}, got {codec!r:.40}")
+        proxies = o.get("proxies")
+        if proxies is not None and not isinstance(proxies, dict):
+            raise MalformedMessage(f"{p}: field 'proxies' must be an object or null")
+        options = o.get("options", {})
+        if not isinstance(options, dict):
+            raise MalformedMessage(f"{p}: field 'options' must be an object")
+        return cls(
+            scene=scene, clock=clock,
+            server_fps=_num(o, "server_fps", 0.1, 1000.0),
+            server_delay_us=_num(o, "server_delay_us", 0, 10_000_000, int),
+            primary=ViewConfig.from_json(o.get("primary"), p + ".primary"),
+            extra=extra, extra_offset=offset,
+            atlas=AtlasLayout.from_json(o.get("atlas")),
+            video_bitrate_kbps=_num(o, "video_bitrate_kbps", 1, 1e7),
+            keyint=_num(o, "keyint", 1, 100000, int),
+            depth_codec=codec,
+            depth_bits=_num(o, "depth_bits", 1, 16, int) if "depth_bits" in o else 8,
+            depth_min_code=_num(o, "depth_min_code", 1, 65534, int) if "depth_min_code" in o else 16,
+            motion=bool(o.get("motion", False)), proxies=proxies, options=options,
+        )

@@ -1,0 +1,407 @@
+"""Head traces: timed camera poses, their canonical CSV form, resampling and built-in recordings.
+
+Conventions (DESIGN.md, Contracts): metres and seconds, right-handed, +Y up, a camera looks
+along -Z, orientations are camera-to-world unit quaternions (w, x, y, z). The canonical CSV
+has the header ``t,px,py,pz,qw,qx,qy,qz`` with ``t`` in seconds from the start. Replay
+resamples to the output rate: linear position, SLERP orientation.
+
+Other file formats are converted once, at the edge, by :mod:`pibr.protocol.trace_import`;
+:func:`load_trace` picks the reader from a file's header line.
+"""
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+from typing import Iterator
+
+import numpy as np
+
+from .errors import TraceError
+from .pose import MIN_QUAT_NORM, Pose, quat_angle, quat_normalize, quat_slerp, quat_to_matrix
+
+CANONICAL_COLUMNS = ("t", "px", "py", "pz", "qw", "qx", "qy", "qz")
+CANONICAL_HEADER = ",".join(CANONICAL_COLUMNS)
+
+#: Header of the pred6dof / HoloLens recordings (Unity, left-handed, .NET ticks).
+PRED6DOF_COLUMNS = ("timestamp", "x", "y", "z", "qx", "qy", "qz", "qw")
+
+#: A quaternion this close to unit length is kept bit for bit, so write -> read is exact.
+_UNIT_TOLERANCE = 1e-12
+#: How far from unit length a HeadTrace orientation may be (rounding of stored files).
+_UNIT_CHECK = 1e-6
+
+_BUILTIN_DIR = "traces/pred6dof"
+_BUILTINS = {
+    "pred6dof-1": ("1.csv", "real HoloLens head motion, walking around a virtual object, 77.7 s, "
+                            "~60 Hz uneven (pred6dof 1.csv)"),
+    "pred6dof-2": ("2.csv", "real HoloLens head motion, walking around a virtual object, 72.4 s, "
+                            "~60 Hz uneven (pred6dof 2.csv)"),
+}
+
+
+@dataclass(eq=False)
+class HeadTrace:
+    """A recorded or synthetic head motion.
+
+    t : (n,) float64 seconds, t[0] == 0, strictly increasing
+    positions : (n, 3) float64 metres, camera-to-world
+    orientations : (n, 4) float64 unit quaternions (w, x, y, z), camera-to-world
+    name : a label (file stem, built-in name, synthetic kind)
+    warnings : what an importer fixed or noticed (dropped duplicates, gaps), for reports
+
+    The arrays are stored read-only, so a trace can be shared without copying. Build one from
+    raw samples (any start time, unnormalised quaternions) with :meth:`from_samples`.
+    """
+
+    t: np.ndarray
+    positions: np.ndarray
+    orientations: np.ndarray
+    name: str = "trace"
+    warnings: list = field(default_factory=list)
+
+    def __post_init__(self):
+        t = np.array(self.t, dtype=np.float64)
+        p = np.array(self.positions, dtype=np.float64)
+        q = np.array(self.orientations, dtype=np.float64)
+        label = f"head trace {self.name!r}"
+        if t.ndim != 1 or t.size == 0:
+            raise TraceError(f"{label}: t must have shape (n,) with n >= 1, got {t.shape}")
+        n = t.size
+        if p.shape != (n, 3):
+            raise TraceError(f"{label}: positions must have shape ({n}, 3), got {p.shape}")
+        if q.shape != (n, 4):
+            raise TraceError(f"{label}: orientations must have shape ({n}, 4), got {q.shape}")
+        for what, a in (("t", t), ("positions", p), ("orientations", q)):
+            bad = np.flatnonzero(~np.all(np.isfinite(a.reshape(n, -1)), axis=1))
+            if bad.size:
+                raise TraceError(f"{label}: {what} has a NaN or infinite value at sample {bad[0]}")
+        if t[0] != 0.0:
+            raise TraceError(f"{label}: t must start at 0, got {t[0]!r} "
+                             "(HeadTrace.from_samples re-bases times)")
+        steps = np.diff(t)
+        if np.any(steps <= 0):
+            i = int(np.flatnonzero(steps <= 0)[0]) + 1
+            raise TraceError(f"{label}: t must be strictly increasing; sample {i} has t={t[i]!r} "
+                             f"after t={t[i - 1]!r}")
+        norms = np.linalg.norm(q, axis=1)
+        off = np.flatnonzero(np.abs(norms - 1.0) > _UNIT_CHECK)
+        if off.size:
+            raise TraceError(f"{label}: orientations must be unit quaternions; sample {off[0]} has "
+                             f"norm {norms[off[0]]!r} (HeadTrace.from_samples normalises)")
+        for a in (t, p, q):
+            a.flags.writeable = False
+        self.t, self.positions, self.orientations = t, p, q
+        self.warnings = list(self.warnings)
+
+    @classmethod
+    def from_samples(cls, t, positions, orientations, name: str = "trace", warnings=()) -> "HeadTrace":
+        """Trace from raw samples: times re-based to start at 0, quaternions normalised (w >= 0).
+
+        t : (n,) seconds; positions : (n, 3); orientations : (n, 4) (w, x, y, z), non-zero
+        """
+        t = np.asarray(t, dtype=np.float64)
+        if t.ndim != 1 or t.size == 0:
+            raise TraceError(f"head trace {name!r}: t must have shape (n,) with n >= 1, got {t.shape}")
+        if not np.isfinite(t[0]):
+            raise TraceError(f"head trace {name!r}: t has a NaN or infinite value at sample 0")
+        q = np.asarray(orientations, dtype=np.float64)
+        if q.ndim != 2 or q.shape[1] != 4:
+            raise TraceError(f"head trace {name!r}: orientations must have shape (n, 4), got {q.shape}")
+        return cls(t - t[0], positions, unit_quaternions(q, name), name, list(warnings))
+
+    # ----------------------------------------------------------------------------- basics
+
+    def __len__(self) -> int:
+        return int(self.t.size)
+
+    @property
+    def duration(self) -> float:
+        """Seconds from the first to the last sample."""
+        return float(self.t[-1])
+
+    def __repr__(self) -> str:
+        return f"HeadTrace(name={self.name!r}, samples={len(self)}, duration={self.duration:.3f} s)"
+
+    # ----------------------------------------------------------------------------- sampling
+
+    def sample(self, times):
+        """Interpolated poses at ``times``: linear position, SLERP orientation.
+
+        times : (m,) seconds (or a scalar); outside [0, duration] the end samples are held.
+        Returns positions (m, 3) and orientations (m, 4) ((3,) and (4,) for a scalar).
+        """
+        times = np.asarray(times, dtype=np.float64)
+        scalar = times.ndim == 0
+        times = np.atleast_1d(times)
+        if times.ndim != 1:
+            raise TraceError(f"sample times must have shape (m,), got {times.shape}")
+        if not np.all(np.isfinite(times)):
+            raise TraceError("sample times must be finite")
+        n = len(self)
+        if n == 1:
+            pos = np.repeat(self.positions, times.size, axis=0)
+            rot = np.repeat(self.orientations, times.size, axis=0)
+        else:
+            clamped = np.clip(times, 0.0, self.duration)
+            i = np.clip(np.searchsorted(self.t, clamped, side="right") - 1, 0, n - 2)
+            s = (clamped - self.t[i]) / (self.t[i + 1] - self.t[i])
+            pos = self.positions[i] + (self.positions[i + 1] - self.positions[i]) * s[:, None]
+            rot = quat_slerp(self.orientations[i], self.orientations[i + 1], s)
+        return (pos[0], rot[0]) if scalar else (pos, rot)
+
+    def pose_at(self, t: float) -> Pose:
+        """Pose at time ``t`` seconds (held at the ends)."""
+        p, q = self.sample(float(t))
+        return Pose.make(p, q)
+
+    def resample(self, rate_hz: float, start: float = 0.0, duration: float | None = None) -> "HeadTrace":
+        """Uniformly sampled copy: times start, start + 1/rate, ... up to start + duration
+        (default, and at most: the end of the trace), re-based to 0. Sample k is at exactly
+        k / rate_hz."""
+        rate_hz = float(rate_hz)
+        if not (math.isfinite(rate_hz) and rate_hz > 0):
+            raise TraceError(f"resample rate must be a positive number of Hz, got {rate_hz!r}")
+        start, end = self._window(start, duration)
+        # A hair of slack so that an end falling exactly on a tick is not lost to rounding.
+        count = int(math.floor((end - start) * rate_hz + 1e-9)) + 1
+        rel = np.arange(count, dtype=np.float64) / rate_hz
+        pos, rot = self.sample(start + rel)
+        return HeadTrace(rel, pos, rot, self.name, self.warnings)
+
+    def slice(self, start: float, duration: float | None = None) -> "HeadTrace":
+        """The part in [start, start + duration], re-based to 0; the original samples inside,
+        plus interpolated samples exactly at both ends of the window."""
+        start, end = self._window(start, duration)
+        inside = (self.t > start) & (self.t < end)
+        times = np.concatenate([[start], self.t[inside], [end]]) if end > start else np.array([start])
+        # Drop interpolated ends that fall (within rounding) on an original sample.
+        keep = np.concatenate([[True], np.diff(times) > 1e-12])
+        times = times[keep]
+        pos, rot = self.sample(times)
+        return HeadTrace(times - start, pos, rot, self.name, self.warnings)
+
+    def _window(self, start: float, duration: float | None) -> tuple[float, float]:
+        start = float(start)
+        if not (math.isfinite(start) and 0.0 <= start <= self.duration):
+            raise TraceError(f"start {start!r} s is outside the trace (0 .. {self.duration:.6g} s)")
+        if duration is None:
+            return start, self.duration
+        duration = float(duration)
+        if not (math.isfinite(duration) and duration >= 0):
+            raise TraceError(f"duration must be a non-negative number of seconds, got {duration!r}")
+        return start, min(start + duration, self.duration)
+
+    # ----------------------------------------------------------------------------- statistics
+
+    def speeds(self) -> tuple[np.ndarray, np.ndarray]:
+        """Per interval (n - 1,): linear speed in m/s and angular speed in rad/s."""
+        dt = np.diff(self.t)
+        linear = np.linalg.norm(np.diff(self.positions, axis=0), axis=1) / dt
+        angular = quat_angle(self.orientations[:-1], self.orientations[1:]) / dt
+        return linear, angular
+
+    def summary(self) -> dict:
+        """JSON-ready statistics: sample count, duration, rates, speeds, position extent."""
+        linear, angular = self.speeds()
+        steps = np.diff(self.t)
+
+        def stats(v, scale=1.0):
+            if v.size == 0:
+                return {"mean": 0.0, "p95": 0.0, "max": 0.0}
+            return {"mean": float(np.mean(v)) * scale, "p95": float(np.percentile(v, 95)) * scale,
+                    "max": float(np.max(v)) * scale}
+
+        lo, hi = self.positions.min(axis=0), self.positions.max(axis=0)
+        return {
+            "name": self.name,
+            "samples": len(self),
+            "duration_s": self.duration,
+            "median_rate_hz": float(1.0 / np.median(steps)) if steps.size else None,
+            "max_gap_s": float(steps.max()) if steps.size else 0.0,
+            "linear_speed_m_s": stats(linear),
+            "angular_speed_rad_s": stats(angular),
+            "angular_speed_deg_s": stats(angular, 180.0 / math.pi),
+            "position_min": lo.tolist(),
+            "position_max": hi.tolist(),
+            "position_extent": (hi - lo).tolist(),
+            "warnings": list(self.warnings),
+        }
+
+
+# --------------------------------------------------------------------------------- helpers
+
+
+def unit_quaternions(q, name: str = "trace") -> np.ndarray:
+    """Normalised copy of quaternions (n, 4) with w >= 0; rows already unit to rounding are
+    kept bit for bit (only their sign may flip), so a canonical file reads back exactly."""
+    q = np.asarray(q, dtype=np.float64)
+    try:
+        normalised = quat_normalize(q)
+    except (ValueError, ArithmeticError) as exc:  # InvalidPose is a ValueError
+        raise TraceError(f"head trace {name!r}: {exc}") from exc
+    if q.ndim != 2:
+        return normalised
+    keep = np.abs(np.linalg.norm(q, axis=1) - 1.0) <= _UNIT_TOLERANCE
+    sign = np.where(np.sum(normalised * q, axis=1) < 0, -1.0, 1.0)
+    return np.where(keep[:, None], q * sign[:, None], normalised)
+
+
+def yaw_pitch(orientations) -> np.ndarray:
+    """Yaw (about +Y, 0 looking along -Z, positive turning left) and pitch (positive looking
+    up) in radians of the viewing direction of each orientation (n, 4). Returns (n, 2); yaw is
+    unwrapped so it is continuous over time."""
+    forward = -quat_to_matrix(np.asarray(orientations, dtype=np.float64))[..., :, 2]
+    yaw = np.unwrap(np.arctan2(-forward[..., 0], -forward[..., 2]))
+    pitch = np.arcsin(np.clip(forward[..., 1], -1.0, 1.0))
+    return np.stack([yaw, pitch], axis=-1)
+
+
+def row_error(path, line: int, problem: str) -> TraceError:
+    """The error for one bad line of a trace file: names the file and the 1-based line."""
+    return TraceError(f"{path}: line {line}: {problem}")
+
+
+def iter_lines(path) -> Iterator[tuple[int, str]]:
+    """(1-based line number, stripped text) of every non-blank line of a text file."""
+    try:
+        with open(path, encoding="utf-8-sig") as f:
+            for number, line in enumerate(f, start=1):
+                text = line.strip()
+                if text:
+                    yield number, text
+    except FileNotFoundError as exc:
+        raise TraceError(f"{path}: no such trace file") from exc
+    except UnicodeDecodeError as exc:
+        raise TraceError(f"{path}: not a text (UTF-8) file: {exc}") from exc
+    except OSError as exc:
+        raise TraceError(f"{path}: cannot read: {exc.strerror or exc}") from exc
+
+
+def parse_number(path, line: int, column: str, text: str) -> float:
+    """A finite float from one CSV field, or a line-numbered TraceError."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise row_error(path, line, f"column {column!r}: {text!r} is not a number") from None
+    if math.isnan(value):
+        raise row_error(path, line, f"column {column!r} is NaN")
+    if math.isinf(value):
+        raise row_error(path, line, f"column {column!r} is infinite")
+    return value
+
+
+def check_quaternion(path, line: int, q) -> None:
+    """Raise a line-numbered TraceError for a (near) zero quaternion (w, x, y, z)."""
+    if math.sqrt(sum(c * c for c in q)) < MIN_QUAT_NORM:
+        raise row_error(path, line, f"zero quaternion {tuple(q)} names no rotation")
+
+
+def header_fields(text: str, delimiter: str | None = ",") -> list[str]:
+    """Field names of a header line, stripped of whitespace and quotes."""
+    return [f.strip().strip("\"'").strip() for f in text.split(delimiter)]
+
+
+# --------------------------------------------------------------------------------- canonical CSV
+
+
+def read_canonical_csv(path, name: str | None = None) -> HeadTrace:
+    """Read a canonical ``t,px,py,pz,qw,qx,qy,qz`` file. Times are re-based to start at 0 and
+    quaternions normalised. Any bad row raises TraceError naming the file and line."""
+    name = name or Path(path).stem
+    lines = iter_lines(path)
+    first = next(lines, None)
+    if first is None:
+        raise TraceError(f"{path}: empty file, expected the header {CANONICAL_HEADER!r}")
+    line, text = first
+    if header_fields(text) != list(CANONICAL_COLUMNS):
+        raise row_error(path, line, f"header must be exactly {CANONICAL_HEADER!r}, got {text!r}")
+    times, rows = [], []
+    last_time, last_line = None, None
+    for line, text in lines:
+        fields = text.split(",")
+        if len(fields) != len(CANONICAL_COLUMNS):
+            raise row_error(path, line, f"expected {len(CANONICAL_COLUMNS)} columns "
+                                        f"({CANONICAL_HEADER}), got {len(fields)}")
+        values = [parse_number(path, line, c, f) for c, f in zip(CANONICAL_COLUMNS, fields)]
+        check_quaternion(path, line, values[4:])
+        t = values[0]
+        if last_time is not None and t <= last_time:
+            if t == last_time:
+                raise row_error(path, line, f"duplicate timestamp t={t!r} (same as line {last_line})")
+            raise row_error(path, line, f"time is not increasing: t={t!r} after t={last_time!r} "
+                                        f"on line {last_line}")
+        last_time, last_line = t, line
+        times.append(t)
+        rows.append(values[1:])
+    if not rows:
+        raise TraceError(f"{path}: no samples after the header")
+    data = np.array(rows, dtype=np.float64)
+    return HeadTrace.from_samples(np.array(times), data[:, :3], data[:, 3:], name)
+
+
+def write_canonical_csv(trace: HeadTrace, path) -> None:
+    """Write ``trace`` as canonical CSV; floats are written exactly (shortest round-trip form)."""
+    table = np.column_stack([trace.t, trace.positions, trace.orientations])
+    out = [CANONICAL_HEADER]
+    out.extend(",".join(map(repr, row)) for row in table.tolist())
+    try:
+        with open(path, "w", encoding="utf-8", newline="\n") as f:
+            f.write("\n".join(out) + "\n")
+    except OSError as exc:
+        raise TraceError(f"{path}: cannot write: {exc.strerror or exc}") from exc
+
+
+# --------------------------------------------------------------------------------- loading
+
+
+def builtin_traces() -> dict[str, str]:
+    """Built-in trace name -> one-line description."""
+    return {name: description for name, (_, description) in _BUILTINS.items()}
+
+
+def detect_format(path) -> str:
+    """'canonical' or 'pred6dof' from a file's header line; TraceError for anything else."""
+    first = next(iter_lines(path), None)
+    if first is None:
+        raise TraceError(f"{path}: empty file")
+    line, text = first
+    names = header_fields(text)
+    if names == list(CANONICAL_COLUMNS):
+        return "canonical"
+    if [f.lower() for f in names] == list(PRED6DOF_COLUMNS):
+        return "pred6dof"
+    raise TraceError(
+        f"{path}: line {line}: unrecognised trace header {text!r}; expected {CANONICAL_HEADER!r} "
+        f"(canonical) or {','.join(PRED6DOF_COLUMNS)!r} (pred6dof/HoloLens). For other CSV files name "
+        "the columns: pibr trace convert IN OUT --format csv --columns t=...,px=...")
+
+
+def load_trace(spec, format: str = "auto") -> HeadTrace:
+    """A head trace from a file path or a built-in name (see :func:`builtin_traces`).
+
+    format : 'auto' (from the header line), 'canonical' or 'pred6dof'
+    """
+    from . import trace_import  # imports this module; deferred to keep the import order simple
+
+    if format not in ("auto", "canonical", "pred6dof"):
+        raise TraceError(f"unknown trace format {format!r}; expected auto, canonical or pred6dof")
+    path = Path(os.fspath(spec))
+    if not path.is_file():
+        key = str(spec)
+        if key not in _BUILTINS:
+            raise TraceError(f"{key!r} is neither a trace file nor a built-in trace "
+                             f"(built-in: {', '.join(_BUILTINS)})")
+        filename = _BUILTINS[key][0]
+        ref = resources.files("pibr.protocol.data").joinpath(_BUILTIN_DIR, filename)
+        with resources.as_file(ref) as builtin_path:
+            trace = trace_import.import_pred6dof(builtin_path)
+        trace.name = key
+        return trace
+    if format == "auto":
+        format = detect_format(path)
+    if format == "canonical":
+        return read_canonical_csv(path)
+    return trace_import.import_pred6dof(path)

@@ -1,0 +1,16 @@
+"""Shared fixtures: a GL context (skipped with a clear reason where EGL is missing)."""
+from __future__ import annotations
+
+import pytest
+
+
+@pytest.fixture(scope="session")
+def gl_ctx():
+    from pibr.protocol.gl import create_context
+
+    try:
+        ctx = create_context()
+    except RuntimeError as exc:  # no EGL driver on this machine
+        pytest.skip(f"no OpenGL: {exc}")
+    yield ctx
+    ctx.release()
