@@ -1,0 +1,517 @@
+"""Load real assets (OBJ+MTL, glTF/GLB, PLY, STL, OFF, ... anything ``trimesh`` reads) as scene objects.
+
+Every asset is converted once, here, to pibr's conventions (metres, right-handed, +Y up):
+
+* node transforms of scene graphs (glTF) are applied, and so are ``units`` and ``up``;
+* each geometry (trimesh already splits OBJ per material and glTF per primitive) becomes
+  one :class:`SceneObject` with a unique name;
+* vertices are re-centred on their bounding-box centre, the offset going into the float64
+  ``transform``, so float32 vertices stay small even for assets placed at 1e6 m;
+* degenerate triangles, triangles touching NaN/inf vertices and unreferenced vertices are
+  removed; point clouds and line sets are skipped with a warning;
+* materials: glTF ``baseColorFactor`` x ``baseColorTexture``, OBJ ``Kd`` or ``map_Kd``,
+  vertex or face colours (PLY) as :attr:`Mesh.colors`; textures become ``(h, w, 3) uint8``
+  of at most :data:`MAX_TEXTURE_SIZE` pixels a side, and only for meshes that have UVs.
+
+Any failure raises :class:`SceneError` naming the file and the reason.
+"""
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from pibr.protocol.errors import SceneError
+from pibr.protocol.pose import Pose
+
+from .scene import Material, Mesh, SceneObject
+
+log = logging.getLogger(__name__)
+
+#: Longest texture side after loading; larger images are downscaled (aspect kept).
+MAX_TEXTURE_SIZE = 2048
+
+#: Metres per unit, for ``units=``.
+UNIT_SCALES = {
+    "m": 1.0, "meter": 1.0, "meters": 1.0, "metre": 1.0, "metres": 1.0,
+    "cm": 0.01, "centimeters": 0.01, "centimetres": 0.01,
+    "mm": 0.001, "millimeters": 0.001, "millimetres": 0.001,
+    "km": 1000.0,
+    "in": 0.0254, "inch": 0.0254, "inches": 0.0254,
+    "ft": 0.3048, "foot": 0.3048, "feet": 0.3048,
+}
+
+UP_AXES = ("y", "z", "auto")
+CENTER_MODES = (None, "bounds", "base")
+
+# glTF is +Y up and in metres by specification: 'auto' never guesses for it.
+_Y_UP_FORMATS = (".gltf", ".glb")
+
+# Z-up to Y-up: a rotation of -90 degrees about +X, (x, y, z) -> (x, z, -y).
+_Z_TO_Y = np.array([[1.0, 0, 0, 0], [0, 0, 1.0, 0], [0, -1.0, 0, 0], [0, 0, 0, 1.0]])
+
+
+def unit_scale(units) -> float:
+    """Metres per unit: a name from :data:`UNIT_SCALES`, a positive number, or None (metres)."""
+    if units is None:
+        return 1.0
+    if isinstance(units, str):
+        key = units.strip().lower()
+        if key not in UNIT_SCALES:
+            raise SceneError(f"unknown units {units!r}; use a number (metres per unit) or one of "
+                             f"m, cm, mm, km, in, ft")
+        return UNIT_SCALES[key]
+    if isinstance(units, bool) or not isinstance(units, (int, float)):
+        raise SceneError(f"units must be a name or a number, got {units!r}")
+    if not math.isfinite(units) or units <= 0:
+        raise SceneError(f"units scale must be a positive finite number, got {units!r}")
+    return float(units)
+
+
+def asset_formats() -> list[str]:
+    """File extensions (without dot) that the installed trimesh can read."""
+    import trimesh
+
+    return sorted(trimesh.available_formats())
+
+
+def is_asset_path(path) -> bool:
+    """Whether ``path``'s extension is one trimesh reads (the file need not exist)."""
+    name = Path(path).name.lower()
+    return any(name.endswith("." + ext) for ext in asset_formats())
+
+
+# ----------------------------------------------------------------------------- textures
+
+def texture_array(image, max_size: int = MAX_TEXTURE_SIZE) -> np.ndarray:
+    """PIL image -> (h, w, 3) uint8, downscaled so neither side exceeds ``max_size``."""
+    from PIL import Image
+
+    if image.mode in ("I", "I;16", "I;16B", "I;16L", "F"):
+        # 16-bit / float greyscale: PIL's convert("RGB") clips instead of scaling.
+        a = np.asarray(image, dtype=np.float64)
+        peak = a.max() if a.size and a.max() > 0 else 1.0
+        image = Image.fromarray(np.clip(a / peak * 255.0 + 0.5, 0, 255).astype(np.uint8))
+    if image.mode != "RGB":
+        image = image.convert("RGB")
+    w, h = image.size
+    if max(w, h) > max_size:
+        s = max_size / max(w, h)
+        image = image.resize((max(1, round(w * s)), max(1, round(h * s))), Image.Resampling.LANCZOS)
+    return np.ascontiguousarray(np.asarray(image, dtype=np.uint8))
+
+
+def load_texture(path, max_size: int = MAX_TEXTURE_SIZE) -> np.ndarray:
+    """Read an image file as a texture: (h, w, 3) uint8, at most ``max_size`` px a side."""
+    from PIL import Image, UnidentifiedImageError
+
+    path = Path(path)
+    if not path.is_file():
+        raise SceneError(f"{path}: texture image does not exist")
+    try:
+        with Image.open(path) as im:
+            im.load()
+            return texture_array(im, max_size)
+    except (OSError, UnidentifiedImageError, ValueError) as exc:
+        raise SceneError(f"{path}: cannot read texture image: {exc}") from exc
+
+
+# ----------------------------------------------------------------------------- loading
+
+@dataclass
+class _Part:
+    """One geometry instance in world space (float64), before re-centring."""
+
+    name: str
+    vertices: np.ndarray          # (n, 3) float64
+    faces: np.ndarray             # (m, 3) int64
+    normals: np.ndarray | None    # (n, 3) float64 unit, or None: let Mesh compute them
+    uvs: np.ndarray | None        # (n, 2)
+    colors: np.ndarray | None     # (n, 4) uint8
+    material: Material
+
+
+def load_asset(path, *, up: str = "y", units=None, fit_size: float | None = None,
+               center: str | None = None, scale=1.0, name: str | None = None) -> list[SceneObject]:
+    """Load an asset file as a list of static scene objects, in metres and +Y up.
+
+    up       : 'y', 'z' (converted to +Y up) or 'auto' (glTF: 'y' by spec; other formats:
+               a guess from the bounds -- resting on z = 0 or flatter along z means Z-up).
+    units    : the file's unit, a name (m, cm, mm, km, in, ft) or metres per unit; None: metres.
+    fit_size : if given, scale the asset so its largest bounding-box extent is this many metres.
+    center   : None (keep the file's origin), 'bounds' (box centre to the origin) or 'base'
+               (bottom centre of the box to the origin: the asset stands on y = 0).
+    scale    : extra scale factor, a number or (3,) per axis, positive, applied last.
+    name     : object name prefix (default: the file stem); parts are named ``name/part``.
+
+    Each object's ``transform`` is the translation to its bounding-box centre; rotations,
+    scales and node transforms are baked into the (float32, small) vertices.
+    """
+    path = Path(path).expanduser()
+    if up not in UP_AXES:
+        raise SceneError(f"{path}: up must be one of {', '.join(UP_AXES)}, got {up!r}")
+    if center not in CENTER_MODES:
+        raise SceneError(f"{path}: center must be None, 'bounds' or 'base', got {center!r}")
+    try:
+        to_metres = unit_scale(units)
+    except SceneError as exc:
+        raise SceneError(f"{path}: {exc}") from None
+    if fit_size is not None and (not math.isfinite(fit_size) or fit_size <= 0):
+        raise SceneError(f"{path}: fit_size must be a positive number of metres, got {fit_size!r}")
+    user_scale = _check_scale(scale, path)
+
+    tscene = _read(path)
+    parts, skipped = _extract_parts(tscene, path)
+    if not parts:
+        what = f" (skipped: {', '.join(skipped)})" if skipped else ""
+        raise SceneError(f"{path}: the asset contains no triangles{what}")
+
+    if up == "auto":
+        up = "y" if path.suffix.lower() in _Y_UP_FORMATS else _guess_up(_union_bounds(parts))
+        log.info("%s: up axis %s (auto)", path, up)
+    convert = np.diag([to_metres, to_metres, to_metres, 1.0])
+    if up == "z":
+        convert = convert @ _Z_TO_Y
+    for p in parts:
+        _transform_part(p, convert)
+
+    lo, hi = _union_bounds(parts)
+    anchor = np.zeros(3)
+    if center == "bounds":
+        anchor = (lo + hi) / 2
+    elif center == "base":
+        anchor = np.array([(lo[0] + hi[0]) / 2, lo[1], (lo[2] + hi[2]) / 2])
+    factor = np.ones(3)
+    if fit_size is not None:
+        largest = float(np.max(hi - lo))
+        if largest <= 0:
+            raise SceneError(f"{path}: cannot fit_size an asset with zero extent")
+        factor *= fit_size / largest
+    factor = factor * user_scale
+    if center is not None or fit_size is not None or np.any(user_scale != 1.0):
+        m = np.diag(np.append(factor, 1.0))
+        m[:3, 3] = -anchor * factor
+        for p in parts:
+            _transform_part(p, m)
+
+    base = name if name is not None else path.stem
+    names = _unique_names(base, [p.name for p in parts])
+    objects = []
+    for p, obj_name in zip(parts, names):
+        try:
+            objects.append(_to_object(p, obj_name))
+        except SceneError as exc:
+            raise SceneError(f"{path}: part {p.name!r}: {exc}") from None
+    return objects
+
+
+def _check_scale(scale, path) -> np.ndarray:
+    try:
+        s = np.broadcast_to(np.asarray(scale, dtype=np.float64), (3,)).copy()
+    except (ValueError, TypeError):
+        raise SceneError(f"{path}: scale must be a number or 3 numbers, got {scale!r}") from None
+    if not np.all(np.isfinite(s)) or np.any(s <= 0):
+        raise SceneError(f"{path}: scale must be positive and finite, got {scale!r}")
+    return s
+
+
+def _read(path: Path):
+    """trimesh.Scene of the file; every failure as a SceneError naming the file."""
+    import trimesh
+
+    if not path.exists():
+        raise SceneError(f"{path}: asset file does not exist")
+    if not path.is_file():
+        raise SceneError(f"{path}: not a file")
+    formats = asset_formats()
+    if not is_asset_path(path):
+        raise SceneError(f"{path}: unsupported asset format {path.suffix or '(no extension)'!r}; "
+                         f"readable: {', '.join(formats)}")
+    try:
+        return trimesh.load_scene(str(path))
+    except Exception as exc:  # trimesh raises anything from KeyError to struct.error on bad files
+        reason = str(exc) or type(exc).__name__
+        raise SceneError(f"{path}: cannot read asset: {type(exc).__name__}: {reason}") from exc
+
+
+def _extract_parts(tscene, path: Path) -> tuple[list[_Part], list[str]]:
+    """World-space (file units, file axes) triangle parts of every node, and what was skipped."""
+    import trimesh
+
+    parts, skipped = [], []
+    textures: dict[int, np.ndarray] = {}  # id(PIL image) -> array, so shared images convert once
+    for node in sorted(tscene.graph.nodes_geometry):
+        matrix, geom_name = tscene.graph[node]
+        geom = tscene.geometry[geom_name]
+        label = node if node == geom_name else f"{node} ({geom_name})"
+        if not isinstance(geom, trimesh.Trimesh):
+            n = len(getattr(geom, "vertices", ()))
+            kind = "point cloud" if isinstance(geom, trimesh.PointCloud) else type(geom).__name__
+            log.warning("%s: skipping %s %r with %d points and no triangles", path, kind, label, n)
+            skipped.append(f"{kind} {label!r} with {n} points")
+            continue
+        if len(geom.faces) == 0:
+            log.warning("%s: skipping mesh %r: it has no faces", path, label)
+            skipped.append(f"mesh {label!r} without faces")
+            continue
+        try:
+            part = _part_from_trimesh(geom, np.asarray(matrix, dtype=np.float64), node, textures)
+        except SceneError as exc:
+            raise SceneError(f"{path}: part {label!r}: {exc}") from None
+        except (ValueError, TypeError, IndexError, AttributeError, OSError) as exc:
+            # Malformed visuals (UV count mismatch, broken embedded image) surface here.
+            raise SceneError(f"{path}: part {label!r}: cannot convert: {type(exc).__name__}: {exc}") from exc
+        if part is None:
+            log.warning("%s: skipping mesh %r: all its triangles are degenerate", path, label)
+            skipped.append(f"mesh {label!r} with only degenerate triangles")
+            continue
+        parts.append(part)
+    return parts, skipped
+
+
+def _part_from_trimesh(geom, matrix: np.ndarray, node: str, textures: dict) -> _Part | None:
+    """Convert one trimesh geometry placed by ``matrix`` (4, 4); None if nothing is left after cleaning."""
+    vertices = np.asarray(geom.vertices, dtype=np.float64)
+    faces = np.asarray(geom.faces, dtype=np.int64)
+    normals = None
+    # Normals read from the file sit in trimesh's cache; otherwise trimesh would compute them.
+    if "vertex_normals" in getattr(geom, "_cache", ()):
+        n = np.asarray(geom.vertex_normals, dtype=np.float64)
+        if n.shape == vertices.shape:
+            normals = n
+    material, uvs, colors, face_colors = _visual_attributes(geom.visual, len(vertices), len(faces), textures)
+    if face_colors is not None:
+        # Face colours that differ: give every face its own three vertices so colours stay exact.
+        vertices = vertices[faces].reshape(-1, 3)
+        normals = normals[faces].reshape(-1, 3) if normals is not None else None
+        uvs = uvs[faces].reshape(-1, 2) if uvs is not None else None
+        colors = np.repeat(face_colors, 3, axis=0)
+        faces = np.arange(len(vertices), dtype=np.int64).reshape(-1, 3)
+    part = _Part(node, vertices, faces, normals, uvs, colors, material)
+    _transform_part(part, matrix)
+    return part if _clean(part) else None
+
+
+def _visual_attributes(visual, n_vertices: int, n_faces: int, textures: dict):
+    """(Material, uvs (n, 2) or None, vertex colours (n, 4) uint8 or None, face colours (m, 4) or None).
+
+    Face colours are returned only when they differ between faces; uniform ones become vertex colours.
+    """
+    kind = getattr(visual, "kind", None)
+    mat = getattr(visual, "material", None)
+    if mat is None:  # ColorVisuals
+        # White base: the colours alone give the surface colour, as the file means.
+        white = Material(base_color=(1.0, 1.0, 1.0, 1.0))
+        if kind == "vertex":
+            vc = np.asarray(visual.vertex_colors, dtype=np.uint8)
+            if vc.shape == (n_vertices, 4):
+                return white, None, vc, None
+        elif kind == "face":
+            fc = np.asarray(visual.face_colors, dtype=np.uint8)
+            if fc.shape == (n_faces, 4):
+                if np.all(fc == fc[0]):
+                    return white, None, np.repeat(fc[:1], n_vertices, axis=0), None
+                return white, None, None, fc
+        return Material(), None, None, None
+
+    name = str(getattr(mat, "name", None) or "default")
+    pbr = hasattr(mat, "baseColorFactor") or hasattr(mat, "baseColorTexture")
+    if pbr:  # PBRMaterial (glTF): factor x texture, as the spec says
+        factor = getattr(mat, "baseColorFactor", None)
+        base = (1.0, 1.0, 1.0, 1.0) if factor is None else _rgba01(factor)
+        image = getattr(mat, "baseColorTexture", None)
+    else:  # SimpleMaterial (OBJ/MTL)
+        diffuse = getattr(mat, "diffuse", None)
+        base = (0.8, 0.8, 0.8, 1.0) if diffuse is None else _rgba01(diffuse)
+        image = getattr(mat, "image", None)
+    uv = getattr(visual, "uv", None)
+    uvs = None
+    if uv is not None:
+        uv = np.asarray(uv, dtype=np.float64)
+        if uv.shape == (n_vertices, 2) and np.all(np.isfinite(uv)):
+            uvs = uv
+    texture = None
+    if image is not None and uvs is not None:
+        key = id(image)
+        if key not in textures:
+            textures[key] = texture_array(image)
+        texture = textures[key]
+        if not pbr:
+            # map_Kd replaces Kd, as Blender's importer does: exporters write a placeholder
+            # "Kd 0.8" next to the texture that would otherwise darken it.
+            base = (1.0, 1.0, 1.0, base[3] if len(base) == 4 else 1.0)
+    colors = None
+    vc = getattr(visual, "vertex_attributes", {}).get("color") if hasattr(visual, "vertex_attributes") else None
+    if vc is not None:  # glTF COLOR_0 next to a material
+        vc = np.asarray(vc)
+        if vc.shape[0] == n_vertices and vc.ndim == 2 and vc.shape[1] in (3, 4):
+            if vc.dtype.kind == "f":
+                vc = np.clip(vc * 255.0 + 0.5, 0, 255)
+            vc = vc.astype(np.uint8)
+            if vc.shape[1] == 3:
+                vc = np.concatenate([vc, np.full((n_vertices, 1), 255, np.uint8)], axis=1)
+            colors = vc
+    return Material(name=name, base_color=base, texture=texture), (uvs if texture is not None else None), colors, None
+
+
+def _rgba01(color) -> tuple:
+    """trimesh colour (uint8 0..255, or float 0..1) -> RGBA floats in [0, 1]."""
+    c = np.asarray(color).reshape(-1)
+    c = c / 255.0 if c.dtype.kind in "ui" else c.astype(np.float64)
+    if len(c) == 3:
+        c = np.append(c, 1.0)
+    return tuple(float(x) for x in c[:4])
+
+
+def _transform_part(part: _Part, matrix: np.ndarray) -> None:
+    """Apply an affine (4, 4) to a part in place: positions, normals (inverse transpose), winding."""
+    if np.array_equal(matrix, np.eye(4)):
+        return
+    linear = matrix[:3, :3]
+    part.vertices = part.vertices @ linear.T + matrix[:3, 3]
+    det = np.linalg.det(linear)
+    if abs(det) < 1e-300:
+        raise SceneError("a node transform is singular (it flattens the mesh)")
+    if part.normals is not None:
+        n = part.normals @ np.linalg.inv(linear)  # row vectors: (inv(L).T @ n.T).T
+        length = np.linalg.norm(n, axis=1, keepdims=True)
+        part.normals = n / np.maximum(length, 1e-300)
+    if det < 0:  # a mirror turns the triangles inside out: restore counter-clockwise winding
+        part.faces = part.faces[:, [0, 2, 1]]
+
+
+def _clean(part: _Part) -> bool:
+    """Drop degenerate triangles, triangles on non-finite vertices, and unreferenced vertices.
+
+    Returns False if no triangle is left.
+    """
+    v, f = part.vertices, part.faces
+    if len(f) and (f.min() < 0 or f.max() >= len(v)):
+        raise SceneError(f"faces index vertex {int(f.max())} but there are {len(v)} vertices")
+    finite = np.all(np.isfinite(v), axis=1)
+    ok = np.all(finite[f], axis=1)
+    ok &= (f[:, 0] != f[:, 1]) & (f[:, 1] != f[:, 2]) & (f[:, 0] != f[:, 2])
+    vs = np.where(finite[:, None], v, 0.0)
+    a, b, c = vs[f[:, 0]], vs[f[:, 1]], vs[f[:, 2]]
+    cross = np.linalg.norm(np.cross(b - a, c - a), axis=1)
+    longest = np.max([np.sum((b - a) ** 2, 1), np.sum((c - b) ** 2, 1), np.sum((a - c) ** 2, 1)], axis=0)
+    # Relative test: a zero-area (collinear or collapsed) triangle at any scale, 1e-4 m or 1e6 m.
+    ok &= cross > 1e-12 * longest
+    f = f[ok]
+    if len(f) == 0:
+        return False
+    used = np.unique(f)
+    remap = np.full(len(v), -1, dtype=np.int64)
+    remap[used] = np.arange(len(used))
+    part.faces = remap[f]
+    part.vertices = v[used]
+    if part.normals is not None:
+        n = part.normals[used]
+        good = np.all(np.isfinite(n), axis=1) & (np.linalg.norm(np.nan_to_num(n), axis=1) > 0.5)
+        part.normals = n if np.all(good) else None  # broken file normals: recompute all
+    if part.uvs is not None:
+        part.uvs = part.uvs[used]
+    if part.colors is not None:
+        part.colors = part.colors[used]
+    return True
+
+
+def _to_object(part: _Part, name: str) -> SceneObject:
+    lo, hi = part.vertices.min(0), part.vertices.max(0)
+    centre = (lo + hi) / 2
+    transform = np.eye(4)
+    transform[:3, 3] = centre
+    mesh = Mesh((part.vertices - centre).astype(np.float32), part.faces.astype(np.uint32),
+                normals=None if part.normals is None else part.normals.astype(np.float32),
+                uvs=part.uvs, colors=part.colors)
+    return SceneObject(name, mesh, part.material, transform)
+
+
+def _union_bounds(parts) -> tuple[np.ndarray, np.ndarray]:
+    lo = np.min([p.vertices.min(0) for p in parts], axis=0)
+    hi = np.max([p.vertices.max(0) for p in parts], axis=0)
+    return lo, hi
+
+
+def _guess_up(bounds) -> str:
+    """'z' or 'y' for an asset of unknown convention, from its (2, 3) bounds in file axes.
+
+    Assets usually rest on the ground plane: one that sits on z = 0 but not on y = 0 is Z-up,
+    and the reverse Y-up; otherwise the flatter axis of the two is taken as up (scenes are
+    wider than tall). A guess: pass ``up`` explicitly when you know.
+    """
+    lo, hi = np.asarray(bounds[0]), np.asarray(bounds[1])
+    ext = hi - lo
+    tol = 0.02 * max(float(np.linalg.norm(ext)), 1e-12)
+    on_y, on_z = abs(lo[1]) <= tol, abs(lo[2]) <= tol
+    if on_z and not on_y:
+        return "z"
+    if on_y and not on_z:
+        return "y"
+    return "z" if ext[2] < ext[1] else "y"
+
+
+def _unique_names(base: str, part_names: list[str]) -> list[str]:
+    """``base`` for a single part, else ``base/part``, with ``~2``, ``~3`` ... on repeats."""
+    if len(part_names) == 1:
+        return [base]
+    out, seen = [], set()
+    for pn in part_names:
+        candidate = f"{base}/{pn or 'part'}"
+        unique, k = candidate, 2
+        while unique in seen:
+            unique, k = f"{candidate}~{k}", k + 1
+        seen.add(unique)
+        out.append(unique)
+    return out
+
+
+# ----------------------------------------------------------------------------- asset as a scene
+
+def default_viewer(bounds) -> Pose:
+    """Viewer origin ~2.5 radii in front (+Z) of the (2, 3) bounds' centre, looking along -Z at it."""
+    lo, hi = np.asarray(bounds, dtype=np.float64)
+    centre = (lo + hi) / 2
+    radius = max(0.5 * float(np.linalg.norm(hi - lo)), 1e-3)
+    return Pose.make(centre + np.array([0.0, 0.0, 2.5 * radius]))
+
+
+def clip_range(bounds) -> tuple[float, float]:
+    """(near, far) clip spheres for a viewer placed by :func:`default_viewer` near these bounds.
+
+    near is 5 % of the radius (at most 0.1 m, at least 1 mm); far covers the whole asset seen
+    from 2.5 radii plus room for the head to move back.
+    """
+    lo, hi = np.asarray(bounds, dtype=np.float64)
+    radius = max(0.5 * float(np.linalg.norm(hi - lo)), 1e-3)
+    near = min(max(0.05 * radius, 1e-3), 0.1)
+    far = 12.0 * radius + 2.0
+    return near, far
+
+
+def load_asset_scene(path, name: str | None = None, **options):
+    """An asset file as a :class:`Scene`: default lights, viewer in front of it, near/far from its size.
+
+    ``options`` are :func:`load_asset`'s (up, units, fit_size, center, scale).
+    """
+    from .scene import Scene
+
+    path = Path(path).expanduser()
+    objects = load_asset(path, **options)
+    scene_name = name if name is not None else path.stem
+    lo = np.min([o.world_bounds()[0] for o in objects], axis=0)
+    hi = np.max([o.world_bounds()[1] for o in objects], axis=0)
+    near, far = clip_range((lo, hi))
+    triangles = sum(o.mesh.triangle_count for o in objects)
+    return Scene(
+        name=scene_name,
+        objects=objects,
+        description=f"asset {path.name}: {len(objects)} object(s), {triangles} triangles",
+        viewer_origin=default_viewer((lo, hi)),
+        near=near,
+        far=far,
+        source=str(path),
+    )
