@@ -1,0 +1,111 @@
+"""``pibr serve`` and ``pibr relay``."""
+from __future__ import annotations
+
+import argparse
+import asyncio
+import sys
+
+from pibr.protocol.address import parse_host_port
+
+from .config import DEFAULT_PORT
+
+
+def _size(text: str) -> tuple[int, int]:
+    try:
+        w, _, h = text.lower().partition("x")
+        return int(w), int(h or w)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT, got {text!r}") from None
+
+
+def _offset(text: str) -> tuple[float, float, float]:
+    try:
+        parts = [float(x) for x in text.split(",")]
+    except ValueError:
+        parts = []
+    if len(parts) != 3:
+        raise argparse.ArgumentTypeError(f"expected FORWARD,UP,TILT_DEG (metres, metres, degrees), got {text!r}")
+    return tuple(parts)
+
+
+def _announce(what: str):
+    def ready(host, port):
+        print(f"pibr {what}: listening on {host}:{port}", flush=True)
+    return ready
+
+
+def register(sub) -> None:
+    from .renderer import DEFAULT_PROJECTION, PROJECTIONS
+
+    p = sub.add_parser("serve", help="run the rendering server",
+                       description="Serve wide-angle views of a scene to pibr clients over TCP.")
+    p.add_argument("--scene", default="room", help="default scene: a built-in name (see 'pibr scenes'), "
+                   "a scene description (.toml/.json) or an asset file (default: room)")
+    p.add_argument("--host", default="127.0.0.1")
+    p.add_argument("--port", type=int, default=DEFAULT_PORT, help=f"TCP port, 0 for any free one (default {DEFAULT_PORT})")
+    p.add_argument("--fps", type=float, default=10.0, help="server frame rate (default 10)")
+    p.add_argument("--view-size", type=_size, default=(1024, 1024), metavar="WxH",
+                   help="primary wide-angle view size (default 1024x1024); the extra view is half")
+    p.add_argument("--extra-view", choices=("auto", "on", "off"), default="auto",
+                   help="render the dual view's extra view: as the scene asks (auto), always, never")
+    p.add_argument("--extra-offset", type=_offset, default=None, metavar="F,U,TILT",
+                   help="extra view offset: metres forward, metres up, degrees tilted down (default: the "
+                        "scene's, else Reinert et al.'s 1.5,1.8,15)")
+    p.add_argument("--bitrate-kbps", type=float, default=16000.0, help="H.264 bitrate (default 16000)")
+    p.add_argument("--keyint", type=int, default=30, help="H.264 keyframe interval in frames (default 30)")
+    p.add_argument("--preset", default="ultrafast", help="x264 preset (default ultrafast)")
+    p.add_argument("--projection", choices=PROJECTIONS, default=DEFAULT_PROJECTION,
+                   help=f"wide-angle rasterisation: pre-tessellated vertex projection or tessellation shader "
+                        f"(default {DEFAULT_PROJECTION}; 'pibr bench server' measures both)")
+    p.add_argument("--server-delay-ms", type=float, default=20.0,
+                   help="virtual clock: modelled render + encode time of a frame (default 20)")
+    p.add_argument("--depth-codec", choices=("h264", "edge"), default="h264",
+                   help="depth transport: 8-bit disparity in the H.264 atlas, or the edge codec")
+    p.add_argument("--max-sessions", type=int, default=8)
+    p.set_defaults(func=cmd_serve)
+
+    r = sub.add_parser("relay", help="inject latency between clients and a server",
+                       description="Relay pibr connections, adding delay, jitter and a bandwidth cap per direction.")
+    r.add_argument("--listen", default="127.0.0.1:7451", help="HOST:PORT to accept clients on (port 0: any)")
+    r.add_argument("--upstream", default=f"127.0.0.1:{DEFAULT_PORT}", help="HOST:PORT of the server")
+    r.add_argument("--up-ms", type=float, default=64.0, help="client -> server one-way delay (default 64)")
+    r.add_argument("--down-ms", type=float, default=64.0, help="server -> client one-way delay (default 64)")
+    r.add_argument("--jitter-ms", type=float, default=0.0, help="uniform +- jitter on each direction (default 0)")
+    r.add_argument("--kbps", type=float, default=0.0, help="bandwidth cap per direction, 0 = none (default 0)")
+    r.add_argument("--seed", type=int, default=0, help="jitter seed (virtual clock: reproducible)")
+    r.set_defaults(func=cmd_relay)
+
+
+def cmd_serve(args) -> int:
+    from .app import run_server
+    from .config import ServerConfig
+
+    config = ServerConfig(host=args.host, port=args.port, scene=args.scene, fps=args.fps,
+                          view_size=tuple(args.view_size), extra_view=args.extra_view,
+                          extra_offset=args.extra_offset, bitrate_kbps=args.bitrate_kbps, keyint=args.keyint,
+                          preset=args.preset, projection=args.projection, server_delay_ms=args.server_delay_ms,
+                          depth_codec=args.depth_codec, max_sessions=args.max_sessions)
+    try:
+        asyncio.run(run_server(config, _announce("serve")))
+    except KeyboardInterrupt:
+        print("pibr serve: stopped", file=sys.stderr)
+    return 0
+
+
+def cmd_relay(args) -> int:
+    from pibr.protocol.errors import ConfigError
+    from pibr.protocol.link import LinkParams
+
+    from .relay import RelayConfig, run_relay
+
+    try:
+        up = LinkParams(args.up_ms, args.jitter_ms, args.kbps)
+        down = LinkParams(args.down_ms, args.jitter_ms, args.kbps)
+    except ValueError as exc:
+        raise ConfigError(str(exc)) from None
+    config = RelayConfig(parse_host_port(args.listen), parse_host_port(args.upstream), up, down, args.seed)
+    try:
+        asyncio.run(run_relay(config, _announce("relay")))
+    except KeyboardInterrupt:
+        print("pibr relay: stopped", file=sys.stderr)
+    return 0

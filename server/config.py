@@ -1,0 +1,71 @@
+"""Server settings (``pibr serve`` options), validated once at start-up."""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from pibr.protocol.atlas import check_view_size
+from pibr.protocol.errors import ConfigError
+from pibr.protocol.framing import DEFAULT_MAX_MESSAGE_SIZE
+from pibr.protocol.pose import Pose, quat_from_axis_angle
+
+from .renderer import DEFAULT_PROJECTION, PROJECTIONS
+
+DEFAULT_PORT = 7450
+
+
+def extra_offset_pose(forward: float, up: float, tilt_deg: float) -> Pose:
+    """The extra view's offset relative to the primary camera: ``forward`` metres along its
+    view direction (-Z), ``up`` metres along its +Y, pitched ``tilt_deg`` downwards."""
+    # Rotating about +X by a negative angle turns the view direction (-Z) downwards.
+    q = quat_from_axis_angle((1.0, 0.0, 0.0), -math.radians(tilt_deg))
+    return Pose.make((0.0, up, -forward), q)
+
+
+#: Reinert et al.'s offset: 1.5 m forward, 1.8 m up, tilted 15 degrees down.
+PAPER_EXTRA_OFFSET = (1.5, 1.8, 15.0)
+
+
+@dataclass
+class ServerConfig:
+    host: str = "127.0.0.1"
+    port: int = DEFAULT_PORT
+    scene: str = "room"                 # default scene when a client asks for none
+    fps: float = 10.0
+    view_size: tuple = (1024, 1024)     # primary view; the extra view is half of it
+    extra_view: str = "auto"            # "auto" (as the scene says), "on", "off"
+    extra_offset: tuple | None = None   # (forward m, up m, tilt deg); None: the scene's or the paper's
+    bitrate_kbps: float = 16000.0
+    keyint: int = 30
+    preset: str = "ultrafast"
+    projection: str = DEFAULT_PROJECTION
+    server_delay_ms: float = 20.0       # virtual clock: render + encode time model
+    depth_codec: str = "h264"
+    max_message_size: int = DEFAULT_MAX_MESSAGE_SIZE
+    max_sessions: int = 8
+    hello_timeout_s: float = 10.0
+    allowed_scenes: tuple | None = None  # None: built-in names and files under the working directory
+
+    def __post_init__(self):
+        if not (0 < self.port < 65536) and self.port != 0:
+            raise ConfigError(f"port must be in 1..65535 (or 0 for any free port), got {self.port}")
+        if not (0.1 <= self.fps <= 240):
+            raise ConfigError(f"server fps must be in 0.1..240, got {self.fps}")
+        try:
+            check_view_size(*self.view_size, what="server view")
+        except ValueError as exc:
+            raise ConfigError(str(exc)) from None
+        if self.extra_view not in ("auto", "on", "off"):
+            raise ConfigError(f"extra view must be auto, on or off, got {self.extra_view!r}")
+        if not (16 <= self.bitrate_kbps <= 1e6):
+            raise ConfigError(f"bitrate must be in 16..1000000 kbit/s, got {self.bitrate_kbps}")
+        if not (1 <= self.keyint <= 10000):
+            raise ConfigError(f"keyframe interval must be in 1..10000 frames, got {self.keyint}")
+        if self.projection not in PROJECTIONS:
+            raise ConfigError(f"projection must be one of {', '.join(PROJECTIONS)}, got {self.projection!r}")
+        if not (0 <= self.server_delay_ms <= 10000):
+            raise ConfigError(f"server delay must be in 0..10000 ms, got {self.server_delay_ms}")
+        if self.depth_codec not in ("h264", "edge"):
+            raise ConfigError(f"depth codec must be h264 or edge, got {self.depth_codec!r}")
+        if self.max_sessions < 1:
+            raise ConfigError("max sessions must be at least 1")

@@ -1,0 +1,88 @@
+"""One session's frame production on the GL thread: render the views, pack, read back.
+
+A :class:`FrameProducer` lives on the server's GL thread (protocol/gl.py); the session
+calls ``await gl.run(producer.produce, pose, t)`` and hands the returned yuv420p buffer to
+its encoder in a worker thread. Renderers are shared by every session showing the same
+scene; render targets belong to the producer.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from pibr.protocol.atlas import AtlasLayout
+from pibr.protocol.depth import DepthQuantizer
+from pibr.protocol.pose import Pose
+
+from .packer import AtlasPacker
+from .renderer import RenderTarget, Renderer
+
+
+@dataclass
+class ProducerSpec:
+    """What a session's frames contain."""
+
+    primary_size: tuple
+    layout: AtlasLayout
+    quantizer: DepthQuantizer | None
+    projection: str = "vertex"
+    extra_size: tuple | None = None
+    extra_offset: Pose | None = None
+    keep_distance: bool = False   # hand the float distance maps to the caller (edge codec)
+
+
+@dataclass
+class ProducedFrame:
+    """yuv : (1.5 H, W) uint8 atlas; distances : name -> (h, w) float32 when requested."""
+
+    yuv: np.ndarray
+    primary_pose: Pose
+    extra_pose: Pose | None
+    scene_t: float
+    render_ms: float
+    readback_ms: float
+    pack_ms: float
+    distances: dict = field(default_factory=dict)
+
+
+class FrameProducer:
+    """Render targets and atlas packer of one session. Create, use and release on the GL thread."""
+
+    def __init__(self, ctx, renderer: Renderer, spec: ProducerSpec):
+        self.ctx, self.renderer, self.spec = ctx, renderer, spec
+        self.primary = RenderTarget(ctx, *spec.primary_size)
+        self.extra = RenderTarget(ctx, *spec.extra_size) if spec.extra_size else None
+        self.packer = AtlasPacker(ctx, spec.layout, spec.quantizer)
+
+    def produce(self, pose: Pose, t: float) -> ProducedFrame:
+        ctx = self.ctx
+        t0 = time.perf_counter()
+        self.renderer.render_wide(self.primary, pose, t, self.spec.projection)
+        extra_pose = None
+        if self.extra is not None:
+            extra_pose = pose.compose(self.spec.extra_offset)
+            self.renderer.render_wide(self.extra, extra_pose, t, self.spec.projection)
+        ctx.finish()
+        t1 = time.perf_counter()
+        sources = {"primary.color": self.primary.color, "primary.depth": self.primary.distance}
+        if self.extra is not None:
+            sources.update({"extra.color": self.extra.color, "extra.depth": self.extra.distance})
+        self.packer.pack(sources)
+        ctx.finish()
+        t2 = time.perf_counter()
+        yuv = self.packer.read().copy()
+        distances = {}
+        if self.spec.keep_distance:
+            distances["primary"] = self.primary.read_distance().copy()
+            if self.extra is not None:
+                distances["extra"] = self.extra.read_distance().copy()
+        t3 = time.perf_counter()
+        return ProducedFrame(yuv, pose, extra_pose, t, (t1 - t0) * 1e3, (t3 - t2) * 1e3, (t2 - t1) * 1e3, distances)
+
+    def release(self) -> None:
+        self.primary.release()
+        if self.extra is not None:
+            self.extra.release()
+        self.packer.release()

@@ -1,0 +1,448 @@
+"""Rendering a scene with moderngl: wide-angle views (the server's) and perspective views
+(ground truth), sharing one shading model so both see exactly the same colours.
+
+Wide-angle views are drawn in a single pass, in one of two ways (``projection``):
+
+``"vertex"``  the vertex shader projects pre-tessellated meshes (see scenes/tessellate.py);
+``"tess"``    a tessellation shader splits each triangle on the fly by the angle its edges
+              span, so near triangles get many pieces and far ones none.
+
+``pibr bench server --projection vertex|tess`` measures both; the default is the faster
+one here. Every render target stores colour (RGBA8) and radial distance (R32F, 0 = sky).
+Images are top-row-first everywhere (see protocol/projection.py): passes flip NDC y, so a
+framebuffer read returns rows in image order.
+"""
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+import numpy as np
+
+from pibr.protocol.pose import Pose
+from pibr.protocol.projection import GLSL as PROJECTION_GLSL
+from pibr.scenes.scene import MAX_LIGHTS, Scene
+from pibr.scenes.tessellate import levels_for_view_region, subdivide
+
+log = logging.getLogger(__name__)
+
+PROJECTIONS = ("vertex", "tess")
+DEFAULT_PROJECTION = "vertex"
+#: Largest angle one rasterised edge may span in the wide-angle projection. At 1024 px over
+#: 180 degrees a 6 degree chord bends by 0.08 degrees, under half a pixel.
+MAX_EDGE_ANGLE_DEG = 6.0
+
+GL_CLIP_DISTANCE0 = 0x3000  # moderngl has no name for it; see moderngl issue #620
+_VERTEX_FORMAT = "3f 3f 2f 4f1"
+_VERTEX_ATTRS = ("in_position", "in_normal", "in_uv", "in_color")
+
+def _vec3(v) -> str:
+    return "vec3(%s)" % ", ".join(repr(float(x)) for x in v)
+
+
+def shading_glsl(lights) -> str:
+    """GLSL ``vec3 shade(world_pos, normal, uv, vcolor)`` with the scene's lights written in as
+    constants: a loop over uniform arrays costs llvmpipe more than the rest of the pass."""
+    terms = []
+    for light in lights[:MAX_LIGHTS]:
+        color = _vec3(np.asarray(light.color[:3], dtype=np.float64) * light.intensity)
+        if light.kind == "ambient":
+            terms.append(f"    light += {color};")
+        elif light.kind == "directional":
+            terms.append(f"    light += {color} * max(dot(n, {_vec3(-np.asarray(light.direction))}), 0.0);")
+        else:
+            terms.append(
+                f"    {{ vec3 d = {_vec3(light.position)} - world_pos; float dist = length(d);\n"
+                f"      float fall = clamp(1.0 - dist / {float(light.range)!r}, 0.0, 1.0);\n"
+                f"      light += {color} * max(dot(n, d / max(dist, 1e-6)), 0.0) * fall * fall; }}")
+    return """
+uniform vec4 u_base_color;
+uniform bool u_has_texture;
+uniform sampler2D u_texture;
+uniform vec3 u_eye;
+
+vec3 shade(vec3 world_pos, vec3 normal, vec2 uv, vec4 vcolor) {
+    vec3 n = normalize(normal);
+    if (dot(n, u_eye - world_pos) < 0.0) n = -n;   // two-sided: light the side we see
+    vec4 albedo = u_base_color * vcolor;
+    if (u_has_texture) {
+        vec3 t = texture(u_texture, uv).rgb;
+        albedo.rgb *= t * t;                          // sRGB -> linear (gamma 2)
+    }
+    vec3 light = vec3(0.0);
+%s
+    return sqrt(clamp(albedo.rgb * light, 0.0, 1.0));  // linear -> sRGB (gamma 2)
+}
+""" % "\n".join(terms)
+
+
+_FRAGMENT = """
+#version 410
+in vec3 v_cam;
+in vec3 v_world;
+in vec3 v_normal;
+in vec2 v_uv;
+in vec4 v_color;
+layout(location = 0) out vec4 f_color;
+layout(location = 1) out float f_dist;
+%(shading)s
+void main() {
+    f_color = vec4(shade(v_world, v_normal, v_uv, v_color), 1.0);
+    f_dist = length(v_cam);
+}
+"""
+
+_COMMON_VS_UNIFORMS = """
+uniform mat4 u_model;
+uniform mat4 u_model_view;
+uniform mat3 u_normal_matrix;
+uniform float u_near;
+uniform float u_far;
+in vec3 in_position;
+in vec3 in_normal;
+in vec2 in_uv;
+in vec4 in_color;
+"""
+
+_WIDE_VERTEX_VS = """
+#version 410
+%(uniforms)s
+%(projection)s
+out vec3 v_cam;
+out vec3 v_world;
+out vec3 v_normal;
+out vec2 v_uv;
+out vec4 v_color;
+out float gl_ClipDistance[1];
+void main() {
+    vec3 cam = (u_model_view * vec4(in_position, 1.0)).xyz;
+    v_cam = cam;
+    v_world = (u_model * vec4(in_position, 1.0)).xyz;
+    v_normal = u_normal_matrix * in_normal;
+    v_uv = in_uv;
+    v_color = in_color;
+    vec3 t = wa_project_extended(cam);
+    gl_Position = vec4(t.x, -t.y, 2.0 * (t.z - u_near) / (u_far - u_near) - 1.0, 1.0);
+    gl_ClipDistance[0] = 1.5 - abs(t.x);   // cut where x' jumps from +2 to -2 behind the camera
+}
+""" % {"uniforms": _COMMON_VS_UNIFORMS, "projection": PROJECTION_GLSL}
+
+_TESS_VS = """
+#version 410
+%(uniforms)s
+out vec3 c_cam;
+out vec3 c_world;
+out vec3 c_normal;
+out vec2 c_uv;
+out vec4 c_color;
+void main() {
+    c_cam = (u_model_view * vec4(in_position, 1.0)).xyz;
+    c_world = (u_model * vec4(in_position, 1.0)).xyz;
+    c_normal = u_normal_matrix * in_normal;
+    c_uv = in_uv;
+    c_color = in_color;
+}
+""" % {"uniforms": _COMMON_VS_UNIFORMS}
+
+_TESS_TCS = """
+#version 410
+layout(vertices = 3) out;
+uniform float u_max_angle;
+uniform float u_max_level;
+uniform float u_max_screen_edge;   // pixels
+uniform vec2 u_half_size;          // pixels per unit of t'
+%(projection)s
+in vec3 c_cam[];
+in vec3 c_world[];
+in vec3 c_normal[];
+in vec2 c_uv[];
+in vec4 c_color[];
+out vec3 e_cam[];
+out vec3 e_world[];
+out vec3 e_normal[];
+out vec2 e_uv[];
+out vec4 e_color[];
+// A function of the edge alone, symmetric in its ends: both triangles sharing an edge
+// split it identically, so the tessellated mesh has no cracks. Two limits: the angle the
+// edge spans (bends in the projection), and its length on screen, which near the poles and
+// the hemisphere's rim grows much faster than the angle.
+float edge_level(vec3 a, vec3 b) {
+    float la = length(a);
+    float lb = length(b);
+    if (la < 1e-6 || lb < 1e-6) return u_max_level;
+    float ang = acos(clamp(dot(a, b) / (la * lb), -1.0, 1.0));
+    vec2 pa = wa_project_extended(a).xy;
+    vec2 pb = wa_project_extended(b).xy;
+    float screen = length((pa - pb) * u_half_size);
+    return clamp(ceil(max(ang / u_max_angle, screen / u_max_screen_edge)), 1.0, u_max_level);
+}
+void main() {
+    e_cam[gl_InvocationID] = c_cam[gl_InvocationID];
+    e_world[gl_InvocationID] = c_world[gl_InvocationID];
+    e_normal[gl_InvocationID] = c_normal[gl_InvocationID];
+    e_uv[gl_InvocationID] = c_uv[gl_InvocationID];
+    e_color[gl_InvocationID] = c_color[gl_InvocationID];
+    if (gl_InvocationID == 0) {
+        if (c_cam[0].z > 0.0 && c_cam[1].z > 0.0 && c_cam[2].z > 0.0) {
+            gl_TessLevelOuter[0] = 0.0;   // entirely behind the camera: drop the patch
+            gl_TessLevelOuter[1] = 0.0;
+            gl_TessLevelOuter[2] = 0.0;
+            gl_TessLevelInner[0] = 0.0;
+        } else {
+            float l0 = edge_level(c_cam[1], c_cam[2]);
+            float l1 = edge_level(c_cam[2], c_cam[0]);
+            float l2 = edge_level(c_cam[0], c_cam[1]);
+            gl_TessLevelOuter[0] = l0;
+            gl_TessLevelOuter[1] = l1;
+            gl_TessLevelOuter[2] = l2;
+            gl_TessLevelInner[0] = max(l0, max(l1, l2));
+        }
+    }
+}
+""" % {"projection": PROJECTION_GLSL}
+
+_TESS_TES = """
+#version 410
+layout(triangles, equal_spacing, ccw) in;
+uniform float u_near;
+uniform float u_far;
+in vec3 e_cam[];
+in vec3 e_world[];
+in vec3 e_normal[];
+in vec2 e_uv[];
+in vec4 e_color[];
+out vec3 v_cam;
+out vec3 v_world;
+out vec3 v_normal;
+out vec2 v_uv;
+out vec4 v_color;
+out float gl_ClipDistance[1];
+%(projection)s
+void main() {
+    vec3 b = gl_TessCoord;
+    vec3 cam = b.x * e_cam[0] + b.y * e_cam[1] + b.z * e_cam[2];
+    v_cam = cam;
+    v_world = b.x * e_world[0] + b.y * e_world[1] + b.z * e_world[2];
+    v_normal = b.x * e_normal[0] + b.y * e_normal[1] + b.z * e_normal[2];
+    v_uv = b.x * e_uv[0] + b.y * e_uv[1] + b.z * e_uv[2];
+    v_color = b.x * e_color[0] + b.y * e_color[1] + b.z * e_color[2];
+    vec3 t = wa_project_extended(cam);
+    gl_Position = vec4(t.x, -t.y, 2.0 * (t.z - u_near) / (u_far - u_near) - 1.0, 1.0);
+    gl_ClipDistance[0] = 1.5 - abs(t.x);   // cut where x' jumps from +2 to -2 behind the camera
+}
+""" % {"projection": PROJECTION_GLSL}
+
+_PERSPECTIVE_VS = """
+#version 410
+%(uniforms)s
+uniform mat4 u_projection;
+out vec3 v_cam;
+out vec3 v_world;
+out vec3 v_normal;
+out vec2 v_uv;
+out vec4 v_color;
+void main() {
+    vec4 cam = u_model_view * vec4(in_position, 1.0);
+    v_cam = cam.xyz;
+    v_world = (u_model * vec4(in_position, 1.0)).xyz;
+    v_normal = u_normal_matrix * in_normal;
+    v_uv = in_uv;
+    v_color = in_color;
+    gl_Position = u_projection * cam;
+    gl_Position.y = -gl_Position.y;   // top-row-first images
+}
+""" % {"uniforms": _COMMON_VS_UNIFORMS}
+
+
+def perspective_matrix(fov_x_deg: float, aspect: float, near: float, far: float) -> np.ndarray:
+    """OpenGL projection (4, 4) for a horizontal field of view and aspect = width / height."""
+    fx = 1.0 / np.tan(np.radians(fov_x_deg) / 2.0)
+    fy = fx * aspect
+    m = np.zeros((4, 4))
+    m[0, 0], m[1, 1] = fx, fy
+    m[2, 2] = (far + near) / (near - far)
+    m[2, 3] = 2.0 * far * near / (near - far)
+    m[3, 2] = -1.0
+    return m
+
+
+def _interleave(mesh) -> np.ndarray:
+    n = len(mesh.vertices)
+    uv = mesh.uvs if mesh.uvs is not None else np.zeros((n, 2), np.float32)
+    col = mesh.colors if mesh.colors is not None else np.full((n, 4), 255, np.uint8)
+    rec = np.empty(n, dtype=[("p", "3f4"), ("n", "3f4"), ("uv", "2f4"), ("c", "4u1")])
+    rec["p"], rec["n"], rec["uv"], rec["c"] = mesh.vertices, mesh.normals, uv, col
+    return rec
+
+
+class _GPUMesh:
+    def __init__(self, ctx, mesh, programs: dict):
+        self.vbo = ctx.buffer(_interleave(mesh).tobytes())
+        self.ibo = ctx.buffer(mesh.faces.astype(np.uint32).tobytes())
+        self.count = mesh.faces.size
+        self.vaos = {name: ctx.vertex_array(prog, [(self.vbo, _VERTEX_FORMAT, *_VERTEX_ATTRS)],
+                                            index_buffer=self.ibo, index_element_size=4,
+                                            skip_errors=True)
+                     for name, prog in programs.items()}
+
+    def release(self):
+        for v in self.vaos.values():
+            v.release()
+        self.vbo.release()
+        self.ibo.release()
+
+
+@dataclass
+class _GPUObject:
+    obj: object
+    original: _GPUMesh
+    tessellated: _GPUMesh | None
+    texture: object | None
+
+
+class RenderTarget:
+    """Colour (RGBA8) + radial distance (R32F, 0 = sky) + depth buffer of ``width`` x ``height``."""
+
+    def __init__(self, ctx, width: int, height: int):
+        self.ctx, self.width, self.height = ctx, width, height
+        self.color = ctx.texture((width, height), 4)
+        self.distance = ctx.texture((width, height), 1, dtype="f4")
+        for t in (self.color, self.distance):
+            t.filter = (ctx.NEAREST, ctx.NEAREST)
+            t.repeat_x = t.repeat_y = False
+        self.depth = ctx.depth_renderbuffer((width, height))
+        self.fbo = ctx.framebuffer(color_attachments=[self.color, self.distance], depth_attachment=self.depth)
+
+    def read_color(self) -> np.ndarray:
+        """(height, width, 3) uint8, row 0 on top."""
+        data = self.fbo.read(components=3, attachment=0, alignment=1)
+        return np.frombuffer(data, np.uint8).reshape(self.height, self.width, 3)
+
+    def read_distance(self) -> np.ndarray:
+        """(height, width) float32 radial distance, 0 where nothing was hit."""
+        data = self.fbo.read(components=1, attachment=1, dtype="f4", alignment=1)
+        return np.frombuffer(data, np.float32).reshape(self.height, self.width)
+
+    def release(self) -> None:
+        for r in (self.fbo, self.color, self.distance, self.depth):
+            r.release()
+
+
+class Renderer:
+    """Draws one scene. Create and use on the GL thread (see protocol/gl.py)."""
+
+    def __init__(self, ctx, scene: Scene, projection: str = DEFAULT_PROJECTION,
+                 max_edge_angle_deg: float = MAX_EDGE_ANGLE_DEG, tess_max_level: int = 64,
+                 tess_max_screen_edge: float = 48.0, wide: bool = True):
+        if projection not in PROJECTIONS:
+            raise ValueError(f"projection must be one of {', '.join(PROJECTIONS)}, got {projection!r}")
+        self.ctx, self.scene, self.projection = ctx, scene, projection
+        self.max_edge_angle = np.radians(max_edge_angle_deg)
+        self.tess_max_level = tess_max_level
+        fragment = _FRAGMENT % {"shading": shading_glsl(scene.lights)}
+        self.programs = {
+            "perspective": ctx.program(vertex_shader=_PERSPECTIVE_VS, fragment_shader=fragment),
+            "vertex": ctx.program(vertex_shader=_WIDE_VERTEX_VS, fragment_shader=fragment),
+            "tess": ctx.program(vertex_shader=_TESS_VS, tess_control_shader=_TESS_TCS,
+                                tess_evaluation_shader=_TESS_TES, fragment_shader=fragment),
+        }
+        self.programs["tess"]["u_max_angle"].value = float(self.max_edge_angle)
+        self.programs["tess"]["u_max_level"].value = float(tess_max_level)
+        self.programs["tess"]["u_max_screen_edge"].value = float(tess_max_screen_edge)
+        region = scene.viewing_region()
+        self.objects: list[_GPUObject] = []
+        self.tessellated_triangles = 0
+        for obj in scene.objects:
+            if obj.mesh.triangle_count == 0:
+                continue
+            original = _GPUMesh(ctx, obj.mesh, {"perspective": self.programs["perspective"],
+                                                "tess": self.programs["tess"]})
+            tess = None
+            if wide:  # pre-tessellated copy for the vertex-projection path
+                levels = levels_for_view_region(obj.mesh, obj.transform, region, max_edge_angle_deg)
+                fine = subdivide(obj.mesh, levels) if levels.max() > 1 else obj.mesh
+                self.tessellated_triangles += fine.triangle_count
+                tess = _GPUMesh(ctx, fine, {"vertex": self.programs["vertex"]})
+            tex = None
+            if obj.material.texture is not None:
+                img = np.ascontiguousarray(obj.material.texture[::-1])  # UV v = 0 is the bottom row
+                tex = ctx.texture((img.shape[1], img.shape[0]), 3, img.tobytes(), alignment=1)
+                tex.build_mipmaps()
+                tex.filter = (ctx.LINEAR_MIPMAP_LINEAR, ctx.LINEAR)
+                # No anisotropic filtering: on llvmpipe it costs more than the rest of the pass.
+            self.objects.append(_GPUObject(obj, original, tess, tex))
+        log.debug("renderer: %d objects, %d triangles (%d pre-tessellated)", len(self.objects),
+                  scene.triangle_count, self.tessellated_triangles)
+
+    def _draw(self, prog_name: str, view: np.ndarray, eye: np.ndarray, t: float, extra_uniforms: dict):
+        prog = self.programs[prog_name]
+        if "u_eye" in prog:
+            prog["u_eye"].value = tuple(float(x) for x in eye)
+        for name, value in extra_uniforms.items():
+            if name in prog:
+                prog[name].write(np.ascontiguousarray(value, dtype=np.float32).tobytes()) \
+                    if isinstance(value, np.ndarray) else setattr(prog[name], "value", value)
+        members = set(prog)  # the compiler drops uniforms a shader does not use
+        for g in self.objects:
+            model = g.obj.world_matrix(t)
+            mv = view @ model
+            values = {
+                "u_model": model.T.astype(np.float32),
+                "u_model_view": mv.T.astype(np.float32),
+                "u_normal_matrix": np.linalg.inv(model[:3, :3]).astype(np.float32),  # (M^-1)^T, column-major
+                "u_base_color": np.array(g.obj.material.base_color, np.float32),
+            }
+            for name, value in values.items():
+                if name in members:
+                    prog[name].write(value.tobytes())
+            if g.texture is not None:
+                g.texture.use(0)
+            if "u_has_texture" in members:
+                prog["u_has_texture"].value = g.texture is not None
+            if prog_name == "vertex":
+                g.tessellated.vaos["vertex"].render(self.ctx.TRIANGLES)
+            elif prog_name == "tess":
+                g.original.vaos["tess"].render(self.ctx.PATCHES)
+            else:
+                g.original.vaos["perspective"].render(self.ctx.TRIANGLES)
+
+    def _begin(self, target: RenderTarget) -> None:
+        ctx = self.ctx
+        target.fbo.use()
+        ctx.viewport = (0, 0, target.width, target.height)
+        ctx.enable_only(ctx.DEPTH_TEST)
+        target.fbo.clear(*self.scene.sky_color[:3], 1.0, depth=1.0)
+        # clear() sets every attachment to the same value; the distance must read 0 for sky.
+        target.fbo.color_mask = [(False, False, False, False), (True, False, False, False)]
+        target.fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
+        target.fbo.color_mask = [(True, True, True, True), (True, True, True, True)]
+
+    def render_wide(self, target: RenderTarget, pose: Pose, t: float, projection: str | None = None) -> None:
+        """Wide-angle view at ``pose`` (camera-to-world) and scene time ``t`` into ``target``."""
+        projection = projection or self.projection
+        if projection not in PROJECTIONS:
+            raise ValueError(f"projection must be one of {', '.join(PROJECTIONS)}, got {projection!r}")
+        self._begin(target)
+        self.ctx.enable_direct(GL_CLIP_DISTANCE0)
+        if projection == "tess":
+            self.ctx.patch_vertices = 3
+            self.programs["tess"]["u_half_size"].value = (target.width / 2.0, target.height / 2.0)
+        self._draw(projection, pose.view_matrix(), pose.p, t,
+                   {"u_near": float(self.scene.near), "u_far": float(self.scene.far)})
+        self.ctx.disable_direct(GL_CLIP_DISTANCE0)
+
+    def render_perspective(self, target: RenderTarget, pose: Pose, t: float, fov_x_deg: float) -> None:
+        """Perspective view (ground truth) at ``pose`` and scene time ``t``, horizontal FOV ``fov_x_deg``."""
+        self._begin(target)
+        proj = perspective_matrix(fov_x_deg, target.width / target.height, self.scene.near, self.scene.far)
+        self._draw("perspective", pose.view_matrix(), pose.p, t, {"u_projection": proj.T})
+
+    def release(self) -> None:
+        for g in self.objects:
+            g.original.release()
+            if g.tessellated is not None:
+                g.tessellated.release()
+            if g.texture is not None:
+                g.texture.release()
+        for p in self.programs.values():
+            p.release()

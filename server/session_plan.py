@@ -1,0 +1,43 @@
+"""What a session will send, decided from the server's settings, the scene and the client's Hello."""
+from __future__ import annotations
+
+from pibr.protocol.atlas import build_layout
+from pibr.protocol.depth import h264_quantizer
+from pibr.protocol.errors import ConfigError
+from pibr.protocol.messages import Hello
+from pibr.protocol.session import SessionConfig, ViewConfig
+
+from .config import PAPER_EXTRA_OFFSET, ServerConfig, extra_offset_pose
+from .pipeline import ProducerSpec
+
+
+def extra_offset_for(cfg: ServerConfig, scene):
+    """The server's override, else the scene's own offset, else Reinert et al.'s."""
+    if cfg.extra_offset is not None:
+        return extra_offset_pose(*cfg.extra_offset)
+    if scene.extra_view_offset is not None:
+        return scene.extra_view_offset
+    return extra_offset_pose(*PAPER_EXTRA_OFFSET)
+
+
+def plan_session(cfg: ServerConfig, scene, hello: Hello) -> tuple[SessionConfig, ProducerSpec]:
+    depth_codec = hello.depth_codec or cfg.depth_codec
+    if depth_codec not in ("h264", "edge"):
+        raise ConfigError(f"unknown depth codec {depth_codec!r}; choose h264 or edge")
+    if depth_codec == "edge":
+        raise ConfigError("depth codec 'edge' is not available on this server yet; use h264")
+    use_extra = cfg.extra_view == "on" or (cfg.extra_view == "auto" and scene.extra_view)
+    pw, ph = cfg.view_size
+    extra_size = (pw // 2, ph // 2) if use_extra else None
+    offset = extra_offset_for(cfg, scene) if use_extra else None
+    layout = build_layout((pw, ph), extra_size, depth_in_atlas=(depth_codec == "h264"))
+    quantizer = h264_quantizer(scene.near, scene.far)
+    config = SessionConfig(
+        scene=scene.info(), clock=hello.clock, server_fps=cfg.fps,
+        server_delay_us=int(round(cfg.server_delay_ms * 1000)),
+        primary=ViewConfig(pw, ph), extra=ViewConfig(*extra_size) if extra_size else None,
+        extra_offset=offset, atlas=layout, video_bitrate_kbps=cfg.bitrate_kbps, keyint=cfg.keyint,
+        depth_codec=depth_codec, depth_bits=quantizer.bits, depth_min_code=quantizer.min_code,
+        motion=False, proxies=None, options={"projection": cfg.projection})
+    spec = ProducerSpec((pw, ph), layout, quantizer, cfg.projection, extra_size, offset)
+    return config, spec

@@ -1,0 +1,68 @@
+"""H.264 encoding of the atlas with libx264 through PyAV.
+
+Zero latency (one packet out per frame in), no B-frames, a configurable bitrate held by
+x264's VBV (about two frames of buffer) and keyframe interval. Encoding releases the GIL,
+so the server runs it in a thread pool, never on the event loop.
+"""
+from __future__ import annotations
+
+import fractions
+
+import numpy as np
+
+from pibr.protocol.errors import CodecError
+
+
+class H264Encoder:
+    """Stateful encoder for one session's stream of ``width`` x ``height`` yuv420p images."""
+
+    name = "h264"
+
+    def __init__(self, width: int, height: int, fps: float, bitrate_kbps: float = 16000.0,
+                 keyint: int = 30, preset: str = "ultrafast", threads: int = 0):
+        import av
+
+        if width % 2 or height % 2:
+            raise ValueError(f"H.264 4:2:0 needs even sizes, got {width}x{height}")
+        self.width, self.height = width, height
+        self.frames = 0
+        ctx = av.CodecContext.create("libx264", "w")
+        ctx.width, ctx.height = width, height
+        ctx.pix_fmt = "yuv420p"
+        rate = fractions.Fraction(fps).limit_denominator(1000)
+        ctx.time_base = 1 / rate
+        ctx.framerate = rate
+        ctx.bit_rate = int(bitrate_kbps * 1000)
+        ctx.gop_size = keyint
+        ctx.max_b_frames = 0
+        ctx.thread_count = threads
+        ctx.color_range = 2  # full range (JPEG): the packer writes 0..255 luma
+        vbv = max(1, int(2 * bitrate_kbps / fps))
+        ctx.options = {
+            "preset": preset,
+            "tune": "zerolatency",
+            "x264-params": f"vbv-maxrate={int(bitrate_kbps)}:vbv-bufsize={vbv}:keyint={keyint}:"
+                           f"min-keyint={keyint}:scenecut=0:fullrange=on",
+        }
+        self._ctx = ctx
+        self._av = av
+
+    def encode(self, yuv: np.ndarray, force_keyframe: bool = False) -> tuple[bytes, bool]:
+        """yuv : (1.5 H, W) uint8 yuv420p buffer -> (Annex B access unit, is keyframe)."""
+        if yuv.shape != (self.height * 3 // 2, self.width):
+            raise ValueError(f"expected a ({self.height * 3 // 2}, {self.width}) yuv420p buffer, got {yuv.shape}")
+        frame = self._av.VideoFrame.from_ndarray(yuv, format="yuv420p")
+        frame.pts = self.frames
+        if force_keyframe:
+            frame.pict_type = self._av.video.frame.PictureType.I
+        self.frames += 1
+        try:
+            packets = self._ctx.encode(frame)
+        except self._av.error.FFmpegError as exc:
+            raise CodecError(f"libx264 failed to encode frame {self.frames - 1}: {exc}") from exc
+        if not packets:
+            raise CodecError("libx264 returned no packet for a frame: is zero-latency mode on?")
+        return b"".join(bytes(p) for p in packets), any(p.is_keyframe for p in packets)
+
+    def close(self) -> None:
+        self._ctx = None
