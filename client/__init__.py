@@ -1,0 +1,1 @@
+"""pibr.client."""

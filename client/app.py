@@ -1,0 +1,377 @@
+"""The client process: replay a head trace against a server and re-render every output tick.
+
+Per output tick the client samples the trace, sends the pose, takes the newest usable
+server frame, re-renders the current view with each requested method and records the
+result. Two clocks (DESIGN.md, Time and latency):
+
+* **virtual**: ticks are simulated. At tick t the client sends its pose stamped t and a
+  ``Clock`` promise for its next tick, then reads until the server's messages pass t, so it
+  has every frame usable at t (stamped <= t). Nothing depends on the wall clock: the same
+  inputs give bit-identical recordings on any machine.
+* **real**: ticks follow the wall clock at the output rate. Frames are decoded as they
+  arrive; a tick whose work ends after the next deadline makes the display skip ticks,
+  each counted as a missed deadline and recorded as a repeat of the last image.
+
+The client knows the scene only from the wire (``Welcome``; proxies when a method asks).
+"""
+from __future__ import annotations
+
+import asyncio
+import concurrent.futures
+import json
+import logging
+import math
+import os
+import sys
+import time
+from collections import deque
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from pibr.protocol.errors import ConfigError, UnexpectedMessage
+from pibr.protocol.gl import GLThread
+from pibr.protocol.messages import Clock, Frame, Hello, OutputConfig, PayloadKind, PoseMsg, Stats
+from pibr.protocol.pose import Pose
+
+from .connection import ClientConnection
+from .frame_textures import FrameTextures
+from .methods import make_method, method_names
+from .recorder import MethodRecorder
+from .video import H264Decoder
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class ClientConfig:
+    host: str = "127.0.0.1"
+    port: int = 7451
+    trace: str = "pred6dof-1"
+    rate_hz: float = 60.0
+    clock: str = "virtual"
+    methods: tuple = ("rotation",)
+    out_dir: str = "out"
+    width: int = 960
+    height: int = 540
+    fov_deg: float = 90.0
+    start_s: float = 0.0
+    duration_s: float | None = None
+    preroll_s: float = 0.5
+    scene: str = ""
+    depth_codec: str = ""
+    record: bool = True
+    lossless: bool = True
+    progress: str = "bar"    # bar, lines (machine-readable on stdout), none
+
+    def __post_init__(self):
+        if self.clock not in ("virtual", "real"):
+            raise ConfigError(f"clock must be virtual or real, got {self.clock!r}")
+        if not self.methods:
+            raise ConfigError("name at least one method")
+        for m in self.methods:
+            if m not in method_names():
+                raise ConfigError(f"unknown method {m!r}; choose from {', '.join(method_names())}")
+        if len(set(self.methods)) != len(self.methods):
+            raise ConfigError("a method is named twice")
+        if not (1 <= self.rate_hz <= 1000):
+            raise ConfigError(f"output rate must be in 1..1000 Hz, got {self.rate_hz}")
+        if self.duration_s is not None and self.duration_s <= 0:
+            raise ConfigError(f"duration must be positive, got {self.duration_s}")
+        if self.preroll_s < 0:
+            raise ConfigError("preroll must be >= 0")
+        if self.progress not in ("bar", "lines", "none"):
+            raise ConfigError(f"progress must be bar, lines or none, got {self.progress!r}")
+        OutputConfig(self.width, self.height, self.fov_deg, self.rate_hz)
+        if not (16 <= self.width <= 8192 and 16 <= self.height <= 8192 and 1 <= self.fov_deg <= 170):
+            raise ConfigError(f"output {self.width}x{self.height} at {self.fov_deg} degrees is out of range")
+
+
+@dataclass
+class _Decoded:
+    frame: Frame
+    arrival_us: int
+    image: object
+
+
+@dataclass
+class ClientResult:
+    ticks: int
+    frames_received: int
+    missed_deadlines: int
+    bytes_received: int
+    handshake_ms: float
+    summary: dict = field(default_factory=dict)
+
+
+class _Progress:
+    def __init__(self, mode: str, total: int):
+        self.mode, self.total, self.done = mode, total, 0
+        self._bar = None
+        if mode == "bar":
+            from tqdm import tqdm
+
+            self._bar = tqdm(total=total, unit="tick", desc="client", file=sys.stderr, leave=False)
+
+    def step(self) -> None:
+        self.done += 1
+        if self._bar is not None:
+            self._bar.update(1)
+        elif self.mode == "lines" and (self.done % 10 == 0 or self.done == self.total):
+            print(f"PROGRESS {self.done} {self.total}", flush=True)
+
+    def close(self) -> None:
+        if self._bar is not None:
+            self._bar.close()
+
+
+class Client:
+    def __init__(self, config: ClientConfig):
+        self.cfg = config
+        self.conn: ClientConnection | None = None
+        self.session = None
+        self.gl: GLThread | None = None
+        self._decode_pool = concurrent.futures.ThreadPoolExecutor(max_workers=1, thread_name_prefix="pibr-decode")
+        self.recorders: dict[str, MethodRecorder] = {}
+        self.frames_received = 0
+        self.missed = 0
+        self._newest: _Decoded | None = None
+        self._gl_state = None
+        self._last_shown: dict = {}
+
+    # ------------------------------------------------------------------ set-up
+
+    def _trace_poses(self):
+        from pibr.protocol.trace import load_trace
+
+        trace = load_trace(self.cfg.trace)
+        if self.cfg.start_s >= trace.duration:
+            raise ConfigError(f"--start {self.cfg.start_s} s is past the end of the trace ({trace.duration:.2f} s)")
+        available = trace.duration - self.cfg.start_s
+        duration = available if self.cfg.duration_s is None else min(self.cfg.duration_s, available)
+        return trace, duration
+
+    def _pose_at(self, trace, t_s: float) -> Pose:
+        local = trace.pose_at(self.cfg.start_s + min(max(t_s, 0.0), self._duration))
+        return self.session.viewer_origin.compose(local)
+
+    def _gl_setup(self, ctx):
+        from .output_target import OutputTarget
+
+        out = OutputConfig(self.cfg.width, self.cfg.height, self.cfg.fov_deg, self.cfg.rate_hz)
+        textures = FrameTextures(ctx, self.session)
+        methods = [make_method(name, ctx, out, self.session) for name in self.cfg.methods]
+        target = OutputTarget(ctx, self.cfg.width, self.cfg.height)
+        self._gl_state = (textures, methods, target)
+
+    def _gl_render(self, ctx, pose: Pose, decoded: _Decoded | None):
+        """Upload the newest frame if new, render every method; -> [(rgb, hole fraction, ms)]."""
+        textures, methods, target = self._gl_state
+        if decoded is not None and textures.frame_id != decoded.frame.frame_id:
+            textures.upload(decoded.image, decoded.frame.frame_id)
+        out = []
+        for m in methods:
+            target.begin()
+            t0 = time.perf_counter()
+            if decoded is not None:
+                m.render(pose, decoded.frame, textures)
+            ctx.finish()
+            ms = (time.perf_counter() - t0) * 1e3
+            rgba = target.read()
+            hole = float(np.count_nonzero(rgba[:, :, 3] == 0)) / (rgba.shape[0] * rgba.shape[1])
+            out.append((rgba[:, :, :3], hole, ms))
+        return out
+
+    def _gl_release(self, ctx):
+        if self._gl_state is None:
+            return
+        textures, methods, target = self._gl_state
+        for m in methods:
+            m.release()
+        textures.release()
+        target.release()
+        self._gl_state = None
+
+    # ------------------------------------------------------------------ run
+
+    async def run(self) -> ClientResult:
+        cfg = self.cfg
+        trace, self._duration = self._trace_poses()
+        loop = asyncio.get_running_loop()
+        self.conn = await ClientConnection.open(cfg.host, cfg.port)
+        t_hello = time.monotonic()
+        hello = Hello(client="pibr-client/0.1", scene=cfg.scene, clock=cfg.clock,
+                      output=OutputConfig(cfg.width, cfg.height, cfg.fov_deg, cfg.rate_hz),
+                      want_proxies=False, depth_codec=cfg.depth_codec, time_us=0)
+        try:
+            self.session = await self.conn.handshake(hello)
+            handshake_ms = (time.monotonic() - t_hello) * 1e3
+            if self.session.clock != cfg.clock:
+                raise UnexpectedMessage(f"server runs the {self.session.clock} clock, we asked for {cfg.clock}")
+            self._decoder = H264Decoder(self.session.atlas.width, self.session.atlas.height)
+            self.gl = await loop.run_in_executor(None, GLThread, "pibr-client-gl")
+            await self.gl.run(self._gl_setup)
+            if cfg.record:
+                for m in cfg.methods:
+                    self.recorders[m] = MethodRecorder(cfg.out_dir, m, cfg.width, cfg.height, cfg.rate_hz,
+                                                       lossless=cfg.lossless)
+            interval_us = int(round(1e6 / cfg.rate_hz))
+            n_ticks = max(1, int(math.floor(self._duration * cfg.rate_hz + 1e-9)))
+            preroll = int(math.ceil(cfg.preroll_s * cfg.rate_hz))
+            progress = _Progress(cfg.progress, n_ticks)
+            try:
+                if cfg.clock == "virtual":
+                    await self._run_virtual(trace, interval_us, n_ticks, preroll, progress)
+                else:
+                    await self._run_real(trace, interval_us, n_ticks, preroll, progress, t_hello)
+            finally:
+                progress.close()
+            await self.conn.send(Stats({"ticks": n_ticks, "missed_deadlines": self.missed,
+                                        "frames_received": self.frames_received}))
+            result = ClientResult(n_ticks, self.frames_received, self.missed, self.conn.bytes_received,
+                                  handshake_ms)
+            self._write_session(result, trace)
+            return result
+        finally:
+            await self._shutdown()
+
+    async def _shutdown(self) -> None:
+        if self.conn is not None:
+            await self.conn.close()
+        for rec in self.recorders.values():
+            rec.close()
+        if self.gl is not None:
+            await self.gl.run(self._gl_release)
+            self.gl.close()
+        self._decode_pool.shutdown(wait=True)
+
+    async def _decode(self, frame: Frame, arrival_us: int) -> None:
+        data = frame.payload(PayloadKind.H264_ATLAS)
+        if data is None:
+            raise UnexpectedMessage(f"frame {frame.frame_id} carries no H.264 atlas")
+        loop = asyncio.get_running_loop()
+        image = await loop.run_in_executor(self._decode_pool, self._decoder.decode, data)
+        self._newest = _Decoded(frame, arrival_us, image)
+        self.frames_received += 1
+
+    async def _display(self, tick: int, t_us: int, scene_t_us: int, pose: Pose, missed: int = 0) -> None:
+        """Render all methods for the tick and record them (plus ``missed`` repeats of the previous image)."""
+        decoded = self._newest
+        results = await self.gl.run(self._gl_render, pose, decoded)
+        for name, (rgb, hole, ms) in zip(self.cfg.methods, results):
+            rec = self.recorders.get(name)
+            if rec is None:
+                continue
+            f = decoded.frame if decoded is not None else None
+            record = {
+                "tick": tick, "t": t_us / 1e6, "scene_t": scene_t_us / 1e6,
+                **dict(zip(("px", "py", "pz", "qw", "qx", "qy", "qz"), pose.as_array())),
+                "frame_id": -1 if f is None else f.frame_id,
+                "frame_render_t": float("nan") if f is None else f.render_t_us / 1e6,
+                "frame_pose_t": float("nan") if f is None else f.pose_t_us / 1e6,
+                "frame_arrival_t": float("nan") if f is None else decoded.arrival_us / 1e6,
+                "age_ms": float("nan") if f is None else (t_us - f.pose_t_us) / 1e3,
+                "client_ms": ms, "hole_fraction": hole, "missed": 0,
+            }
+            rec.submit(rgb, record)
+            self._last_shown[name] = (rgb, record)
+
+    async def _run_virtual(self, trace, interval_us, n_ticks, preroll, progress) -> None:
+        horizon = None
+        inbox: deque = deque()
+        for tick in range(-preroll, n_ticks):
+            t_us = tick * interval_us
+            pose = self._pose_at(trace, t_us / 1e6)
+            await self.conn.send(PoseMsg(tick + preroll, t_us, pose), vtime_us=t_us, flush=False)
+            await self.conn.send(Clock(), vtime_us=t_us + interval_us)
+            while horizon is None or horizon <= t_us:
+                env = await self.conn.recv()
+                if horizon is not None and env.vtime_us < horizon:
+                    raise UnexpectedMessage(f"server's virtual time went backwards ({env.vtime_us} < {horizon})")
+                horizon = env.vtime_us
+                if isinstance(env.message, Frame):
+                    inbox.append(env)
+                elif not isinstance(env.message, (Clock, Stats)):
+                    raise UnexpectedMessage(f"unexpected {env.message.NAME} from the server")
+            while inbox and inbox[0].vtime_us <= t_us:
+                env = inbox.popleft()
+                await self._decode(env.message, env.vtime_us)
+            if tick >= 0:
+                await self._display(tick, t_us, t_us, pose)
+                progress.step()
+
+    async def _run_real(self, trace, interval_us, n_ticks, preroll, progress, t_hello) -> None:
+        loop = asyncio.get_running_loop()
+        # Session clock: the Hello went out at 0 (monotonic t_hello); the Welcome's server
+        # time 0 is estimated half a round trip before we received it.
+        rtt_us = int((time.monotonic() - t_hello) * 1e6)
+        server_offset_us = rtt_us // 2          # server time s  <->  client time s + offset
+        zero = loop.time() + preroll * interval_us / 1e6   # tick 0's deadline
+        receiver = asyncio.create_task(self._receive_real(zero), name="client-receiver")
+        try:
+            tick = -preroll
+            while tick < n_ticks:
+                deadline = zero + tick * interval_us / 1e6
+                wait = deadline - loop.time()
+                if wait > 0:
+                    await asyncio.wait({receiver}, timeout=wait)
+                if receiver.done():
+                    receiver.result()
+                    raise UnexpectedMessage("server stopped sending before the trace ended")
+                t_us = tick * interval_us
+                pose = self._pose_at(trace, t_us / 1e6)
+                await self.conn.send(PoseMsg(tick + preroll, int((loop.time() - zero) * 1e6), pose),
+                                     vtime_us=t_us)
+                if tick >= 0:
+                    await self._display(tick, t_us, t_us - server_offset_us, pose)
+                    progress.step()
+                # Ticks whose deadline passed while we worked are not displayed afresh.
+                next_tick = max(tick + 1, math.floor((loop.time() - zero) * 1e6 / interval_us) + 1)
+                skipped = min(next_tick, n_ticks) - tick - 1
+                if tick >= 0 and skipped > 0:
+                    self.missed += skipped
+                    for s in range(1, skipped + 1):
+                        self._repeat_last(tick + s, (tick + s) * interval_us, server_offset_us, trace)
+                        progress.step()
+                tick = next_tick
+        finally:
+            receiver.cancel()
+            try:
+                await receiver
+            except (asyncio.CancelledError, Exception):  # its outcome was already reported above
+                pass
+
+    def _repeat_last(self, tick: int, t_us: int, offset_us: int, trace) -> None:
+        """Record a missed tick: the display kept showing the previous image."""
+        pose = self._pose_at(trace, t_us / 1e6)
+        for name, rec in self.recorders.items():
+            if name not in self._last_shown:
+                continue
+            rgb, record = self._last_shown[name]
+            record = dict(record, tick=tick, t=t_us / 1e6, scene_t=(t_us - offset_us) / 1e6, missed=1,
+                          **dict(zip(("px", "py", "pz", "qw", "qx", "qy", "qz"), pose.as_array())))
+            rec.submit(rgb, record)
+
+    async def _receive_real(self, zero: float) -> None:
+        loop = asyncio.get_running_loop()
+        while True:
+            env = await self.conn.recv()
+            if isinstance(env.message, Frame):
+                await self._decode(env.message, int((loop.time() - zero) * 1e6))
+            elif not isinstance(env.message, (Clock, Stats)):
+                raise UnexpectedMessage(f"unexpected {env.message.NAME} from the server")
+
+    def _write_session(self, result: ClientResult, trace) -> None:
+        os.makedirs(self.cfg.out_dir, exist_ok=True)
+        info = {
+            "client": asdict(self.cfg) | {"methods": list(self.cfg.methods)},
+            "session": self.session.to_json(),
+            "trace": {"name": trace.name, "start_s": self.cfg.start_s, "duration_s": self._duration},
+            "result": asdict(result),
+        }
+        with open(os.path.join(self.cfg.out_dir, "session.json"), "w") as f:
+            json.dump(info, f, indent=2, default=str)
+
+
+async def run_client(config: ClientConfig) -> ClientResult:
+    return await Client(config).run()

@@ -1,0 +1,67 @@
+"""``pibr client``."""
+from __future__ import annotations
+
+import argparse
+import asyncio
+
+from pibr.protocol.address import parse_host_port
+
+
+def _size(text: str) -> tuple[int, int]:
+    try:
+        w, _, h = text.lower().partition("x")
+        return int(w), int(h)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT, got {text!r}") from None
+
+
+def _methods(text: str) -> tuple:
+    from .methods import method_names
+
+    names = tuple(m.strip() for m in text.split(",") if m.strip())
+    unknown = [m for m in names if m not in method_names()]
+    if unknown or not names:
+        raise argparse.ArgumentTypeError(f"unknown method {', '.join(unknown) or text!r}; "
+                                         f"choose from {', '.join(method_names())} (comma-separated)")
+    return names
+
+
+def register(sub) -> None:
+    p = sub.add_parser("client", help="replay a head trace against a server and record what is displayed",
+                       description="Connect to a pibr server (or relay), replay a head trace at a fixed output "
+                                   "rate, re-render every tick with one or more methods and record the results.")
+    p.add_argument("--connect", default="127.0.0.1:7451", help="HOST:PORT of the server or relay (default :7451)")
+    p.add_argument("--trace", default="pred6dof-1",
+                   help="head trace: a file (canonical CSV or pred6dof) or a built-in name (see 'pibr trace list')")
+    p.add_argument("--rate", type=float, default=60.0, help="output rate in Hz (default 60)")
+    p.add_argument("--clock", choices=("virtual", "real"), default="virtual",
+                   help="virtual: simulated, deterministic time; real: the wall clock (default virtual)")
+    p.add_argument("--method", type=_methods, default=("rotation",),
+                   help="re-rendering method(s), comma-separated: none, rotation, ... (default rotation)")
+    p.add_argument("--out", default="out", help="output directory (default out)")
+    p.add_argument("--size", type=_size, default=(960, 540), metavar="WxH", help="output size (default 960x540)")
+    p.add_argument("--fov", type=float, default=90.0, help="horizontal field of view in degrees (default 90)")
+    p.add_argument("--start", type=float, default=0.0, help="start this many seconds into the trace")
+    p.add_argument("--duration", type=float, default=None, help="seconds of trace to replay (default: all)")
+    p.add_argument("--preroll", type=float, default=0.5,
+                   help="seconds of poses sent before the first displayed tick (default 0.5)")
+    p.add_argument("--scene", default="", help="ask the server for this scene (default: the server's)")
+    p.add_argument("--depth-codec", choices=("h264", "edge"), default=None, help="ask for this depth transport")
+    p.add_argument("--no-lossless", action="store_true", help="skip the lossless recording used for metrics")
+    p.add_argument("--progress", choices=("bar", "lines", "none"), default="bar")
+    p.set_defaults(func=cmd_client)
+
+
+def cmd_client(args) -> int:
+    from .app import ClientConfig, run_client
+
+    host, port = parse_host_port(args.connect)
+    cfg = ClientConfig(host=host, port=port, trace=args.trace, rate_hz=args.rate, clock=args.clock,
+                       methods=tuple(args.method), out_dir=args.out, width=args.size[0], height=args.size[1],
+                       fov_deg=args.fov, start_s=args.start, duration_s=args.duration, preroll_s=args.preroll,
+                       scene=args.scene, depth_codec=args.depth_codec or "", lossless=not args.no_lossless,
+                       progress=args.progress)
+    result = asyncio.run(run_client(cfg))
+    print(f"pibr client: {result.ticks} ticks, {result.frames_received} frames received, "
+          f"{result.missed_deadlines} missed deadlines; recordings in {args.out}/")
+    return 0

@@ -1,0 +1,102 @@
+"""The client's side of a session: connect, handshake, send poses, receive messages.
+
+An asyncio adapter over the sans-I/O :class:`~pibr.protocol.connection.Connection`.
+"""
+from __future__ import annotations
+
+import asyncio
+import logging
+from collections import deque
+
+from pibr.protocol.connection import Connection, Envelope
+from pibr.protocol.errors import RemoteError, UnexpectedMessage
+from pibr.protocol.framing import DEFAULT_MAX_MESSAGE_SIZE
+from pibr.protocol.messages import Bye, Error, Hello, Message, Welcome
+from pibr.protocol.session import SessionConfig
+
+log = logging.getLogger(__name__)
+
+
+class ServerClosed(Exception):
+    """The server ended the session (Bye or end of stream)."""
+
+
+class ClientConnection:
+    def __init__(self, reader, writer, max_message_size: int = DEFAULT_MAX_MESSAGE_SIZE):
+        self.reader, self.writer = reader, writer
+        self.conn = Connection(max_message_size)
+        self._pending: deque[Envelope] = deque()
+        self.welcome: Welcome | None = None
+        self.config: SessionConfig | None = None
+        self.bytes_received = 0
+
+    @classmethod
+    async def open(cls, host: str, port: int, timeout: float = 10.0, **kw) -> "ClientConnection":
+        try:
+            reader, writer = await asyncio.wait_for(asyncio.open_connection(host, port), timeout)
+        except (OSError, asyncio.TimeoutError) as exc:
+            raise ConnectionError(f"cannot connect to pibr server at {host}:{port}: {exc or 'timed out'}") from None
+        return cls(reader, writer, **kw)
+
+    async def send(self, message: Message, vtime_us: int = 0, flush: bool = True) -> None:
+        self.conn.send(message, vtime_us)
+        self.writer.write(self.conn.data_to_send())
+        if flush:
+            await self.writer.drain()
+
+    async def recv(self, timeout: float | None = None) -> Envelope:
+        """Next message; raises RemoteError on the server's Error, ServerClosed at its end."""
+        while not self._pending:
+            if self.conn.failed:
+                await self._flush_quietly()
+                raise self.conn.error
+            read = self.reader.read(1 << 16)
+            data = await (asyncio.wait_for(read, timeout) if timeout else read)
+            if not data:
+                self.conn.receive_eof()
+                if self.conn.error is not None:
+                    raise self.conn.error
+                raise ServerClosed("server closed the connection")
+            self.bytes_received += len(data)
+            self.conn.receive_data(data)
+            self._pending.extend(self.conn.events_received())
+        env = self._pending.popleft()
+        if isinstance(env.message, Error):
+            raise RemoteError(env.message.code, env.message.text)
+        if isinstance(env.message, Bye):
+            raise ServerClosed(f"server said bye ({env.message.reason or 'no reason'})")
+        return env
+
+    async def handshake(self, hello: Hello, timeout: float = 120.0) -> SessionConfig:
+        """Send Hello, wait for Welcome (the server may first load and prepare the scene)."""
+        await self.send(hello)
+        env = await self.recv(timeout)
+        if not isinstance(env.message, Welcome):
+            raise UnexpectedMessage(f"expected Welcome, got {env.message.NAME}")
+        self.welcome = env.message
+        if self.welcome.protocol != hello.protocol:
+            raise UnexpectedMessage(f"server speaks protocol {self.welcome.protocol}, we speak {hello.protocol}")
+        self.config = SessionConfig.from_json(self.welcome.config)
+        return self.config
+
+    async def _flush_quietly(self) -> None:
+        data = self.conn.data_to_send()
+        if data:
+            try:
+                self.writer.write(data)
+                await self.writer.drain()
+            except (ConnectionError, RuntimeError):
+                pass
+
+    async def close(self, reason: str = "done") -> None:
+        try:
+            if not self.conn.failed and not self.writer.is_closing():
+                self.conn.send(Bye(reason))
+            await asyncio.wait_for(self._flush_quietly(), 2.0)
+        except asyncio.TimeoutError:
+            pass
+        self.writer.close()
+        try:
+            await asyncio.wait_for(self.writer.wait_closed(), 2.0)
+        except (ConnectionError, asyncio.TimeoutError):
+            pass

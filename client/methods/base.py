@@ -1,0 +1,48 @@
+"""What every client re-rendering method provides."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from pibr.protocol.messages import OutputConfig
+from pibr.protocol.pose import Pose
+from pibr.protocol.session import SessionConfig
+
+FULLSCREEN_VS = """
+#version 410
+in vec2 in_pos;
+void main() { gl_Position = vec4(in_pos, 0.0, 1.0); }
+"""
+
+
+def output_tan_half(output: OutputConfig) -> tuple[float, float]:
+    """tan of half the horizontal and vertical field of view of the output camera."""
+    tx = math.tan(math.radians(output.fov_deg) / 2.0)
+    return tx, tx * output.height / output.width
+
+
+class Method:
+    """A way to turn the newest server frame into the current output image.
+
+    Subclasses draw into the bound output framebuffer (RGBA8, row 0 on top; alpha 0 marks
+    pixels no transmitted view covers) on the client's GL thread.
+    """
+
+    name = "?"
+    needs_proxies = False
+
+    def __init__(self, ctx, output: OutputConfig, config: SessionConfig):
+        self.ctx, self.output, self.config = ctx, output, config
+
+    def render(self, out_pose: Pose, frame, textures) -> None:
+        """Draw the view at ``out_pose`` from ``frame`` (protocol Frame) whose atlas is in ``textures``."""
+        raise NotImplementedError
+
+    def release(self) -> None:
+        pass
+
+
+def fullscreen_quad(ctx, prog):
+    vbo = ctx.buffer(np.array([-1, -1, 1, -1, -1, 1, 1, 1], dtype="f4").tobytes())
+    return vbo, ctx.vertex_array(prog, [(vbo, "2f", "in_pos")])

@@ -1,0 +1,72 @@
+"""``none`` and ``rotation``: re-sample the primary wide-angle view along output rays.
+
+``none`` shows the newest frame as it was rendered: output rays are taken at the frame's own
+pose. ``rotation`` turns them to the current orientation first (asynchronous timewarp):
+head rotation since the render is corrected, translation is ignored. Neither needs depth.
+Output rays that leave the primary view's front hemisphere have no source (alpha 0).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from pibr.protocol.pose import Pose
+
+from ..frame_textures import ATLAS_GLSL, bind_atlas_uniforms, rect_uniform
+from .base import FULLSCREEN_VS, Method, fullscreen_quad, output_tan_half
+
+_FS = """
+#version 410
+%(atlas)s
+uniform mat3 u_out_to_src;    // output camera -> source camera rotation
+uniform vec2 u_tan_half;
+uniform vec2 u_out_size;
+uniform vec4 u_color_rect;
+out vec4 f_color;
+void main() {
+    vec2 ndc = vec2(2.0 * gl_FragCoord.x / u_out_size.x - 1.0, 1.0 - 2.0 * gl_FragCoord.y / u_out_size.y);
+    vec3 d = u_out_to_src * normalize(vec3(ndc * u_tan_half, -1.0));
+    if (d.z > 0.0) { f_color = vec4(0.0); return; }
+    f_color = vec4(atlas_rgb(u_color_rect, wa_uv(wa_project(d).xy)), 1.0);
+}
+""" % {"atlas": ATLAS_GLSL}
+
+
+class DirectionWarp(Method):
+    follow_rotation = True
+
+    def __init__(self, ctx, output, config):
+        super().__init__(ctx, output, config)
+        self.prog = ctx.program(vertex_shader=FULLSCREEN_VS, fragment_shader=_FS)
+        bind_atlas_uniforms(self.prog, config)
+        self.prog["u_tan_half"].value = output_tan_half(output)
+        self.prog["u_out_size"].value = (float(output.width), float(output.height))
+        self.prog["u_color_rect"].value = rect_uniform(config, "primary.color")
+        self.vbo, self.vao = fullscreen_quad(ctx, self.prog)
+
+    def render(self, out_pose: Pose, frame, textures) -> None:
+        src = frame.primary_pose
+        view_rotation = out_pose.rotation() if self.follow_rotation else src.rotation()
+        out_to_src = src.rotation().T @ view_rotation
+        self.prog["u_out_to_src"].write(out_to_src.T.astype("f4").tobytes())
+        textures.use()
+        self.ctx.disable(self.ctx.DEPTH_TEST)
+        self.vao.render(self.ctx.TRIANGLE_STRIP)
+
+    def release(self) -> None:
+        self.vao.release()
+        self.vbo.release()
+        self.prog.release()
+
+
+class NoCompensation(DirectionWarp):
+    """The newest frame as rendered, at its own pose."""
+
+    name = "none"
+    follow_rotation = False
+
+
+class RotationWarp(DirectionWarp):
+    """Re-projected to the current orientation; translation ignored."""
+
+    name = "rotation"
+    follow_rotation = True

@@ -1,0 +1,110 @@
+"""Recording what the client displays: per method, a viewable MP4, a lossless copy for
+metrics, and one CSV row per output tick.
+
+Files in the output directory, for method M::
+
+    M.mp4            H.264 yuv420p, for people
+    M.lossless.mkv   H.264 4:4:4 RGB at qp 0 (lossless), for metrics against ground truth
+    M.records.csv    one row per displayed tick (columns: RECORD_FIELDS)
+
+Encoding runs on a worker thread per method; at most ``max_pending`` frames wait, so a slow
+disk slows the client (and, on the real clock, shows up as missed deadlines) rather than
+filling memory.
+"""
+from __future__ import annotations
+
+import concurrent.futures
+import csv
+import fractions
+import os
+from collections import deque
+
+import numpy as np
+
+RECORD_FIELDS = (
+    "tick", "t", "scene_t", "px", "py", "pz", "qw", "qx", "qy", "qz",
+    "frame_id", "frame_render_t", "frame_pose_t", "frame_arrival_t", "age_ms",
+    "client_ms", "hole_fraction", "missed",
+)
+
+
+class MethodRecorder:
+    def __init__(self, out_dir: str, method: str, width: int, height: int, rate_hz: float,
+                 lossless: bool = True, max_pending: int = 4):
+        import av
+
+        self._av = av
+        os.makedirs(out_dir, exist_ok=True)
+        self.method, self.width, self.height = method, width, height
+        rate = fractions.Fraction(rate_hz).limit_denominator(1000)
+        self._containers = []
+        self._streams = []
+        mp4 = av.open(os.path.join(out_dir, f"{method}.mp4"), "w")
+        s = mp4.add_stream("libx264", rate=rate)
+        s.width, s.height, s.pix_fmt = width, height, "yuv420p"
+        s.options = {"preset": "ultrafast", "crf": "18"}
+        self._containers.append(mp4)
+        self._streams.append(s)
+        if lossless:
+            mkv = av.open(os.path.join(out_dir, f"{method}.lossless.mkv"), "w")
+            s = mkv.add_stream("libx264rgb", rate=rate)
+            s.width, s.height, s.pix_fmt = width, height, "rgb24"
+            s.options = {"preset": "ultrafast", "qp": "0"}
+            self._containers.append(mkv)
+            self._streams.append(s)
+        self._csv_file = open(os.path.join(out_dir, f"{method}.records.csv"), "w", newline="")
+        self._csv = csv.DictWriter(self._csv_file, fieldnames=RECORD_FIELDS)
+        self._csv.writeheader()
+        self._pool = concurrent.futures.ThreadPoolExecutor(max_workers=1, thread_name_prefix=f"rec-{method}")
+        self._pending: deque = deque()
+        self.max_pending = max_pending
+        self.frames = 0
+
+    def _write(self, rgb: np.ndarray, pts: int, record: dict) -> None:
+        frame = self._av.VideoFrame.from_ndarray(rgb, format="rgb24")
+        for container, stream in zip(self._containers, self._streams):
+            frame.pts = pts
+            for packet in stream.encode(frame):
+                container.mux(packet)
+        self._csv.writerow(record)
+
+    def submit(self, rgb: np.ndarray, record: dict) -> None:
+        """Queue one displayed image (H, W, 3) uint8 and its record; blocks while too many wait."""
+        if rgb.shape != (self.height, self.width, 3):
+            raise ValueError(f"expected a ({self.height}, {self.width}, 3) image, got {rgb.shape}")
+        while len(self._pending) >= self.max_pending:
+            self._pending.popleft().result()
+        self._pending.append(self._pool.submit(self._write, np.ascontiguousarray(rgb), self.frames, record))
+        self.frames += 1
+
+    def close(self) -> None:
+        while self._pending:
+            self._pending.popleft().result()
+
+        def finish():
+            for container, stream in zip(self._containers, self._streams):
+                for packet in stream.encode():
+                    container.mux(packet)
+                container.close()
+            self._csv_file.close()
+
+        self._pool.submit(finish).result()
+        self._pool.shutdown()
+
+
+def read_records(path: str) -> list[dict]:
+    """Rows of a ``M.records.csv`` with numbers converted."""
+    from pibr.protocol.errors import ConfigError
+
+    rows = []
+    with open(path, newline="") as f:
+        reader = csv.DictReader(f)
+        missing = [k for k in RECORD_FIELDS if k not in (reader.fieldnames or [])]
+        if missing:
+            raise ConfigError(f"{path}: not a pibr records file (missing columns {', '.join(missing)})")
+        for line, row in enumerate(reader, start=2):
+            try:
+                rows.append({k: (int(v) if k in ("tick", "frame_id", "missed") else float(v)) for k, v in row.items()})
+            except (TypeError, ValueError):
+                raise ConfigError(f"{path}:{line}: a value does not parse as a number") from None
+    return rows

@@ -1,0 +1,69 @@
+"""H.264 decoding of the atlas stream with PyAV, to planar YUV the GPU converts itself."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from pibr.protocol.errors import CodecError
+
+
+@dataclass
+class YUVImage:
+    """Planes of a full-range BT.601 4:2:0 image: y (H, W), u and v (H/2, W/2), uint8."""
+
+    y: np.ndarray
+    u: np.ndarray
+    v: np.ndarray
+
+    @property
+    def width(self) -> int:
+        return self.y.shape[1]
+
+    @property
+    def height(self) -> int:
+        return self.y.shape[0]
+
+    def to_rgb(self) -> np.ndarray:
+        """(H, W, 3) uint8 on the CPU (for tests and tools; the client converts in shaders)."""
+        y = self.y.astype(np.float32)
+        u = np.repeat(np.repeat(self.u.astype(np.float32) - 128.0, 2, 0), 2, 1)
+        v = np.repeat(np.repeat(self.v.astype(np.float32) - 128.0, 2, 0), 2, 1)
+        rgb = np.stack([y + 1.402 * v, y - 0.344136 * u - 0.714136 * v, y + 1.772 * u], axis=-1)
+        return np.clip(rgb + 0.5, 0, 255).astype(np.uint8)
+
+
+class H264Decoder:
+    """Decodes one session's access units in order. Every frame must be fed, keyframe first."""
+
+    name = "h264"
+
+    def __init__(self, width: int, height: int):
+        import av
+
+        self._av = av
+        self.width, self.height = width, height
+        self._ctx = av.CodecContext.create("h264", "r")
+        self._ctx.thread_type = "NONE"  # frame threading would delay output by a frame per thread
+        self.frames = 0
+
+    def decode(self, data: bytes) -> YUVImage:
+        try:
+            frames = self._ctx.decode(self._av.Packet(data))
+        except self._av.error.FFmpegError as exc:
+            raise CodecError(f"H.264 frame {self.frames} does not decode: {exc}") from None
+        if not frames:
+            raise CodecError(f"H.264 frame {self.frames} produced no picture (missing keyframe or truncated data)")
+        frame = frames[-1]
+        self.frames += 1
+        if (frame.width, frame.height) != (self.width, self.height):
+            raise CodecError(f"H.264 picture is {frame.width}x{frame.height}, the session's atlas is "
+                             f"{self.width}x{self.height}")
+        if frame.format.name not in ("yuv420p", "yuvj420p"):
+            frame = frame.reformat(format="yuv420p")
+        buf = frame.to_ndarray()
+        h, w = self.height, self.width
+        q = (h // 2) * (w // 2)
+        flat = buf[h:].reshape(-1)
+        return YUVImage(np.ascontiguousarray(buf[:h]), flat[:q].reshape(h // 2, w // 2).copy(),
+                        flat[q:2 * q].reshape(h // 2, w // 2).copy())
