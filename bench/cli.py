@@ -1,0 +1,116 @@
+"""``pibr demo``, ``pibr evaluate`` and ``pibr bench ...``."""
+from __future__ import annotations
+
+import argparse
+import json
+
+
+def _size(text: str) -> tuple[int, int]:
+    try:
+        w, _, h = text.lower().partition("x")
+        return int(w), int(h or w)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT, got {text!r}") from None
+
+
+def _names(text: str) -> tuple:
+    names = tuple(x.strip() for x in text.split(",") if x.strip())
+    if not names:
+        raise argparse.ArgumentTypeError("name at least one")
+    return names
+
+
+def register(sub) -> None:
+    d = sub.add_parser("demo", help="run server, relay and client on loopback and score the result",
+                       description="Start a server, a 128 ms relay and a client as separate processes, replay a "
+                                   "real head trace, then compare the methods against ground truth.")
+    d.add_argument("--out", default="out", help="output directory (default out)")
+    d.add_argument("--scene", default="room")
+    d.add_argument("--trace", default="pred6dof-1")
+    d.add_argument("--start", type=float, default=10.0, help="seconds into the trace (default 10)")
+    d.add_argument("--duration", type=float, default=8.0, help="seconds to replay (default 8)")
+    d.add_argument("--rate", type=float, default=30.0, help="output rate Hz (default 30)")
+    d.add_argument("--size", type=_size, default=(960, 540), metavar="WxH")
+    d.add_argument("--latency-ms", type=float, default=128.0, help="round trip, split evenly (default 128)")
+    d.add_argument("--method", type=_names, default=("none", "rotation"), help="methods to compare")
+    d.add_argument("--clock", choices=("virtual", "real"), default="virtual")
+    d.add_argument("--flip-every", type=int, default=4, help="FLIP on every Nth frame, 0: never (default 4)")
+    d.set_defaults(func=cmd_demo)
+
+    e = sub.add_parser("evaluate", help="score a client recording against ground truth",
+                       description="Render ground truth for every displayed tick of a 'pibr client' recording and "
+                                   "compute PSNR, SSIM, DSSIM, FLIP and hole fraction per method.")
+    e.add_argument("run", help="the client's --out directory")
+    e.add_argument("--scene", default=None, help="scene spec if the recording's scene name is not a built-in")
+    e.add_argument("--flip-every", type=int, default=1)
+    e.add_argument("--workers", type=int, default=2, help="metric worker processes (default 2)")
+    e.add_argument("--no-video", action="store_true", help="skip side_by_side.mp4")
+    e.set_defaults(func=cmd_evaluate)
+
+    b = sub.add_parser("bench", help="benchmarks: speed, size and quality trades",
+                       description="Benchmarks print a table and write JSON (and plots) to --out.")
+    bs = b.add_subparsers(dest="bench", metavar="BENCH")
+    bs.required = True
+    s = bs.add_parser("server", help="server ms per frame by stage, and bitrate")
+    s.add_argument("--scene", default="room")
+    s.add_argument("--trace", default="pred6dof-1")
+    s.add_argument("--frames", type=int, default=40)
+    s.add_argument("--view-size", type=_size, default=(1024, 1024), metavar="WxH")
+    s.add_argument("--projection", type=_names, default=("vertex", "tess"), help="which to measure (default both)")
+    s.add_argument("--extra-view", choices=("auto", "on", "off", "both"), default="auto")
+    s.add_argument("--bitrate-kbps", type=float, default=16000.0)
+    s.add_argument("--out", default="out/bench")
+    s.set_defaults(func=cmd_bench_server)
+    c = bs.add_parser("client", help="client ms per frame by stage")
+    c.add_argument("--scene", default="room")
+    c.add_argument("--trace", default="pred6dof-1")
+    c.add_argument("--frames", type=int, default=40)
+    c.add_argument("--view-size", type=_size, default=(1024, 1024), metavar="WxH")
+    c.add_argument("--size", type=_size, default=(960, 540), metavar="WxH", help="client output size")
+    c.add_argument("--method", type=_names, default=("none", "rotation"))
+    c.add_argument("--out", default="out/bench")
+    c.set_defaults(func=cmd_bench_client)
+
+
+def cmd_demo(args) -> int:
+    from .demo import print_report, run_demo
+
+    metrics = run_demo(out_dir=args.out, scene=args.scene, trace=args.trace, start_s=args.start,
+                       duration_s=args.duration, rate_hz=args.rate, size=args.size, latency_ms=args.latency_ms,
+                       methods=args.method, clock=args.clock, flip_every=args.flip_every)
+    print_report(metrics, args.out)
+    return 0
+
+
+def cmd_evaluate(args) -> int:
+    from .evaluate import evaluate_run, summary_table
+
+    metrics = evaluate_run(args.run, scene_spec=args.scene, flip_every=args.flip_every, workers=args.workers,
+                           side_by_side=not args.no_video)
+    print(summary_table(metrics))
+    print(f"written: {args.run}/metrics.json, metrics_frames.csv, quality.png"
+          + ("" if args.no_video else ", side_by_side.mp4"))
+    return 0
+
+
+def cmd_bench_server(args) -> int:
+    from .pipeline_bench import bench_server, print_server_table
+
+    result = bench_server(scene_spec=args.scene, trace=args.trace, frames=args.frames, view_size=args.view_size,
+                          projections=args.projection, extra_view=args.extra_view, bitrate_kbps=args.bitrate_kbps,
+                          out_dir=args.out)
+    print_server_table(result)
+    return 0
+
+
+def cmd_bench_client(args) -> int:
+    from .pipeline_bench import bench_client, print_client_table
+
+    result = bench_client(scene_spec=args.scene, trace=args.trace, frames=args.frames, view_size=args.view_size,
+                          out_size=args.size, methods=args.method, out_dir=args.out)
+    print_client_table(result)
+    return 0
+
+
+def _dump(obj) -> str:
+    return json.dumps(obj, indent=2)

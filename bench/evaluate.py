@@ -1,0 +1,204 @@
+"""Score a client recording against ground truth (``pibr evaluate RUN_DIR``).
+
+For every displayed tick: render the ground truth at the tick's pose and scene time, read
+each method's lossless recording, and compute PSNR, SSIM, DSSIM, FLIP and the hole fraction.
+Writes into the run directory:
+
+    metrics.json         per method: psnr_mean, ssim_mean, dssim_mean, flip_mean,
+                         hole_fraction_mean, client_ms_median, frames (+ more, see below)
+    metrics_frames.csv   one row per method and tick
+    quality.png          quality and frame age over time
+    side_by_side.mp4     per method one row: method | ground truth | error image
+
+Metrics run in worker processes while this process renders ground truth and decodes.
+"""
+from __future__ import annotations
+
+import concurrent.futures
+import csv
+import json
+import logging
+import math
+import os
+import sys
+from collections import deque
+
+import numpy as np
+
+from pibr.protocol.errors import ConfigError
+from pibr.protocol.pose import Pose
+
+from .metrics import error_image, frame_metrics, pixels_per_degree
+
+log = logging.getLogger(__name__)
+
+SUMMARY_KEYS = ("psnr_mean", "ssim_mean", "dssim_mean", "flip_mean", "hole_fraction_mean", "client_ms_median",
+                "frames")
+
+
+def _read_session(run_dir: str) -> dict:
+    path = os.path.join(run_dir, "session.json")
+    try:
+        with open(path) as f:
+            return json.load(f)
+    except FileNotFoundError:
+        raise ConfigError(f"{run_dir} holds no client recording (no session.json); run 'pibr client --out DIR' first") \
+            from None
+    except json.JSONDecodeError as exc:
+        raise ConfigError(f"{path} is not valid JSON: {exc}") from None
+
+
+def _frames(path: str):
+    import av
+
+    try:
+        container = av.open(path)
+    except (OSError, av.error.FFmpegError) as exc:
+        raise ConfigError(f"cannot open recording {path}: {exc}") from None
+    with container:
+        for frame in container.decode(video=0):
+            yield frame.to_ndarray(format="rgb24")
+
+
+def _metrics_job(gt, img, ppd, with_flip):
+    return frame_metrics(gt, img, ppd, with_flip)
+
+
+def _stack_rows(rows, scale: int) -> np.ndarray:
+    out = np.concatenate([np.concatenate(r, axis=1) for r in rows], axis=0)
+    if scale > 1:
+        out = out[::scale, ::scale]
+    h, w = out.shape[:2]
+    return np.ascontiguousarray(out[: h - h % 2, : w - w % 2])
+
+
+def evaluate_run(run_dir: str, scene_spec: str | None = None, flip_every: int = 1, workers: int = 2,
+                 side_by_side: bool = True, plot: bool = True, progress: bool = True,
+                 max_frames: int | None = None) -> dict:
+    """Score every method of the recording in ``run_dir``; returns the metrics.json content."""
+    from pibr.client.recorder import read_records
+    from pibr.scenes.registry import load_scene
+
+    from .groundtruth import GroundTruth
+
+    if flip_every < 0:
+        raise ConfigError("flip_every must be >= 0 (0: no FLIP)")
+    info = _read_session(run_dir)
+    client = info["client"]
+    methods = list(client["methods"])
+    width, height, fov = int(client["width"]), int(client["height"]), float(client["fov_deg"])
+    scene = load_scene(scene_spec or info["session"]["scene"]["name"])
+    records = {m: read_records(os.path.join(run_dir, f"{m}.records.csv")) for m in methods}
+    n = min(len(r) for r in records.values())
+    if max_frames is not None:
+        n = min(n, max_frames)
+    if n == 0:
+        raise ConfigError(f"{run_dir}: the recording has no displayed frames")
+    ppd = pixels_per_degree(width, fov)
+    streams = {m: _frames(os.path.join(run_dir, f"{m}.lossless.mkv")) for m in methods}
+    gt = GroundTruth(scene, width, height, fov)
+    pool = concurrent.futures.ProcessPoolExecutor(max_workers=max(1, workers)) if workers > 0 else None
+    writer = None
+    if side_by_side:
+        from .video_writer import VideoWriter
+
+        writer = VideoWriter(os.path.join(run_dir, "side_by_side.mp4"), client["rate_hz"])
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=n, unit="frame", desc="ground truth + metrics", file=sys.stderr, leave=False)
+    results = {m: [None] * n for m in methods}
+    pending: deque = deque()
+
+    def settle(block: bool):
+        while pending and (block or pending[0][2].done() or len(pending) > 4 * max(1, workers)):
+            m, i, fut = pending.popleft()
+            results[m][i] = fut.result() if pool is not None else fut
+    try:
+        for i in range(n):
+            rec = records[methods[0]][i]
+            pose = Pose.make([rec["px"], rec["py"], rec["pz"]], [rec["qw"], rec["qx"], rec["qy"], rec["qz"]])
+            ref = gt.render(pose, rec["scene_t"])
+            rows = []
+            for m in methods:
+                try:
+                    img = next(streams[m])
+                except StopIteration:
+                    raise ConfigError(f"{m}.lossless.mkv ends after {i} frames but {m}.records.csv has {n}") from None
+                if img.shape != ref.shape:
+                    raise ConfigError(f"{m}.lossless.mkv frames are {img.shape}, expected {ref.shape}")
+                with_flip = flip_every > 0 and i % flip_every == 0
+                if pool is not None:
+                    pending.append((m, i, pool.submit(_metrics_job, ref, img, ppd, with_flip)))
+                else:
+                    pending.append((m, i, _metrics_job(ref, img, ppd, with_flip)))
+                if writer is not None:
+                    rows.append([img, ref, error_image(ref, img)])
+            if writer is not None:
+                writer.write(_stack_rows(rows, 2))
+            settle(block=False)
+            if bar is not None:
+                bar.update(1)
+        settle(block=True)
+    finally:
+        if bar is not None:
+            bar.close()
+        gt.close()
+        if pool is not None:
+            pool.shutdown(cancel_futures=True)
+        if writer is not None:
+            writer.close()
+
+    summary = {}
+    rows_out = []
+    for m in methods:
+        per = results[m]
+        recs = records[m][:n]
+        flips = [p["flip"] for p in per if not math.isnan(p["flip"])]
+        ages = [r["age_ms"] for r in recs if not math.isnan(r["age_ms"])]
+        summary[m] = {
+            "psnr_mean": float(np.mean([p["psnr"] for p in per])),
+            "ssim_mean": float(np.mean([p["ssim"] for p in per])),
+            "dssim_mean": float(np.mean([p["dssim"] for p in per])),
+            "flip_mean": float(np.mean(flips)) if flips else None,
+            "hole_fraction_mean": float(np.mean([r["hole_fraction"] for r in recs])),
+            "client_ms_median": float(np.median([r["client_ms"] for r in recs])),
+            "frames": n,
+            "flip_frames": len(flips),
+            "age_ms_mean": float(np.mean(ages)) if ages else None,
+            "missed_deadlines": int(sum(r["missed"] for r in recs)),
+        }
+        for r, p in zip(recs, per):
+            rows_out.append({"method": m, "tick": r["tick"], "t": r["t"], **p, "hole_fraction": r["hole_fraction"],
+                             "age_ms": r["age_ms"], "client_ms": r["client_ms"], "frame_id": r["frame_id"]})
+    out = {"run": os.path.abspath(run_dir), "scene": scene.name, "trace": info.get("trace"),
+           "clock": client["clock"], "output": {"width": width, "height": height, "fov_deg": fov,
+                                                "rate_hz": client["rate_hz"], "pixels_per_degree": ppd},
+           "flip_every": flip_every, "methods": summary}
+    with open(os.path.join(run_dir, "metrics.json"), "w") as f:
+        json.dump(out, f, indent=2)
+    with open(os.path.join(run_dir, "metrics_frames.csv"), "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=list(rows_out[0].keys()))
+        w.writeheader()
+        w.writerows(rows_out)
+    if plot:
+        from .plots import plot_quality_over_time
+
+        plot_quality_over_time(rows_out, os.path.join(run_dir, "quality.png"))
+    return out
+
+
+def summary_table(metrics: dict) -> str:
+    """Plain-text table of metrics.json's per-method means."""
+    cols = [("method", "{}"), ("PSNR dB", "{:.2f}"), ("SSIM", "{:.4f}"), ("DSSIM", "{:.4f}"), ("FLIP", "{:.4f}"),
+            ("holes %", "{:.2f}"), ("client ms", "{:.1f}"), ("age ms", "{:.0f}"), ("frames", "{}")]
+    rows = []
+    for m, s in metrics["methods"].items():
+        vals = [m, s["psnr_mean"], s["ssim_mean"], s["dssim_mean"], s["flip_mean"],
+                100 * s["hole_fraction_mean"], s["client_ms_median"], s["age_ms_mean"], s["frames"]]
+        rows.append(["-" if v is None else fmt.format(v) for (_, fmt), v in zip(cols, vals)])
+    widths = [max(len(c[0]), *(len(r[i]) for r in rows)) for i, c in enumerate(cols)]
+    line = "  ".join(c[0].rjust(w) for c, w in zip(cols, widths))
+    body = ["  ".join(v.rjust(w) for v, w in zip(r, widths)) for r in rows]
+    return "\n".join([line, "-" * len(line), *body])

@@ -1,0 +1,34 @@
+"""Ground truth: the full scene rendered in a perspective camera at each displayed pose and time."""
+from __future__ import annotations
+
+import numpy as np
+
+from pibr.protocol.pose import Pose
+
+
+class GroundTruth:
+    """Renders ``width`` x ``height`` perspective views (horizontal FOV ``fov_deg``) of ``scene``.
+
+    Creates its own GL context on the calling thread (bench code is synchronous).
+    """
+
+    def __init__(self, scene, width: int, height: int, fov_deg: float, ctx=None):
+        from pibr.protocol.gl import create_context
+        from pibr.server.renderer import Renderer, RenderTarget
+
+        self._own_ctx = ctx is None
+        self.ctx = create_context() if ctx is None else ctx
+        self.scene, self.fov_deg = scene, fov_deg
+        self.renderer = Renderer(self.ctx, scene, wide=False)
+        self.target = RenderTarget(self.ctx, width, height)
+
+    def render(self, pose: Pose, t: float) -> np.ndarray:
+        """(height, width, 3) uint8 view at ``pose`` and scene time ``t`` seconds."""
+        self.renderer.render_perspective(self.target, pose, t, self.fov_deg)
+        return self.target.read_color().copy()
+
+    def close(self) -> None:
+        self.target.release()
+        self.renderer.release()
+        if self._own_ctx:
+            self.ctx.release()

@@ -1,0 +1,74 @@
+"""Image-quality metrics against ground truth.
+
+PSNR (dB, capped at PSNR_CAP so identical images give a finite, comparable number),
+SSIM and DSSIM = (1 - SSIM) / 2 (scikit-image, on all three channels), FLIP (NVIDIA's
+flip-evaluator, LDR, with the display's pixels per degree) and the fraction of pixels no
+transmitted view covered (reported by the client).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+PSNR_CAP = 100.0
+
+
+def _check_pair(ref: np.ndarray, test: np.ndarray) -> None:
+    if ref.shape != test.shape or ref.ndim != 3 or ref.shape[2] != 3:
+        raise ValueError(f"need two (H, W, 3) images of one shape, got {ref.shape} and {test.shape}")
+
+
+def psnr(ref: np.ndarray, test: np.ndarray) -> float:
+    """PSNR in dB of uint8 (H, W, 3) images; PSNR_CAP when they are identical."""
+    _check_pair(ref, test)
+    mse = np.mean((ref.astype(np.float64) - test.astype(np.float64)) ** 2)
+    if mse <= 0:
+        return PSNR_CAP
+    return min(PSNR_CAP, 10.0 * math.log10(255.0 ** 2 / mse))
+
+
+def ssim(ref: np.ndarray, test: np.ndarray) -> float:
+    from skimage.metrics import structural_similarity
+
+    _check_pair(ref, test)
+    return float(structural_similarity(ref, test, channel_axis=2, data_range=255))
+
+
+def dssim(ssim_value: float) -> float:
+    return (1.0 - ssim_value) / 2.0
+
+
+def flip(ref: np.ndarray, test: np.ndarray, pixels_per_degree: float = 67.0, with_map: bool = False):
+    """Mean FLIP error in [0, 1] (lower is better); with ``with_map`` also the (H, W) error map."""
+    import flip_evaluator
+
+    _check_pair(ref, test)
+    r = ref.astype(np.float32) / 255.0
+    t = test.astype(np.float32) / 255.0
+    error_map, mean, _ = flip_evaluator.evaluate(r, t, "LDR", inputsRGB=True, applyMagma=False,
+                                                 computeMeanError=True, parameters={"ppd": float(pixels_per_degree)})
+    if with_map:
+        return float(mean), np.asarray(error_map).reshape(ref.shape[:2] + (-1,))[:, :, 0]
+    return float(mean)
+
+
+def pixels_per_degree(width: int, fov_deg: float) -> float:
+    """Display resolution at the centre of a perspective view, pixels per degree."""
+    return width / 2.0 / math.tan(math.radians(fov_deg) / 2.0) * math.pi / 180.0
+
+
+def frame_metrics(ref: np.ndarray, test: np.ndarray, ppd: float, with_flip: bool = True) -> dict:
+    """All per-frame metrics of one displayed image (FLIP is NaN when skipped)."""
+    s = ssim(ref, test)
+    return {"psnr": psnr(ref, test), "ssim": s, "dssim": dssim(s),
+            "flip": flip(ref, test, ppd) if with_flip else float("nan")}
+
+
+def error_image(ref: np.ndarray, test: np.ndarray, gain: float = 4.0) -> np.ndarray:
+    """(H, W, 3) uint8 heat map of the per-pixel colour difference (magma), for videos."""
+    from matplotlib import colormaps
+
+    diff = np.abs(ref.astype(np.int16) - test.astype(np.int16)).mean(axis=2) / 255.0
+    lut = (colormaps["magma"](np.linspace(0, 1, 256))[:, :3] * 255).astype(np.uint8)
+    return lut[np.clip(diff * gain * 255, 0, 255).astype(np.uint8)]

@@ -1,0 +1,198 @@
+"""``pibr bench server`` and ``pibr bench client``: ms per frame by stage, and bitrate.
+
+Both run the real pipeline in one process (no sockets, so the numbers are the stages'
+own cost): the server's renderer, atlas packer and libx264 encoder along a real head
+trace; the client's H.264 decoder, texture upload and each method's display pass on the
+stream the server pipeline produced. Timings here are noisy: compare within one run.
+"""
+from __future__ import annotations
+
+import json
+import os
+import time
+
+import numpy as np
+
+from pibr.protocol.messages import Frame, Hello, OutputConfig, PayloadKind
+
+
+def _poses(scene, trace_spec: str, count: int, fps: float, start_s: float = 10.0):
+    from pibr.protocol.trace import load_trace
+
+    trace = load_trace(trace_spec)
+    start = min(start_s, max(0.0, trace.duration - count / fps))
+    return [(start + k / fps, scene.viewer_origin.compose(trace.pose_at(start + k / fps))) for k in range(count)]
+
+
+def _server_cfg(**kw):
+    from pibr.server.config import ServerConfig
+
+    return ServerConfig(**kw)
+
+
+def _median(xs) -> float:
+    return float(np.median(xs)) if len(xs) else float("nan")
+
+
+def bench_server(scene_spec="room", trace="pred6dof-1", frames=40, view_size=(1024, 1024),
+                 projections=("vertex", "tess"), extra_view="auto", bitrate_kbps=16000.0, out_dir="out/bench",
+                 fps=10.0) -> dict:
+    from pibr.protocol.gl import create_context
+    from pibr.scenes.registry import load_scene
+    from pibr.server.pipeline import FrameProducer
+    from pibr.server.renderer import Renderer
+    from pibr.server.session_plan import plan_session
+    from pibr.server.video import H264Encoder
+
+    scene = load_scene(scene_spec)
+    poses = _poses(scene, trace, frames + 3, fps)
+    ctx = create_context()
+    extras = ["off", "on"] if extra_view == "both" else [extra_view]
+    rows = []
+    for projection in projections:
+        t0 = time.perf_counter()
+        renderer = Renderer(ctx, scene, projection)
+        setup_s = time.perf_counter() - t0
+        for extra in extras:
+            cfg = _server_cfg(scene=scene_spec, view_size=tuple(view_size), extra_view=extra, projection=projection,
+                              bitrate_kbps=bitrate_kbps, fps=fps)
+            session, spec = plan_session(cfg, scene, Hello())
+            producer = FrameProducer(ctx, renderer, spec)
+            encoder = H264Encoder(spec.layout.width, spec.layout.height, fps, bitrate_kbps, cfg.keyint)
+            stages = {"render": [], "readback": [], "pack": [], "encode": []}
+            sizes, keys = [], []
+            for i, (t, pose) in enumerate(poses):
+                p = producer.produce(pose, t)
+                te = time.perf_counter()
+                data, key = encoder.encode(p.yuv)
+                encode_ms = (time.perf_counter() - te) * 1e3
+                if i < 3:
+                    continue  # warm-up: shader compilation, encoder start
+                stages["render"].append(p.render_ms)
+                stages["readback"].append(p.readback_ms)
+                stages["pack"].append(p.pack_ms)
+                stages["encode"].append(encode_ms)
+                sizes.append(len(data))
+                keys.append(key)
+            producer.release()
+            total = [sum(v) for v in zip(*stages.values())]
+            rows.append({
+                "projection": projection, "extra_view": spec.extra_size is not None,
+                "view_size": list(view_size), "atlas": [spec.layout.width, spec.layout.height],
+                **{f"{k}_ms": _median(v) for k, v in stages.items()}, "total_ms": _median(total),
+                "kbps": float(np.mean(sizes) * 8 * fps / 1000), "frame_bytes_mean": float(np.mean(sizes)),
+                "keyframe_bytes": float(np.mean([s for s, k in zip(sizes, keys) if k])) if any(keys) else None,
+                "triangles": scene.triangle_count, "rasterised_triangles":
+                    renderer.tessellated_triangles if projection == "vertex" else scene.triangle_count,
+                "renderer_setup_s": setup_s, "frames": len(total),
+            })
+        renderer.release()
+    ctx.release()
+    result = {"scene": scene.name, "trace": trace, "fps": fps, "bitrate_target_kbps": bitrate_kbps, "rows": rows}
+    os.makedirs(out_dir, exist_ok=True)
+    with open(os.path.join(out_dir, "bench_server.json"), "w") as f:
+        json.dump(result, f, indent=2)
+    return result
+
+
+def print_server_table(result: dict) -> None:
+    print(f"pibr bench server: scene {result['scene']}, {result['fps']:g} fps, target "
+          f"{result['bitrate_target_kbps']:g} kbit/s (median ms per frame)")
+    head = f"{'projection':>10} {'extra':>5} {'atlas':>9} {'render':>7} {'readback':>8} {'pack':>6} {'encode':>7} " \
+           f"{'total':>7} {'kbit/s':>8} {'triangles':>10}"
+    print(head)
+    print("-" * len(head))
+    for r in result["rows"]:
+        print(f"{r['projection']:>10} {('on' if r['extra_view'] else 'off'):>5} "
+              f"{r['atlas'][0]:>4}x{r['atlas'][1]:<4} {r['render_ms']:7.1f} {r['readback_ms']:8.1f} "
+              f"{r['pack_ms']:6.1f} {r['encode_ms']:7.1f} {r['total_ms']:7.1f} {r['kbps']:8.0f} "
+              f"{r['rasterised_triangles']:>10}")
+
+
+def bench_client(scene_spec="room", trace="pred6dof-1", frames=40, view_size=(1024, 1024), out_size=(960, 540),
+                 methods=("none", "rotation"), out_dir="out/bench", fps=10.0, rate_hz=60.0,
+                 extra_view="auto") -> dict:
+    from pibr.client.frame_textures import FrameTextures
+    from pibr.client.methods import make_method
+    from pibr.client.output_target import OutputTarget
+    from pibr.client.video import H264Decoder
+    from pibr.protocol.gl import create_context
+    from pibr.scenes.registry import load_scene
+    from pibr.server.pipeline import FrameProducer
+    from pibr.server.renderer import Renderer
+    from pibr.server.session_plan import plan_session
+    from pibr.server.video import H264Encoder
+
+    scene = load_scene(scene_spec)
+    poses = _poses(scene, trace, frames, fps)
+    ctx = create_context()
+    cfg = _server_cfg(scene=scene_spec, view_size=tuple(view_size), extra_view=extra_view, fps=fps)
+    session, spec = plan_session(cfg, scene, Hello())
+    renderer = Renderer(ctx, scene, cfg.projection)
+    producer = FrameProducer(ctx, renderer, spec)
+    encoder = H264Encoder(spec.layout.width, spec.layout.height, fps, cfg.bitrate_kbps, cfg.keyint)
+    stream = []
+    for k, (t, pose) in enumerate(poses):
+        p = producer.produce(pose, t)
+        data, key = encoder.encode(p.yuv)
+        stream.append(Frame(k, int(t * 1e6), int(t * 1e6), k, int(t * 1e6), p.primary_pose, p.extra_pose,
+                            scene.near, scene.far, payloads=((PayloadKind.H264_ATLAS, data),), keyframe=key))
+    producer.release()
+    renderer.release()
+
+    out = OutputConfig(out_size[0], out_size[1], 90.0, rate_hz)
+    decoder = H264Decoder(session.atlas.width, session.atlas.height)
+    textures = FrameTextures(ctx, session)
+    ms = [make_method(m, ctx, out, session) for m in methods]
+    target = OutputTarget(ctx, *out_size)
+    stages = {"decode": [], "upload": []}
+    display = {m: [] for m in methods}
+    readback = []
+    ticks_per_frame = int(round(rate_hz / fps))
+    for k, frame in enumerate(stream):
+        t0 = time.perf_counter()
+        image = decoder.decode(frame.payload(PayloadKind.H264_ATLAS))
+        t1 = time.perf_counter()
+        textures.upload(image, frame.frame_id)
+        ctx.finish()
+        t2 = time.perf_counter()
+        if k >= 2:
+            stages["decode"].append((t1 - t0) * 1e3)
+            stages["upload"].append((t2 - t1) * 1e3)
+        for j in range(ticks_per_frame):
+            t_out, pose = poses[min(k + 1, len(poses) - 1)]  # the display has moved on since the render
+            for name, m in zip(methods, ms):
+                target.begin()
+                t3 = time.perf_counter()
+                m.render(pose, frame, textures)
+                ctx.finish()
+                t4 = time.perf_counter()
+                target.read()
+                t5 = time.perf_counter()
+                if k >= 2:
+                    display[name].append((t4 - t3) * 1e3)
+                    readback.append((t5 - t4) * 1e3)
+    for m in ms:
+        m.release()
+    textures.release()
+    target.release()
+    ctx.release()
+    result = {"scene": scene.name, "atlas": [session.atlas.width, session.atlas.height],
+              "output": list(out_size), "rate_hz": rate_hz, "fps": fps,
+              "decode_ms": _median(stages["decode"]), "upload_ms": _median(stages["upload"]),
+              "display_ms": {m: _median(v) for m, v in display.items()}, "readback_ms": _median(readback),
+              "frames": len(stages["decode"])}
+    os.makedirs(out_dir, exist_ok=True)
+    with open(os.path.join(out_dir, "bench_client.json"), "w") as f:
+        json.dump(result, f, indent=2)
+    return result
+
+
+def print_client_table(result: dict) -> None:
+    print(f"pibr bench client: atlas {result['atlas'][0]}x{result['atlas'][1]}, output "
+          f"{result['output'][0]}x{result['output'][1]} (median ms)")
+    print(f"  per server frame ({result['fps']:g}/s): decode {result['decode_ms']:.1f}, "
+          f"upload {result['upload_ms']:.1f}")
+    for m, v in result["display_ms"].items():
+        print(f"  per output tick ({result['rate_hz']:g}/s): display '{m}' {v:.1f}")
+    print(f"  read back for recording (not part of display): {result['readback_ms']:.1f}")

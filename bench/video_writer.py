@@ -1,0 +1,45 @@
+"""A small MP4 writer (H.264, yuv420p) for the benchmark's videos."""
+from __future__ import annotations
+
+import fractions
+
+import numpy as np
+
+
+class VideoWriter:
+    def __init__(self, path: str, rate_hz: float, crf: int = 23):
+        import av
+
+        self._av = av
+        self.path = path
+        self._container = av.open(path, "w")
+        self._stream = self._container.add_stream("libx264", rate=fractions.Fraction(rate_hz).limit_denominator(1000))
+        self._stream.pix_fmt = "yuv420p"
+        self._stream.options = {"preset": "veryfast", "crf": str(crf)}
+        self._size = None
+        self.frames = 0
+
+    def write(self, rgb: np.ndarray) -> None:
+        """Append one (H, W, 3) uint8 image; every image must have the first one's (even) size."""
+        h, w = rgb.shape[:2]
+        if self._size is None:
+            if w % 2 or h % 2:
+                raise ValueError(f"video frames need even sizes, got {w}x{h}")
+            self._stream.width, self._stream.height = w, h
+            self._size = (w, h)
+        elif (w, h) != self._size:
+            raise ValueError(f"frame size {w}x{h} differs from the video's {self._size[0]}x{self._size[1]}")
+        frame = self._av.VideoFrame.from_ndarray(np.ascontiguousarray(rgb), format="rgb24")
+        frame.pts = self.frames
+        for p in self._stream.encode(frame):
+            self._container.mux(p)
+        self.frames += 1
+
+    def close(self) -> None:
+        if self._container is None:
+            return
+        if self._size is not None:
+            for p in self._stream.encode():
+                self._container.mux(p)
+        self._container.close()
+        self._container = None
