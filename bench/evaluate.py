@@ -19,6 +19,7 @@ import csv
 import json
 import logging
 import math
+import multiprocessing
 import os
 import sys
 from collections import deque
@@ -97,7 +98,10 @@ def evaluate_run(run_dir: str, scene_spec: str | None = None, flip_every: int = 
     ppd = pixels_per_degree(width, fov)
     streams = {m: _frames(os.path.join(run_dir, f"{m}.lossless.mkv")) for m in methods}
     gt = GroundTruth(scene, width, height, fov)
-    pool = concurrent.futures.ProcessPoolExecutor(max_workers=max(1, workers)) if workers > 0 else None
+    # 'spawn', not fork: FLIP and SSIM use thread pools (OpenMP) that a forked child can find
+    # locked forever if the parent used them before.
+    pool = (concurrent.futures.ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"))
+            if workers > 0 else None)
     writer = None
     if side_by_side:
         from .video_writer import VideoWriter

@@ -138,6 +138,8 @@ class Client:
         self._newest: _Decoded | None = None
         self._gl_state = None
         self._last_shown: dict = {}
+        #: server time = client time + this (0 on the virtual clock, estimated on the real one)
+        self._server_offset_us = 0
 
     # ------------------------------------------------------------------ set-up
 
@@ -202,10 +204,11 @@ class Client:
         t_hello = time.monotonic()
         hello = Hello(client="pibr-client/0.1", scene=cfg.scene, clock=cfg.clock,
                       output=OutputConfig(cfg.width, cfg.height, cfg.fov_deg, cfg.rate_hz),
-                      want_proxies=False, depth_codec=cfg.depth_codec, time_us=0)
+                      want_proxies=False, depth_codec=cfg.depth_codec)
         try:
             self.session = await self.conn.handshake(hello)
-            handshake_ms = (time.monotonic() - t_hello) * 1e3
+            t_welcome = time.monotonic()
+            handshake_ms = (t_welcome - t_hello) * 1e3
             if self.session.clock != cfg.clock:
                 raise UnexpectedMessage(f"server runs the {self.session.clock} clock, we asked for {cfg.clock}")
             self._decoder = H264Decoder(self.session.atlas.width, self.session.atlas.height)
@@ -223,7 +226,7 @@ class Client:
                 if cfg.clock == "virtual":
                     await self._run_virtual(trace, interval_us, n_ticks, preroll, progress)
                 else:
-                    await self._run_real(trace, interval_us, n_ticks, preroll, progress, t_hello)
+                    await self._run_real(trace, interval_us, n_ticks, preroll, progress, t_hello, t_welcome)
             finally:
                 progress.close()
             await self.conn.send(Stats({"ticks": n_ticks, "missed_deadlines": self.missed,
@@ -254,8 +257,10 @@ class Client:
         self._newest = _Decoded(frame, arrival_us, image)
         self.frames_received += 1
 
-    async def _display(self, tick: int, t_us: int, scene_t_us: int, pose: Pose, missed: int = 0) -> None:
-        """Render all methods for the tick and record them (plus ``missed`` repeats of the previous image)."""
+    async def _display(self, tick: int, t_us: int, pose: Pose) -> None:
+        """Render all methods for the tick and record them. Recorded times are in client time;
+        ``scene_t`` is the scene-animation (server) time the ground truth must show."""
+        offset = self._server_offset_us
         decoded = self._newest
         results = await self.gl.run(self._gl_render, pose, decoded)
         for name, (rgb, hole, ms) in zip(self.cfg.methods, results):
@@ -264,10 +269,10 @@ class Client:
                 continue
             f = decoded.frame if decoded is not None else None
             record = {
-                "tick": tick, "t": t_us / 1e6, "scene_t": scene_t_us / 1e6,
+                "tick": tick, "t": t_us / 1e6, "scene_t": (t_us + offset) / 1e6,
                 **dict(zip(("px", "py", "pz", "qw", "qx", "qy", "qz"), pose.as_array())),
                 "frame_id": -1 if f is None else f.frame_id,
-                "frame_render_t": float("nan") if f is None else f.render_t_us / 1e6,
+                "frame_render_t": float("nan") if f is None else (f.render_t_us - offset) / 1e6,
                 "frame_pose_t": float("nan") if f is None else f.pose_t_us / 1e6,
                 "frame_arrival_t": float("nan") if f is None else decoded.arrival_us / 1e6,
                 "age_ms": float("nan") if f is None else (t_us - f.pose_t_us) / 1e3,
@@ -297,16 +302,16 @@ class Client:
                 env = inbox.popleft()
                 await self._decode(env.message, env.vtime_us)
             if tick >= 0:
-                await self._display(tick, t_us, t_us, pose)
+                await self._display(tick, t_us, pose)
                 progress.step()
 
-    async def _run_real(self, trace, interval_us, n_ticks, preroll, progress, t_hello) -> None:
+    async def _run_real(self, trace, interval_us, n_ticks, preroll, progress, t_hello, t_welcome) -> None:
         loop = asyncio.get_running_loop()
-        # Session clock: the Hello went out at 0 (monotonic t_hello); the Welcome's server
-        # time 0 is estimated half a round trip before we received it.
-        rtt_us = int((time.monotonic() - t_hello) * 1e6)
-        server_offset_us = rtt_us // 2          # server time s  <->  client time s + offset
-        zero = loop.time() + preroll * interval_us / 1e6   # tick 0's deadline
+        zero = loop.time() + preroll * interval_us / 1e6   # tick 0's deadline: client time 0
+        # The server's clock starts when it sends Welcome, estimated half a network round
+        # trip (the handshake minus the server's set-up time) before we received it.
+        one_way = max(0.0, t_welcome - t_hello - self.conn.welcome.setup_us / 1e6) / 2
+        self._server_offset_us = int(round((zero - (t_welcome - one_way)) * 1e6))
         receiver = asyncio.create_task(self._receive_real(zero), name="client-receiver")
         try:
             tick = -preroll
@@ -323,7 +328,7 @@ class Client:
                 await self.conn.send(PoseMsg(tick + preroll, int((loop.time() - zero) * 1e6), pose),
                                      vtime_us=t_us)
                 if tick >= 0:
-                    await self._display(tick, t_us, t_us - server_offset_us, pose)
+                    await self._display(tick, t_us, pose)
                     progress.step()
                 # Ticks whose deadline passed while we worked are not displayed afresh.
                 next_tick = max(tick + 1, math.floor((loop.time() - zero) * 1e6 / interval_us) + 1)
@@ -331,7 +336,7 @@ class Client:
                 if tick >= 0 and skipped > 0:
                     self.missed += skipped
                     for s in range(1, skipped + 1):
-                        self._repeat_last(tick + s, (tick + s) * interval_us, server_offset_us, trace)
+                        self._repeat_last(tick + s, (tick + s) * interval_us, trace)
                         progress.step()
                 tick = next_tick
         finally:
@@ -341,15 +346,16 @@ class Client:
             except (asyncio.CancelledError, Exception):  # its outcome was already reported above
                 pass
 
-    def _repeat_last(self, tick: int, t_us: int, offset_us: int, trace) -> None:
+    def _repeat_last(self, tick: int, t_us: int, trace) -> None:
         """Record a missed tick: the display kept showing the previous image."""
         pose = self._pose_at(trace, t_us / 1e6)
         for name, rec in self.recorders.items():
             if name not in self._last_shown:
                 continue
             rgb, record = self._last_shown[name]
-            record = dict(record, tick=tick, t=t_us / 1e6, scene_t=(t_us - offset_us) / 1e6, missed=1,
-                          **dict(zip(("px", "py", "pz", "qw", "qx", "qy", "qz"), pose.as_array())))
+            age = record["age_ms"] + (t_us / 1e6 - record["t"]) * 1e3  # NaN stays NaN: no frame yet
+            record = dict(record, tick=tick, t=t_us / 1e6, scene_t=(t_us + self._server_offset_us) / 1e6, missed=1,
+                          age_ms=age, **dict(zip(("px", "py", "pz", "qw", "qx", "qy", "qz"), pose.as_array())))
             rec.submit(rgb, record)
 
     async def _receive_real(self, zero: float) -> None:

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import sys
 
 from pibr.protocol.address import parse_host_port
 
@@ -61,7 +62,13 @@ def cmd_client(args) -> int:
                        fov_deg=args.fov, start_s=args.start, duration_s=args.duration, preroll_s=args.preroll,
                        scene=args.scene, depth_codec=args.depth_codec or "", lossless=not args.no_lossless,
                        progress=args.progress)
-    result = asyncio.run(run_client(cfg))
+    from .connection import ServerClosed
+
+    try:
+        result = asyncio.run(run_client(cfg))
+    except (ConnectionError, ServerClosed) as exc:
+        print(f"pibr client: error: {exc}", file=sys.stderr)
+        return 2
     print(f"pibr client: {result.ticks} ticks, {result.frames_received} frames received, "
           f"{result.missed_deadlines} missed deadlines; recordings in {args.out}/")
     return 0

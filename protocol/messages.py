@@ -121,14 +121,12 @@ class Hello(Message):
     output: OutputConfig = field(default_factory=OutputConfig)
     want_proxies: bool = False
     depth_codec: str = ""   # "" = the server's choice
-    time_us: int = 0        # client clock when sent (real clock: offset estimate)
     protocol: int = PROTOCOL_VERSION
 
     def serialize(self) -> bytes:
         return _dump_json({"protocol": self.protocol, "client": self.client, "scene": self.scene,
                            "clock": self.clock, "output": self.output.to_json(),
-                           "want_proxies": self.want_proxies, "depth_codec": self.depth_codec,
-                           "time_us": self.time_us})
+                           "want_proxies": self.want_proxies, "depth_codec": self.depth_codec})
 
     @classmethod
     def parse(cls, payload: bytes) -> "Hello":
@@ -142,7 +140,6 @@ class Hello(Message):
                                           or OutputConfig().to_json()),
             want_proxies=_get(cls.NAME, o, "want_proxies", bool, False),
             depth_codec=_get(cls.NAME, o, "depth_codec", str, ""),
-            time_us=_get(cls.NAME, o, "time_us", int, 0),
         )
 
 
@@ -153,6 +150,8 @@ class Welcome(Message):
     ``config`` holds everything the client needs to decode and re-render (scene info,
     views, projection, atlas layout, codecs, server rate and the virtual-time model); its
     keys are documented and validated by :class:`~pibr.protocol.session.SessionConfig`.
+    ``setup_us`` is how long the server took between the Hello and this Welcome, so the
+    client can tell network round trip from set-up time (real clock: clock offset estimate).
     """
 
     TYPE: ClassVar[int] = 2
@@ -160,12 +159,12 @@ class Welcome(Message):
     server: str
     session: int
     config: dict
-    time_us: int = 0
+    setup_us: int = 0
     protocol: int = PROTOCOL_VERSION
 
     def serialize(self) -> bytes:
         return _dump_json({"protocol": self.protocol, "server": self.server, "session": self.session,
-                           "config": self.config, "time_us": self.time_us})
+                           "config": self.config, "setup_us": self.setup_us})
 
     @classmethod
     def parse(cls, payload: bytes) -> "Welcome":
@@ -175,7 +174,7 @@ class Welcome(Message):
             server=_get(cls.NAME, o, "server", str, ""),
             session=_get(cls.NAME, o, "session", int, lo=0),
             config=_get(cls.NAME, o, "config", dict),
-            time_us=_get(cls.NAME, o, "time_us", int, 0),
+            setup_us=_get(cls.NAME, o, "setup_us", int, 0, lo=0),
         )
 
 

@@ -5,7 +5,8 @@ ways through a :class:`~pibr.protocol.link.LinkModel` per direction. It reads th
 ``Hello`` to learn the session's clock:
 
 * **virtual**: frames are forwarded at once, their header ``vtime_us`` rewritten to the
-  modelled arrival time (deterministic: jitter comes from a seeded generator);
+  modelled arrival time (deterministic: jitter comes from a seeded generator); the
+  handshake (``Hello``, ``Welcome``) precedes the simulated timeline and passes unchanged;
 * **real**: frames are held until their modelled arrival on the wall clock, unchanged.
 
 The relay parses framing (never payloads, except the first ``Hello``), so a peer sending
@@ -23,7 +24,7 @@ from pibr.protocol.connection import Connection
 from pibr.protocol.errors import ProtocolError, UnexpectedMessage
 from pibr.protocol.framing import DEFAULT_MAX_MESSAGE_SIZE, FrameReader, encode_frame
 from pibr.protocol.link import LinkModel, LinkParams
-from pibr.protocol.messages import Clock, Error, Hello
+from pibr.protocol.messages import Clock, Error, Hello, Welcome
 
 log = logging.getLogger(__name__)
 
@@ -105,7 +106,11 @@ class _Pair:
                         self.clock.set_result(Hello.parse(f.payload).clock)
                     clock = await self.clock
                     is_clock = f.type == Clock.TYPE
-                    if clock == "virtual":
+                    if clock == "virtual" and f.type in (Hello.TYPE, Welcome.TYPE):
+                        # The handshake happens before the simulated timeline starts; passing it
+                        # through the link model would push the link's FIFO clock past the ticks.
+                        await queue.put((None, encode_frame(f.type, f.payload, f.vtime_us)))
+                    elif clock == "virtual":
                         arrive = model.arrival_us(f.vtime_us, f.wire_size, is_clock)
                         await queue.put((None, encode_frame(f.type, f.payload, arrive)))
                     else:
@@ -165,6 +170,8 @@ class Relay:
         self._tasks.add(task)
         try:
             await _Pair(self, next(self._numbers), reader, writer).run()
+        except asyncio.CancelledError:
+            pass  # the relay is shutting down; the pair closed its sockets on the way out
         except Exception:  # one pair's bug must not stop the relay; log it loudly
             log.exception("relay: connection pair failed")
         finally:

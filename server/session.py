@@ -102,8 +102,8 @@ class Session:
         except (ConnectionError, asyncio.IncompleteReadError) as exc:
             log.info("session %d: connection lost: %s", self.id, exc)
         except asyncio.CancelledError:
+            # The server is shutting down: say so, close, and end this handler normally.
             self.conn.send(Bye("server shutting down"))
-            raise
         except Exception as exc:  # a bug must not take the server down: report it, end this session only
             log.exception("session %d: internal error", self.id)
             self.conn.send(Error(1, f"internal server error: {type(exc).__name__}: {exc}"))
@@ -130,6 +130,7 @@ class Session:
 
     async def _handshake(self) -> Hello:
         env = await self._recv(timeout=self.server.config.hello_timeout_s)
+        t_hello = time.monotonic()
         hello = env.message
         if not isinstance(hello, Hello):
             raise UnexpectedMessage(f"expected Hello as the first message, got {hello.NAME}")
@@ -137,7 +138,9 @@ class Session:
             raise UnsupportedVersion(f"client speaks protocol {hello.protocol}, this server speaks {PROTOCOL_VERSION}")
         setup = await self.server.setup_session(hello)
         self.config, self.producer, self.encoder, self.depth_encoder = setup
-        self.conn.send(Welcome(server=self.server.name, session=self.id, config=self.config.to_json(), time_us=0))
+        setup_us = int((time.monotonic() - t_hello) * 1e6)
+        self.conn.send(Welcome(server=self.server.name, session=self.id, config=self.config.to_json(),
+                               setup_us=setup_us))
         await self._flush()
         log.info("session %d: scene %s, %s clock, %dx%d output at %g Hz", self.id, self.config.scene["name"],
                  hello.clock, hello.output.width, hello.output.height, hello.output.rate_hz)
@@ -165,39 +168,57 @@ class Session:
         self.server.record_frame_timings(frame.timings_ms, sum(len(d) for _, d in payloads))
 
     async def _run_virtual(self) -> None:
-        """Deterministic schedule (see protocol/session.py): frame k at k * interval."""
+        """Deterministic schedule (see protocol/session.py): frame k at k * interval.
+
+        Before waiting for the client the session promises (``Clock``) the earliest virtual
+        time its next message can have, so the client can advance meanwhile; with the
+        client doing the same, neither ever waits on the other forever.
+        """
         interval = self.config.frame_interval_us
         delay = self.config.server_delay_us
         horizon = None          # every later client message has a virtual time >= this
         poses = deque()         # (arrival vtime, PoseMsg) not yet in effect
         current = None
+        promised = None
         k = None
+
+        async def promise(vtime_us: int) -> None:
+            nonlocal promised
+            if promised is None or vtime_us > promised:
+                self.conn.send(Clock(), vtime_us=vtime_us)
+                await self._flush()
+                promised = vtime_us
+
+        async def receive() -> None:
+            nonlocal horizon
+            env = await self._recv()
+            if horizon is not None and env.vtime_us < horizon:
+                raise UnexpectedMessage(f"virtual time went backwards ({env.vtime_us} us after {horizon} us)")
+            horizon = env.vtime_us
+            if isinstance(env.message, PoseMsg):
+                poses.append((env.vtime_us, env.message))
+            elif not isinstance(env.message, Clock):
+                raise UnexpectedMessage(f"unexpected {env.message.NAME} from the client")
+
         while True:
             if k is None:
-                env = await self._recv()
-                horizon = env.vtime_us
-                if isinstance(env.message, PoseMsg):
-                    poses.append((env.vtime_us, env.message))
-                    k = -(-env.vtime_us // interval)  # first tick at or after the first pose arrives
-                elif not isinstance(env.message, Clock):
-                    raise UnexpectedMessage(f"unexpected {env.message.NAME} from the client")
+                if poses:   # first tick at or after the first pose arrives
+                    k = -(-poses[0][0] // interval)
+                    continue
+                if horizon is not None:  # no frame before a pose arrives, and none arrives before horizon
+                    await promise(-(-horizon // interval) * interval + delay)
+                await receive()
                 continue
             t_k = k * interval
             while horizon <= t_k:
-                env = await self._recv()
-                if env.vtime_us < horizon:
-                    raise UnexpectedMessage(f"virtual time went backwards ({env.vtime_us} us after {horizon} us)")
-                horizon = env.vtime_us
-                if isinstance(env.message, PoseMsg):
-                    poses.append((env.vtime_us, env.message))
-                elif not isinstance(env.message, Clock):
-                    raise UnexpectedMessage(f"unexpected {env.message.NAME} from the client")
+                await promise(t_k + delay)
+                await receive()
             while poses and poses[0][0] <= t_k:
                 current = poses.popleft()[1]
             await self._send_frame(current, t_k, t_k + delay)
-            k += 1
-            self.conn.send(Clock(), vtime_us=k * interval + delay)
+            promised = t_k + delay
             await self._flush()
+            k += 1
 
     async def _run_real(self) -> None:
         """Wall clock: render at the server's own rate with the newest pose received."""
@@ -228,12 +249,11 @@ class Session:
                 self.tick_overruns += next_k - k - 1
                 k = next_k
         finally:
-            if not receiver.done():
-                receiver.cancel()
-                try:
-                    await receiver
-                except (asyncio.CancelledError, SessionClosed, ProtocolError, ConnectionError):
-                    pass
+            receiver.cancel()
+            try:
+                await receiver
+            except (asyncio.CancelledError, SessionClosed, ProtocolError, ConnectionError):
+                pass  # its outcome, if it mattered, was raised above
 
     async def _receive_poses(self, newest: list) -> None:
         while True:

@@ -16,9 +16,9 @@ EXTRA = Pose.make((0.5, 3.4, -3.5), (0.9914448613738104, -0.13052619222005157, 0
 
 MESSAGES = {
     "hello": (Hello(client="golden", scene="room", clock="virtual", output=OutputConfig(960, 540, 90.0, 60.0),
-                    want_proxies=True, depth_codec="h264", time_us=0), 0),
+                    want_proxies=True, depth_codec="h264"), 0),
     "welcome": (Welcome(server="pibr-server/0.1", session=7, config={"server_fps": 10.0, "scene": {"name": "room"}},
-                        time_us=123), 0),
+                        setup_us=123), 0),
     "pose": (PoseMsg(seq=42, t_us=700_000, pose=POSE), 700_000),
     "frame": (Frame(frame_id=3, render_t_us=300_000, pose_t_us=216_667, pose_seq=13, scene_t_us=300_000,
                     primary_pose=POSE, extra_pose=EXTRA, near=0.1, far=1000.0,

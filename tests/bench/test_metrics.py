@@ -1,0 +1,53 @@
+import math
+
+import numpy as np
+import pytest
+
+from pibr.bench.metrics import PSNR_CAP, dssim, error_image, flip, frame_metrics, pixels_per_degree, psnr, ssim
+from pibr.protocol.errors import ConfigError
+
+
+def _img(seed=0, shape=(64, 96, 3)):
+    return np.random.default_rng(seed).integers(0, 256, shape, dtype=np.uint8)
+
+
+def test_identical_images_are_perfect_and_finite():
+    a = _img()
+    assert psnr(a, a) == PSNR_CAP
+    assert ssim(a, a) == pytest.approx(1.0)
+    assert dssim(ssim(a, a)) == pytest.approx(0.0)
+    assert flip(a, a, 20.0) == pytest.approx(0.0, abs=1e-6)
+
+
+def test_known_psnr():
+    a = np.full((10, 10, 3), 100, np.uint8)
+    b = a.copy()
+    b[...] = 110  # MSE 100
+    assert psnr(a, b) == pytest.approx(10 * math.log10(255 ** 2 / 100))
+
+
+def test_worse_images_score_worse():
+    a = _img(1)
+    slight = np.clip(a.astype(int) + 5, 0, 255).astype(np.uint8)
+    other = _img(2)
+    m1, m2 = frame_metrics(a, slight, 20.0), frame_metrics(a, other, 20.0)
+    assert m1["psnr"] > m2["psnr"] and m1["ssim"] > m2["ssim"] and m1["flip"] < m2["flip"]
+    assert 0 <= m2["dssim"] <= 1
+
+
+def test_shape_mismatch_is_named():
+    with pytest.raises(ValueError, match="one shape"):
+        psnr(_img(), _img(shape=(64, 95, 3)))
+
+
+def test_pixels_per_degree_and_error_image():
+    assert pixels_per_degree(960, 90) == pytest.approx(480 * math.pi / 180)
+    e = error_image(_img(1), _img(2))
+    assert e.shape == (64, 96, 3) and e.dtype == np.uint8
+
+
+def test_evaluate_needs_a_recording(tmp_path):
+    from pibr.bench.evaluate import evaluate_run
+
+    with pytest.raises(ConfigError, match="no session.json"):
+        evaluate_run(str(tmp_path))

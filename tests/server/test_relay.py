@@ -1,0 +1,95 @@
+"""The latency relay in-process: virtual stamping, real-clock delay, bad peers."""
+import asyncio
+import time
+
+import pytest
+
+from pibr.client.connection import ClientConnection
+from pibr.protocol.connection import Connection
+from pibr.protocol.link import LinkParams
+from pibr.protocol.messages import Clock, Error, Frame, Hello, OutputConfig, PoseMsg
+from pibr.server.app import Server
+from pibr.server.config import ServerConfig
+from pibr.server.relay import Relay, RelayConfig
+
+pytestmark = pytest.mark.gl
+
+
+@pytest.fixture
+async def chain():
+    srv = Server(ServerConfig(port=0, scene="sphere", view_size=(128, 128), server_delay_ms=20.0, bitrate_kbps=2000))
+    host, port = await srv.start()
+    stask = asyncio.create_task(srv.serve_forever())
+    relay = Relay(RelayConfig(("127.0.0.1", 0), (host, port), LinkParams(64.0), LinkParams(64.0)))
+    rhost, rport = await relay.start()
+    rtask = asyncio.create_task(relay.serve_forever())
+    yield rhost, rport
+    for t in (rtask, stask):
+        t.cancel()
+    await asyncio.gather(rtask, stask, return_exceptions=True)
+    await relay.close()
+    await srv.close()
+
+
+async def test_virtual_frames_carry_injected_delay(chain):
+    host, port = chain
+    c = await ClientConnection.open(host, port)
+    cfg = await c.handshake(Hello(clock="virtual", output=OutputConfig(160, 96, 90.0, 30.0)))
+    interval, horizon, frames = 33_333, None, []
+    for tick in range(-6, 15):
+        t = tick * interval
+        await c.send(PoseMsg(tick + 6, t, cfg.viewer_origin), vtime_us=t, flush=False)
+        await c.send(Clock(), vtime_us=t + interval)
+        while horizon is None or horizon <= t:
+            env = await c.recv(timeout=60)
+            horizon = env.vtime_us
+            if isinstance(env.message, Frame):
+                frames.append((env.vtime_us, env.message))
+    await c.close()
+    assert frames
+    for vt, f in frames:
+        assert vt - f.render_t_us == 20_000 + 64_000        # encode model + downlink
+        assert f.render_t_us - f.pose_t_us >= 64_000        # the pose needed the uplink
+    for vt, f in frames:  # the newest pose that had arrived (64 ms after it was sent) by render time
+        sent = [tick * interval for tick in range(-6, 15)]
+        assert f.pose_t_us == max(t for t in sent if t + 64_000 <= f.render_t_us)
+
+
+async def test_real_clock_delay_is_applied(chain):
+    host, port = chain
+    c = await ClientConnection.open(host, port)
+    t0 = time.monotonic()
+    await c.handshake(Hello(clock="real", output=OutputConfig(160, 96, 90.0, 30.0)))
+    rtt = time.monotonic() - t0
+    assert rtt >= 0.128
+    await c.close()
+
+
+async def test_garbage_to_relay_gets_error(chain):
+    host, port = chain
+    reader, writer = await asyncio.open_connection(host, port)
+    writer.write(b"\x00" * 64)
+    await writer.drain()
+    conn = Connection()
+    while True:
+        chunk = await asyncio.wait_for(reader.read(65536), 10)
+        if not chunk:
+            break
+        conn.receive_data(chunk)
+    msgs = [e.message for e in conn.events_received()]
+    assert msgs and isinstance(msgs[0], Error) and "relay" in msgs[0].text and "magic" in msgs[0].text
+
+
+async def test_relay_reports_unreachable_upstream():
+    relay = Relay(RelayConfig(("127.0.0.1", 0), ("127.0.0.1", 1), LinkParams(1.0), LinkParams(1.0)))
+    host, port = await relay.start()
+    task = asyncio.create_task(relay.serve_forever())
+    c = await ClientConnection.open(host, port)
+    from pibr.protocol.errors import RemoteError
+
+    with pytest.raises(RemoteError, match="unreachable"):
+        await c.handshake(Hello())
+    await c.close()
+    task.cancel()
+    await asyncio.gather(task, return_exceptions=True)
+    await relay.close()

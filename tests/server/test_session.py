@@ -1,0 +1,129 @@
+"""The server over real loopback sockets: handshake, frames on the virtual clock, and bad
+clients that must get an Error naming the problem while everyone else is served."""
+import asyncio
+import struct
+
+import pytest
+
+from pibr.client.connection import ClientConnection
+from pibr.protocol.connection import Connection
+from pibr.protocol.errors import (BadMagic, MalformedMessage, MessageTooLarge, RemoteError, SceneError,
+                                  UnexpectedMessage, UnsupportedVersion)
+from pibr.protocol.framing import HEADER, MAGIC, encode_frame
+from pibr.protocol.messages import Clock, Error, Frame, Hello, OutputConfig, PoseMsg
+from pibr.protocol.pose import Pose
+from pibr.server.app import Server
+from pibr.server.config import ServerConfig
+
+pytestmark = pytest.mark.gl
+
+
+@pytest.fixture
+async def server():
+    srv = Server(ServerConfig(port=0, scene="sphere", view_size=(128, 128), fps=10.0, server_delay_ms=20.0,
+                              bitrate_kbps=2000, extra_view="on"))
+    host, port = await srv.start()
+    task = asyncio.create_task(srv.serve_forever())
+    yield srv, host, port
+    task.cancel()
+    await asyncio.gather(task, return_exceptions=True)
+    await srv.close()
+
+
+HELLO = Hello(client="test", scene="sphere", clock="virtual", output=OutputConfig(160, 96, 90.0, 30.0))
+
+
+async def _raw(host, port, data: bytes, read_timeout=10.0) -> list:
+    """Send raw bytes, read until the server closes; -> messages received."""
+    reader, writer = await asyncio.open_connection(host, port)
+    writer.write(data)
+    await writer.drain()
+    conn = Connection()
+    while True:
+        chunk = await asyncio.wait_for(reader.read(65536), read_timeout)
+        if not chunk:
+            break
+        conn.receive_data(chunk)
+    writer.close()
+    return [e.message for e in conn.events_received()]
+
+
+async def _virtual_session(host, port, ticks=12, interval_us=33_333):
+    """Minimal virtual-clock client: -> list of (vtime, Frame)."""
+    c = await ClientConnection.open(host, port)
+    cfg = await c.handshake(HELLO)
+    frames, horizon = [], None
+    origin = cfg.viewer_origin
+    for tick in range(ticks):
+        t = tick * interval_us
+        await c.send(PoseMsg(tick, t, origin), vtime_us=t, flush=False)
+        await c.send(Clock(), vtime_us=t + interval_us)
+        while horizon is None or horizon <= t:
+            env = await c.recv(timeout=60)
+            horizon = env.vtime_us
+            if isinstance(env.message, Frame):
+                frames.append((env.vtime_us, env.message))
+    await c.close()
+    return cfg, frames
+
+
+async def test_virtual_session_schedule(server):
+    srv, host, port = server
+    cfg, frames = await _virtual_session(host, port)
+    assert cfg.extra is not None and cfg.atlas.width == 128 + 128 + 64
+    assert frames, "no frame arrived"
+    for vt, f in frames:
+        assert f.render_t_us % 100_000 == 0                 # the server's 10 fps grid
+        assert vt == f.render_t_us + 20_000                  # + modelled render/encode (no relay here)
+        assert f.pose_t_us <= f.render_t_us                 # the pose had arrived by render time
+        assert f.extra_pose is not None
+    assert frames[0][1].keyframe
+    assert [f.frame_id for _, f in frames] == list(range(len(frames)))
+
+
+@pytest.mark.parametrize("data, code, text", [
+    (b"GET / HTTP/1.1\r\nHost: x\r\n\r\n", BadMagic.code, "magic"),
+    (HEADER.pack(MAGIC, 1, Hello.TYPE, 0, 0, 1 << 30), MessageTooLarge.code, "exceeds the limit"),
+    (HEADER.pack(MAGIC, 7, Hello.TYPE, 0, 0, 0), UnsupportedVersion.code, "framing version 7"),
+    (encode_frame(PoseMsg.TYPE, PoseMsg(0, 0, Pose.identity()).serialize()), UnexpectedMessage.code,
+     "expected Hello"),
+    (encode_frame(Hello.TYPE, b'{"protocol": 99}'), UnsupportedVersion.code, "protocol 99"),
+    (encode_frame(Hello.TYPE, b"{not json"), MalformedMessage.code, "not UTF-8 JSON"),
+    (encode_frame(Hello.TYPE, b'{"protocol": 1, "scene": "atlantis"}'), SceneError.code, "available"),
+])
+async def test_bad_client_gets_error_and_others_are_served(server, data, code, text):
+    srv, host, port = server
+    good = asyncio.create_task(_virtual_session(host, port, ticks=8))
+    msgs = await _raw(host, port, data)
+    errors = [m for m in msgs if isinstance(m, Error)]
+    assert errors and errors[0].code == code and text in errors[0].text, msgs
+    cfg, frames = await good
+    assert frames
+
+
+async def test_nan_pose_after_handshake_is_rejected(server):
+    srv, host, port = server
+    bad = struct.pack("<Iq7d", 0, 0, float("nan"), 0, 0, 1, 0, 0, 0)
+    msgs = await _raw(host, port, encode_frame(Hello.TYPE, HELLO.serialize()) + encode_frame(PoseMsg.TYPE, bad))
+    err = [m for m in msgs if isinstance(m, Error)]
+    assert err and err[0].code == MalformedMessage.code and "NaN" in err[0].text
+
+
+async def test_truncated_message_then_close_leaves_server_up(server):
+    srv, host, port = server
+    frame = encode_frame(Hello.TYPE, HELLO.serialize())
+    reader, writer = await asyncio.open_connection(host, port)
+    writer.write(frame[:-5])
+    await writer.drain()
+    writer.close()
+    await asyncio.sleep(0.2)
+    cfg, frames = await _virtual_session(host, port, ticks=6)
+    assert frames
+
+
+async def test_client_sees_remote_error_for_unknown_scene(server):
+    srv, host, port = server
+    c = await ClientConnection.open(host, port)
+    with pytest.raises(RemoteError, match="atlantis"):
+        await c.handshake(Hello(scene="atlantis"))
+    await c.close()

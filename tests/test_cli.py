@@ -1,0 +1,55 @@
+"""The command line: every documented invocation parses, errors are clear, docker-compose is valid."""
+import os
+import shlex
+
+import pytest
+import yaml
+
+from pibr.cli import build_parser, main
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+def test_docker_compose_commands_are_valid_pibr_invocations():
+    with open(os.path.join(ROOT, "docker-compose.yml")) as f:
+        compose = yaml.safe_load(f)
+    services = compose["services"]
+    assert {"server", "relay", "client"} <= set(services)
+    with open(os.path.join(ROOT, "Dockerfile")) as f:
+        dockerfile = f.read()
+    assert 'ENTRYPOINT ["pibr"]' in dockerfile and "libegl" in dockerfile
+    parser = build_parser()
+    for name, svc in services.items():
+        cmd = svc["command"]
+        argv = shlex.split(cmd) if isinstance(cmd, str) else [str(a) for a in cmd]
+        args = parser.parse_args(argv)     # argparse exits on anything it does not accept
+        assert args.command in ("serve", "relay", "client")
+    relay = parser.parse_args(services["relay"]["command"])
+    assert relay.up_ms + relay.down_ms == 128
+
+
+@pytest.mark.parametrize("argv", [
+    ["serve", "--port", "0", "--projection", "tess", "--extra-view", "off"],
+    ["relay", "--listen", ":0", "--upstream", "host:7450", "--jitter-ms", "5", "--kbps", "20000"],
+    ["client", "--connect", "[::1]:7451", "--method", "none,rotation", "--clock", "real", "--size", "1280x720"],
+    ["demo", "--duration", "2"], ["evaluate", "out"], ["bench", "server", "--projection", "vertex"],
+    ["bench", "client"], ["scenes"], ["trace", "list"],
+])
+def test_documented_invocations_parse(argv):
+    build_parser().parse_args(argv)
+
+
+def test_bad_cli_values_are_reported(capsys):
+    with pytest.raises(SystemExit):
+        build_parser().parse_args(["client", "--method", "warp"])
+    assert "unknown method" in capsys.readouterr().err
+    assert main(["relay", "--up-ms", "-5"]) == 2
+    assert "delay_ms must be" in capsys.readouterr().err
+    assert main(["client", "--connect", "nohost"]) == 2
+    assert "expected HOST:PORT" in capsys.readouterr().err
+
+
+def test_scenes_lists_builtins(capsys):
+    assert main(["scenes"]) == 0
+    out = capsys.readouterr().out
+    assert "room" in out and "sphere" in out
