@@ -127,3 +127,21 @@ async def test_client_sees_remote_error_for_unknown_scene(server):
     with pytest.raises(RemoteError, match="atlantis"):
         await c.handshake(Hello(scene="atlantis"))
     await c.close()
+
+
+async def test_a_client_that_stops_reading_stalls_only_itself(server):
+    srv, host, port = server
+    # The stuck client keeps asking for frames but never reads a byte.
+    reader, writer = await asyncio.open_connection(host, port)
+    conn = Connection()
+    conn.send(HELLO)
+    for tick in range(600):
+        t = tick * 33_333
+        conn.send(PoseMsg(tick, t, Pose.make((0, 1.6, 0))), vtime_us=t)
+        conn.send(Clock(), vtime_us=t + 33_333)
+    writer.write(conn.data_to_send())
+    await writer.drain()
+    await asyncio.sleep(1.0)
+    cfg, frames = await asyncio.wait_for(_virtual_session(host, port, ticks=10), 60)
+    assert frames
+    writer.close()
