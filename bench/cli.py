@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 
 
 def _size(text: str) -> tuple[int, int]:
@@ -11,6 +10,25 @@ def _size(text: str) -> tuple[int, int]:
         return int(w), int(h or w)
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT, got {text!r}") from None
+
+
+def _offset(text: str) -> tuple:
+    try:
+        parts = tuple(float(x) for x in text.split(","))
+    except ValueError:
+        parts = ()
+    if len(parts) != 3:
+        raise argparse.ArgumentTypeError(f"expected FORWARD,UP,TILT_DEG, got {text!r}")
+    return parts
+
+
+def _range(text: str) -> list:
+    from .offset_search import parse_range
+
+    try:
+        return parse_range(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def _names(text: str) -> tuple:
@@ -71,6 +89,42 @@ def register(sub) -> None:
     c.add_argument("--out", default="out/bench")
     c.set_defaults(func=cmd_bench_client)
 
+    cov = bs.add_parser("coverage", help="pixels no transmitted view covers: primary, peeling, offset, both",
+                        description="Reproduces Reinert et al.'s Figure 4: the fraction of displayed pixels that no "
+                                    "transmitted view covers, for four dual-view variants, along real traces.")
+    cov.add_argument("--scene", default="room")
+    cov.add_argument("--trace", type=_names, default=("pred6dof-1", "pred6dof-2"), help="comma-separated traces")
+    cov.add_argument("--latency-ms", type=float, default=128.0)
+    cov.add_argument("--start", type=float, default=10.0)
+    cov.add_argument("--duration", type=float, default=8.0)
+    cov.add_argument("--rate", type=float, default=30.0)
+    cov.add_argument("--view-size", type=_size, default=(1024, 1024), metavar="WxH")
+    cov.add_argument("--size", type=_size, default=(320, 180), metavar="WxH", help="displayed view size")
+    cov.add_argument("--offset", type=_offset, default=None, metavar="F,U,TILT",
+                     help="extra view offset (default: the scene's, else Reinert et al.'s 1.5,1.8,15)")
+    cov.add_argument("--out", default="out/bench")
+    cov.set_defaults(func=cmd_bench_coverage)
+
+    o = bs.add_parser("optimize-offset", help="search the extra view's offset for the fewest holes",
+                      description="Exhaustive (or coarse-to-fine) search over forward offset, height and tilt of "
+                                  "the extra view, minimising the mean missing-pixel fraction over traces.")
+    o.add_argument("--scene", default="room")
+    o.add_argument("--trace", type=_names, default=("pred6dof-1", "pred6dof-2"))
+    o.add_argument("--latency-ms", type=float, default=128.0)
+    o.add_argument("--start", type=float, default=10.0)
+    o.add_argument("--duration", type=float, default=8.0)
+    o.add_argument("--frames", type=int, default=12, help="displayed frames per trace (default 12)")
+    o.add_argument("--forward", type=_range, default="-1:2:0.5", help="metres, START:STOP:STEP or a,b,c")
+    o.add_argument("--up", type=_range, default="0:1.8:0.3", help="metres")
+    o.add_argument("--tilt", type=_range, default="-30:45:15", help="degrees down")
+    o.add_argument("--method", choices=("exhaustive", "coarse-to-fine"), default="exhaustive")
+    o.add_argument("--objective", choices=("all", "geometry"), default="all",
+                   help="missing fraction over all pixels, or only over pixels showing geometry")
+    o.add_argument("--view-size", type=_size, default=(512, 512), metavar="WxH")
+    o.add_argument("--size", type=_size, default=(192, 108), metavar="WxH")
+    o.add_argument("--out", default="out/bench")
+    o.set_defaults(func=cmd_bench_offset)
+
 
 def cmd_demo(args) -> int:
     from .demo import print_report, run_demo
@@ -112,5 +166,30 @@ def cmd_bench_client(args) -> int:
     return 0
 
 
-def _dump(obj) -> str:
-    return json.dumps(obj, indent=2)
+def cmd_bench_coverage(args) -> int:
+    from .coverage import print_coverage_table, run_coverage_bench
+
+    result = run_coverage_bench(scene_spec=args.scene, traces=args.trace, latency_ms=args.latency_ms,
+                                start_s=args.start, duration_s=args.duration, rate_hz=args.rate,
+                                view_size=args.view_size, out_size=args.size, offset=args.offset, out_dir=args.out)
+    print_coverage_table(result)
+    print(f"written: {args.out}/coverage.json, {args.out}/coverage.png")
+    return 0
+
+
+def cmd_bench_offset(args) -> int:
+    from .offset_search import search_offset
+
+    forward, up, tilt = (args.forward, args.up, args.tilt)
+    forward, up, tilt = (a if isinstance(a, list) else _range(a) for a in (forward, up, tilt))
+    r = search_offset(scene_spec=args.scene, traces=args.trace, latency_ms=args.latency_ms, start_s=args.start,
+                      duration_s=args.duration, frames_per_trace=args.frames, forward=forward, up=up, tilt=tilt,
+                      method=args.method, view_size=args.view_size, out_size=args.size, objective=args.objective,
+                      out_dir=args.out)
+    b = r["best"]
+    print(f"pibr bench optimize-offset: {r['method']} search, {r['evaluations']} offsets x {r['frames']} frames")
+    print(f"best offset: forward {b['forward']:g} m, up {b['up']:g} m, tilt {b['tilt']:g} deg down -> "
+          f"{100 * b['missing']:.2f} % missing pixels")
+    print(f"use it: pibr serve --extra-offset {b['forward']:g},{b['up']:g},{b['tilt']:g}")
+    print(f"written: {args.out}/offset_search.json, {args.out}/offset_search.png")
+    return 0

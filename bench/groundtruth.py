@@ -24,11 +24,13 @@ class GroundTruth:
 
     def render(self, pose: Pose, t: float) -> np.ndarray:
         """(height, width, 3) uint8 view at ``pose`` and scene time ``t`` seconds."""
-        self.renderer.render_perspective(self.target, pose, t, self.fov_deg)
-        return self.target.read_color().copy()
+        with self.ctx:  # another context may have been made current on this thread since
+            self.renderer.render_perspective(self.target, pose, t, self.fov_deg)
+            return self.target.read_color().copy()
 
     def close(self) -> None:
-        self.target.release()
-        self.renderer.release()
+        with self.ctx:
+            self.target.release()
+            self.renderer.release()
         if self._own_ctx:
             self.ctx.release()

@@ -35,3 +35,60 @@ def plot_quality_over_time(rows: list[dict], path: str) -> None:
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
+
+
+def plot_coverage(result: dict, path: str) -> None:
+    """Missing-pixel fraction over time per variant (one panel per trace) and the means."""
+    from .coverage import VARIANT_LABELS, VARIANTS
+
+    plt = _pyplot()
+    traces = result["traces"]
+    fig, axes = plt.subplots(1, len(traces) + 1, figsize=(5 * (len(traces) + 1), 4))
+    for ax, tr in zip(axes, traces):
+        d = result["per_trace"][tr]
+        for v in VARIANTS + ("floor",):
+            ax.plot(d["times"], 100 * np.array(d["missing"][v]), label=VARIANT_LABELS[v], lw=1,
+                    ls=":" if v == "floor" else "-")
+        ax.set_title(f"{tr}")
+        ax.set_xlabel("time s")
+        ax.set_ylabel("pixels no view covers %")
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=8)
+    ax = axes[-1]
+    width = 0.8 / len(traces)
+    x = np.arange(len(VARIANTS))
+    for i, tr in enumerate(traces):
+        ax.bar(x + i * width, [100 * result["per_trace"][tr]["means"][v] for v in VARIANTS], width, label=tr)
+    ax.set_xticks(x + width * (len(traces) - 1) / 2)
+    ax.set_xticklabels([VARIANT_LABELS[v].replace(": ", ":\n") for v in VARIANTS], fontsize=7)
+    ax.set_ylabel("mean missing %")
+    ax.set_title(f"{result['scene']}, {result['latency_ms']:g} ms")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def plot_offset_search(result: dict, path: str) -> None:
+    """The offset search's surface: mean missing % over forward x up, one panel per tilt."""
+    plt = _pyplot()
+    grid = result["grid"]
+    fw, up, tilt = (np.array(grid[k]) for k in ("forward", "up", "tilt"))
+    values = np.array(result["surface"])  # (forward, up, tilt), NaN where not evaluated
+    fig, axes = plt.subplots(1, len(tilt), figsize=(3.2 * len(tilt), 3.4), squeeze=False)
+    finite = values[np.isfinite(values)]
+    vmin, vmax = (100 * finite.min(), 100 * finite.max()) if finite.size else (0, 1)
+    for k, ax in enumerate(axes[0]):
+        im = ax.imshow(100 * values[:, :, k].T, origin="lower", aspect="auto", vmin=vmin, vmax=vmax,
+                       extent=[fw[0], fw[-1], up[0], up[-1]] if len(fw) > 1 and len(up) > 1 else None,
+                       cmap="viridis_r")
+        ax.set_title(f"tilt {tilt[k]:g} deg", fontsize=9)
+        ax.set_xlabel("forward m")
+        if k == 0:
+            ax.set_ylabel("up m")
+    best = result["best"]
+    fig.suptitle(f"mean missing % ({result['scene']}); best: forward {best['forward']:g} m, up {best['up']:g} m, "
+                 f"tilt {best['tilt']:g} deg -> {100 * best['missing']:.2f} %", fontsize=10)
+    fig.colorbar(im, ax=axes[0].tolist(), shrink=0.8)
+    fig.savefig(path, dpi=100)
+    plt.close(fig)

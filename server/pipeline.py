@@ -17,7 +17,7 @@ from pibr.protocol.depth import DepthQuantizer
 from pibr.protocol.pose import Pose
 
 from .packer import AtlasPacker
-from .renderer import RenderTarget, Renderer
+from .renderer import PEEL_TOLERANCE, RenderTarget, Renderer
 
 
 @dataclass
@@ -31,6 +31,8 @@ class ProducerSpec:
     extra_size: tuple | None = None
     extra_offset: Pose | None = None
     keep_distance: bool = False   # hand the float distance maps to the caller (edge codec)
+    peel: bool = True             # depth-peel the extra view against the primary
+    peel_tolerance: float = PEEL_TOLERANCE
 
 
 @dataclass
@@ -63,7 +65,8 @@ class FrameProducer:
         extra_pose = None
         if self.extra is not None:
             extra_pose = pose.compose(self.spec.extra_offset)
-            self.renderer.render_wide(self.extra, extra_pose, t, self.spec.projection)
+            peel = (self.primary, pose, self.spec.peel_tolerance) if self.spec.peel else None
+            self.renderer.render_wide(self.extra, extra_pose, t, self.spec.projection, peel=peel)
         ctx.finish()
         t1 = time.perf_counter()
         sources = {"primary.color": self.primary.color, "primary.depth": self.primary.distance}

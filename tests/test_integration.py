@@ -23,6 +23,10 @@ def test_server_relay_client_processes(tmp_path):
                               "--size", "320x180", "--method", "none,rotation"],
                  on_progress=lambda done, total: progress.append((done, total)), timeout=600)
     assert progress and progress[-1] == (60, 60)
+    # The benchmarks' model of the schedule predicts exactly what the processes did.
+    from pibr.bench.coverage import LatencyModel
+
+    model = LatencyModel(rate_hz=30.0, server_fps=10.0, up_ms=64, down_ms=64, server_delay_ms=20)
     for m in ("none", "rotation"):
         rows = read_records(os.path.join(out, f"{m}.records.csv"))
         assert len(rows) == 60
@@ -34,6 +38,8 @@ def test_server_relay_client_processes(tmp_path):
             # ... rendered from a pose that crossed the injected uplink first.
             assert r["frame_render_t"] - r["frame_pose_t"] >= 0.064 - 1e-6
             assert r["age_ms"] >= 148 - 1e-6
+            render_us, pose_us = model.frame_for(round(r["t"] * 1e6))
+            assert round(r["frame_render_t"] * 1e6) == render_us and round(r["frame_pose_t"] * 1e6) == pose_us
         assert len({r["frame_id"] for r in used}) >= 19     # 10 server frames per second
         assert os.path.getsize(os.path.join(out, f"{m}.mp4")) > 1000
 

@@ -145,3 +145,22 @@ async def test_a_client_that_stops_reading_stalls_only_itself(server):
     cfg, frames = await asyncio.wait_for(_virtual_session(host, port, ticks=10), 60)
     assert frames
     writer.close()
+
+
+async def test_scene_without_disocclusions_gets_no_extra_view():
+    srv = Server(ServerConfig(port=0, scene="sphere", view_size=(128, 128), extra_view="auto"))
+    host, port = await srv.start()
+    task = asyncio.create_task(srv.serve_forever())
+    try:
+        c = await ClientConnection.open(host, port)
+        cfg = await c.handshake(HELLO)
+        assert cfg.extra is None and cfg.atlas.width == 256   # colour + depth of the primary only
+        await c.close()
+        c = await ClientConnection.open(host, port)
+        cfg = await c.handshake(Hello(scene="room", output=HELLO.output))
+        assert cfg.extra is not None                            # the room asks for one
+        await c.close()
+    finally:
+        task.cancel()
+        await asyncio.gather(task, return_exceptions=True)
+        await srv.close()

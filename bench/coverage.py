@@ -1,0 +1,287 @@
+"""How much of each displayed view the transmitted views cover (Reinert et al., Fig. 4).
+
+For a displayed pose the ground-truth renderer gives, per output pixel, the surface point
+the viewer sees (or sky). A pixel is *covered* when some transmitted view shows that same
+point: its back-projection into the view lands on a texel (any of the four around it)
+whose stored distance matches the point's distance within a relative tolerance — the same
+test depth peeling uses. Sky is covered where a view without peeling shows sky in that
+direction (a peeled view's empty texels say nothing). Everything else is a hole an ideal,
+depth-exact warp of the transmitted views could not fill.
+
+Variants (``VARIANTS``): the primary view alone; plus an extra view at zero offset with
+peeling (a second depth layer); at the offset without peeling; at the offset with peeling.
+``floor`` is the primary view rendered at the displayed pose itself (no latency): what the
+test misses with nothing to disocclude (grazing surfaces, sub-texel leaves), the noise floor
+the other numbers sit on.
+
+Frames follow the system's virtual-clock schedule (protocol/session.py): at display time t
+the client shows the newest server frame usable by then, rendered from the newest pose
+that had reached the server.
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+from dataclasses import dataclass
+
+import numpy as np
+
+from pibr.protocol.pose import Pose
+from pibr.protocol.projection import FORWARD
+
+VARIANTS = ("primary", "peel_no_offset", "offset_no_peel", "offset_peel")
+VARIANT_LABELS = {"primary": "primary only", "peel_no_offset": "extra: peeling, no offset",
+                  "offset_no_peel": "extra: offset, no peeling", "offset_peel": "extra: offset + peeling",
+                  "floor": "primary, no latency (floor)"}
+#: Relative distance tolerance of the coverage test (as depth peeling's, see renderer.py).
+COVERAGE_TOLERANCE = 0.03
+
+
+@dataclass(frozen=True)
+class LatencyModel:
+    """The virtual clock's schedule without a network in between (integer microseconds)."""
+
+    rate_hz: float = 60.0
+    server_fps: float = 10.0
+    up_ms: float = 64.0
+    down_ms: float = 64.0
+    server_delay_ms: float = 20.0
+
+    def frame_for(self, t_us: int) -> tuple[int, int]:
+        """-> (render time, client time of the pose used) of the frame shown at display time t."""
+        interval = int(round(1e6 / self.server_fps))
+        tick = int(round(1e6 / self.rate_hz))
+        up, down, delay = (int(round(x * 1000)) for x in (self.up_ms, self.down_ms, self.server_delay_ms))
+        render = ((t_us - delay - down) // interval) * interval
+        pose_t = ((render - up) // tick) * tick
+        return render, pose_t
+
+
+def project_to_view(points: np.ndarray, view_pose: Pose):
+    """World points (n, 3) -> (t' (n, 2), distance (n,), in front (n,) bool) in a wide-angle view."""
+    local = (points - view_pose.p) @ view_pose.rotation()
+    tx, ty, r = FORWARD.numpy(px=local[:, 0], py=local[:, 1], pz=local[:, 2])
+    return np.stack([tx, ty], axis=1), r, local[:, 2] <= 0.0
+
+
+def matches_view(points, view_pose: Pose, distance: np.ndarray, tolerance: float) -> np.ndarray:
+    """(n,) True where the view's distance map (h, w), row 0 on top, shows the point."""
+    h, w = distance.shape
+    t, r, front = project_to_view(points, view_pose)
+    tx = (t[:, 0] + 1.0) * 0.5 * w - 0.5
+    ty = (1.0 - t[:, 1]) * 0.5 * h - 0.5
+    x0, y0 = np.floor(tx).astype(np.int64), np.floor(ty).astype(np.int64)
+    hit = np.zeros(len(points), bool)
+    for dx, dy in ((0, 0), (1, 0), (0, 1), (1, 1)):
+        d = distance[np.clip(y0 + dy, 0, h - 1), np.clip(x0 + dx, 0, w - 1)]
+        hit |= (d > 0) & (np.abs(d - r) < tolerance * r)
+    return hit & front
+
+
+def sky_in_view(directions: np.ndarray, view_pose: Pose, distance: np.ndarray) -> np.ndarray:
+    """(n,) True where the view shows sky along world directions (n, 3)."""
+    h, w = distance.shape
+    local = directions @ view_pose.rotation()
+    tx, ty, _ = FORWARD.numpy(px=local[:, 0], py=local[:, 1], pz=local[:, 2])
+    x = np.clip(((tx + 1.0) * 0.5 * w).astype(np.int64), 0, w - 1)
+    y = np.clip(((1.0 - ty) * 0.5 * h).astype(np.int64), 0, h - 1)
+    return (local[:, 2] <= 0.0) & (distance[y, x] == 0)
+
+
+class CoverageProbe:
+    """Renders ground truth and wide-angle views of one scene at small sizes, on this thread."""
+
+    def __init__(self, scene, view_size=(512, 512), out_size=(320, 180), fov_deg=90.0, projection="vertex",
+                 tolerance=COVERAGE_TOLERANCE, ctx=None):
+        from pibr.protocol.gl import create_context
+        from pibr.server.renderer import PEEL_TOLERANCE, RenderTarget, Renderer
+
+        self._own = ctx is None
+        self.ctx = create_context() if ctx is None else ctx
+        self.scene, self.fov_deg, self.projection, self.tolerance = scene, fov_deg, projection, tolerance
+        self.peel_tolerance = PEEL_TOLERANCE
+        self.renderer = Renderer(self.ctx, scene, projection)
+        self.primary = RenderTarget(self.ctx, *view_size)
+        self.extra = RenderTarget(self.ctx, view_size[0] // 2, view_size[1] // 2)
+        self.gt = RenderTarget(self.ctx, *out_size)
+        w, h = out_size
+        tan_x = math.tan(math.radians(fov_deg) / 2)
+        tan_y = tan_x * h / w
+        xs = ((np.arange(w) + 0.5) / w * 2 - 1) * tan_x
+        ys = (1 - (np.arange(h) + 0.5) / h * 2) * tan_y
+        gx, gy = np.meshgrid(xs, ys)
+        d = np.stack([gx, gy, -np.ones_like(gx)], axis=-1).reshape(-1, 3)
+        self._dirs = d / np.linalg.norm(d, axis=1, keepdims=True)
+
+    # Every GL entry point makes this probe's context current first (``with self.ctx``):
+    # another context created on the same thread since would otherwise receive the calls.
+
+    def display_points(self, pose: Pose, t: float):
+        """Ground truth at the displayed pose: world points (n, 3), sky mask (n,), world directions (n, 3)."""
+        with self.ctx:
+            self.renderer.render_perspective(self.gt, pose, t, self.fov_deg)
+            r = self.gt.read_distance().reshape(-1).astype(np.float64)
+        dirs = self._dirs @ pose.rotation().T
+        return pose.p + dirs * r[:, None], r == 0, dirs
+
+    def render_primary(self, pose: Pose, t: float) -> np.ndarray:
+        with self.ctx:
+            self.renderer.render_wide(self.primary, pose, t, self.projection)
+            return self.primary.read_distance().copy()
+
+    def load_primary(self, distance: np.ndarray) -> None:
+        """Put a primary distance map rendered earlier back where peeling reads it."""
+        with self.ctx:
+            self.primary.distance.write(np.ascontiguousarray(distance, np.float32).tobytes())
+
+    def render_extra(self, primary_pose: Pose, offset: Pose, t: float, peel: bool) -> np.ndarray:
+        """The extra view's distance map; the primary must be the last one rendered."""
+        peel_arg = (self.primary, primary_pose, self.peel_tolerance) if peel else None
+        with self.ctx:
+            self.renderer.render_wide(self.extra, primary_pose.compose(offset), t, self.projection, peel=peel_arg)
+            return self.extra.read_distance().copy()
+
+    def missing(self, points, sky, dirs, views) -> tuple[float, float]:
+        """(fraction of all pixels, fraction of pixels showing geometry) no view covers.
+
+        views: [(pose, distance map, peeled)]."""
+        covered = np.zeros(len(points), bool)
+        geo = ~sky
+        for pose, dist, peeled in views:
+            todo = geo & ~covered
+            covered[todo] = matches_view(points[todo], pose, dist, self.tolerance)
+            if not peeled:
+                s = sky & ~covered
+                covered[s] = sky_in_view(dirs[s], pose, dist)
+        n_geo = int(geo.sum())
+        geo_missing = float((geo & ~covered).sum() / n_geo) if n_geo else 0.0
+        return float(1.0 - covered.mean()), geo_missing
+
+    def close(self) -> None:
+        with self.ctx:
+            self.renderer.release()
+            for t in (self.primary, self.extra, self.gt):
+                t.release()
+        if self._own:
+            self.ctx.release()
+
+
+def display_samples(scene, trace_spec: str, start_s: float, duration_s: float | None, rate_hz: float,
+                    latency: LatencyModel, stride: int = 1):
+    """[(display time s, display pose, render time s, render pose)] along a trace."""
+    from pibr.protocol.trace import load_trace
+
+    trace = load_trace(trace_spec)
+    end = trace.duration if duration_s is None else min(trace.duration, start_s + duration_s)
+    n = max(1, int(math.floor((end - start_s) * rate_hz + 1e-9)))
+    tick_us = int(round(1e6 / rate_hz))
+    origin = scene.viewer_origin
+    out = []
+    for i in range(0, n, stride):
+        t_us = i * tick_us
+        render_us, pose_us = latency.frame_for(t_us)
+        display = origin.compose(trace.pose_at(start_s + t_us / 1e6))
+        rendered = origin.compose(trace.pose_at(start_s + max(pose_us, 0) / 1e6))
+        out.append((t_us / 1e6, display, render_us / 1e6, rendered))
+    return out
+
+
+def measure_coverage(probe: CoverageProbe, samples, offset: Pose, variants=VARIANTS + ("floor",)) -> dict:
+    """Per variant, the missing fraction of every sample -> {variant: [fraction, ...]}, and
+    under ``variant + ":geometry"`` the same over pixels that show geometry (no sky)."""
+    zero = Pose.identity()
+    out = {v: [] for v in variants}
+    out.update({v + ":geometry": [] for v in variants})
+    for t_disp, display, t_render, rendered in samples:
+        points, sky, dirs = probe.display_points(display, t_disp)
+        if "floor" in variants:
+            here = probe.render_primary(display, t_disp)
+            everything, geometry = probe.missing(points, sky, dirs, [(display, here, False)])
+            out["floor"].append(everything)
+            out["floor:geometry"].append(geometry)
+        primary = probe.render_primary(rendered, t_render)
+        base = [(rendered, primary, False)]
+        for v in variants:
+            if v == "floor":
+                continue
+            if v == "primary":
+                views = base
+            else:
+                off = zero if v == "peel_no_offset" else offset
+                peel = v != "offset_no_peel"
+                extra = probe.render_extra(rendered, off, t_render, peel)
+                views = base + [(rendered.compose(off), extra, peel)]
+            everything, geometry = probe.missing(points, sky, dirs, views)
+            out[v].append(everything)
+            out[v + ":geometry"].append(geometry)
+    return out
+
+
+def run_coverage_bench(scene_spec="room", traces=("pred6dof-1", "pred6dof-2"), latency_ms=128.0, start_s=10.0,
+                       duration_s=8.0, rate_hz=30.0, view_size=(1024, 1024), out_size=(320, 180), offset=None,
+                       out_dir="out/bench", progress=True) -> dict:
+    """``pibr bench coverage``: JSON and plot of the four variants' missing-pixel fractions."""
+    from pibr.scenes.registry import load_scene
+    from pibr.server.config import PAPER_EXTRA_OFFSET, extra_offset_pose
+
+    scene = load_scene(scene_spec)
+    if offset is None:
+        offset_pose = scene.extra_view_offset or extra_offset_pose(*PAPER_EXTRA_OFFSET)
+    else:
+        offset_pose = extra_offset_pose(*offset)
+    latency = LatencyModel(rate_hz=rate_hz, up_ms=latency_ms / 2, down_ms=latency_ms / 2)
+    probe = CoverageProbe(scene, view_size, out_size)
+    per_trace = {}
+    try:
+        bar = None
+        all_samples = {tr: display_samples(scene, tr, start_s, duration_s, rate_hz, latency) for tr in traces}
+        if progress:
+            import sys
+
+            from tqdm import tqdm
+
+            bar = tqdm(total=sum(len(s) for s in all_samples.values()), unit="frame", desc="coverage",
+                       file=sys.stderr, leave=False)
+        for tr, samples in all_samples.items():
+            series = {}
+            for s in samples:
+                for k, vals in measure_coverage(probe, [s], offset_pose).items():
+                    series.setdefault(k, []).extend(vals)
+                if bar is not None:
+                    bar.update(1)
+            per_trace[tr] = {"times": [s[0] for s in samples], "missing": series,
+                             "means": {k: float(np.mean(v)) for k, v in series.items()}}
+        if bar is not None:
+            bar.close()
+    finally:
+        probe.close()
+    overall = {k: float(np.mean(np.concatenate([per_trace[t]["missing"][k] for t in traces])))
+               for k in per_trace[traces[0]]["missing"]}
+    result = {"scene": scene.name, "traces": list(traces), "latency_ms": latency_ms, "rate_hz": rate_hz,
+              "start_s": start_s, "duration_s": duration_s, "view_size": list(view_size),
+              "output_size": list(out_size), "offset": list(offset_pose.as_array()),
+              "tolerance": COVERAGE_TOLERANCE, "means": overall,
+              "per_trace": per_trace}
+    os.makedirs(out_dir, exist_ok=True)
+    with open(os.path.join(out_dir, "coverage.json"), "w") as f:
+        json.dump(result, f, indent=2)
+    from .plots import plot_coverage
+
+    plot_coverage(result, os.path.join(out_dir, "coverage.png"))
+    return result
+
+
+def print_coverage_table(result: dict) -> None:
+    print(f"pibr bench coverage: scene {result['scene']}, {result['latency_ms']:g} ms round trip, "
+          f"missing-pixel fraction (lower is better)")
+    traces = result["traces"]
+    head = f"{'variant':<28}" + "".join(f"{t:>14}" for t in traces) + f"{'all':>10}{'geometry only':>15}"
+    print(head)
+    print("-" * len(head))
+    for v in VARIANTS + ("floor",):
+        row = f"{VARIANT_LABELS[v]:<28}" + "".join(f"{100 * result['per_trace'][t]['means'][v]:>13.2f}%"
+                                                   for t in traces)
+        print(row + f"{100 * result['means'][v]:>9.2f}%{100 * result['means'][v + ':geometry']:>14.2f}%")
+    print("'geometry only' leaves out pixels showing sky: a peeled extra view cannot tell sky from "
+          "peeled-away surfaces, so only unpeeled views vouch for sky.")
