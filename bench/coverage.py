@@ -242,7 +242,8 @@ def run_coverage_bench(scene_spec="room", traces=("pred6dof-1", "pred6dof-2"), l
             from tqdm import tqdm
 
             bar = tqdm(total=sum(len(s) for s in all_samples.values()), unit="frame", desc="coverage",
-                       file=sys.stderr, leave=False)
+                       file=sys.stderr, leave=False,
+                       disable=None)  # None: no bar when stderr is not a terminal
         for tr, samples in all_samples.items():
             series = {}
             for s in samples:

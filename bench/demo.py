@@ -28,7 +28,7 @@ def run_demo(out_dir: str = "out", scene: str = "room", trace: str = "pred6dof-1
     os.makedirs(out_dir, exist_ok=True)
     t0 = time.perf_counter()
     bar = tqdm(total=None, unit="tick", desc="streaming (server -> relay -> client)", file=sys.stderr,
-               disable=not progress, leave=False)
+               disable=None if progress else True, leave=False)
 
     def on_progress(done, total):
         if bar.total != total:

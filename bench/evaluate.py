@@ -111,7 +111,8 @@ def evaluate_run(run_dir: str, scene_spec: str | None = None, flip_every: int = 
     if progress:
         from tqdm import tqdm
 
-        bar = tqdm(total=n, unit="frame", desc="ground truth + metrics", file=sys.stderr, leave=False)
+        bar = tqdm(total=n, unit="frame", desc="ground truth + metrics", file=sys.stderr, leave=False,
+                       disable=None)  # None: no bar when stderr is not a terminal
     results = {m: [None] * n for m in methods}
     pending: deque = deque()
 

@@ -130,7 +130,8 @@ def search_offset(scene_spec="room", traces=("pred6dof-1", "pred6dof-2"), latenc
         if progress:
             from tqdm import tqdm
 
-            bar = tqdm(total=total, unit="offset", desc=f"offset search ({method})", file=sys.stderr, leave=False)
+            bar = tqdm(total=total, unit="offset", desc=f"offset search ({method})", file=sys.stderr, leave=False,
+                       disable=None)
         step = bar.update if bar is not None else None
         values = exhaustive(f, axes, step) if method == "exhaustive" else coarse_to_fine(f, axes, progress=step)
     finally:

@@ -111,7 +111,8 @@ class _Progress:
         if mode == "bar":
             from tqdm import tqdm
 
-            self._bar = tqdm(total=total, unit="tick", desc="client", file=sys.stderr, leave=False)
+            self._bar = tqdm(total=total, unit="tick", desc="client", file=sys.stderr, leave=False,
+                       disable=None)  # None: no bar when stderr is not a terminal
 
     def step(self) -> None:
         self.done += 1
