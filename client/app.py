@@ -31,12 +31,12 @@ import numpy as np
 
 from pibr.protocol.errors import ConfigError, UnexpectedMessage
 from pibr.protocol.gl import GLThread
-from pibr.protocol.messages import Clock, Frame, Hello, OutputConfig, PayloadKind, PoseMsg, Stats
+from pibr.protocol.messages import Clock, Frame, Hello, OutputConfig, PayloadKind, PoseMsg, ProxyChunk, Stats
 from pibr.protocol.pose import Pose
 
 from .connection import ClientConnection
 from .frame_textures import FrameTextures
-from .methods import make_method, method_names
+from .methods import make_method, method_names, needs_proxies
 from .recorder import MethodRecorder
 from .video import H264Decoder
 
@@ -63,6 +63,9 @@ class ClientConfig:
     record: bool = True
     lossless: bool = True
     progress: str = "bar"    # bar, lines (machine-readable on stdout), none
+    tau: float = 0.1         # proxy IBR: relative depth error accepted as the same surface
+    lod_pixels: float = 6.0  # proxy IBR: on-screen edge length that selects an object's LoD
+    lod_level: str | None = None  # proxy IBR: force original, proxy or box for every object
 
     def __post_init__(self):
         if self.clock not in ("virtual", "real"):
@@ -80,6 +83,12 @@ class ClientConfig:
             raise ConfigError(f"duration must be positive, got {self.duration_s}")
         if self.preroll_s < 0:
             raise ConfigError("preroll must be >= 0")
+        if not (0 < self.tau < 10):
+            raise ConfigError(f"tau must be in (0, 10), got {self.tau}")
+        if not (self.lod_pixels > 0):
+            raise ConfigError(f"LoD pixel target must be positive, got {self.lod_pixels}")
+        if self.lod_level not in (None, "original", "proxy", "box"):
+            raise ConfigError(f"LoD level must be original, proxy or box, got {self.lod_level!r}")
         if self.progress not in ("bar", "lines", "none"):
             raise ConfigError(f"progress must be bar, lines or none, got {self.progress!r}")
         OutputConfig(self.width, self.height, self.fov_deg, self.rate_hz)
@@ -139,6 +148,8 @@ class Client:
         self._newest: _Decoded | None = None
         self._gl_state = None
         self._last_shown: dict = {}
+        self.proxies = None
+        self.proxy_stats: dict = {}
         #: server time = client time + this (0 on the virtual clock, estimated on the real one)
         self._server_offset_us = 0
 
@@ -163,11 +174,13 @@ class Client:
 
         out = OutputConfig(self.cfg.width, self.cfg.height, self.cfg.fov_deg, self.cfg.rate_hz)
         textures = FrameTextures(ctx, self.session)
-        methods = [make_method(name, ctx, out, self.session) for name in self.cfg.methods]
+        options = {"tau": self.cfg.tau, "lod_target_px": self.cfg.lod_pixels, "lod_level": self.cfg.lod_level}
+        methods = [make_method(name, ctx, out, self.session, proxies=self.proxies, **options)
+                   for name in self.cfg.methods]
         target = OutputTarget(ctx, self.cfg.width, self.cfg.height)
         self._gl_state = (textures, methods, target)
 
-    def _gl_render(self, ctx, pose: Pose, decoded: _Decoded | None):
+    def _gl_render(self, ctx, pose: Pose, decoded: _Decoded | None, scene_t: float):
         """Upload the newest frame if new, render every method; -> [(rgb, hole fraction, ms)]."""
         textures, methods, target = self._gl_state
         if decoded is not None and textures.frame_id != decoded.frame.frame_id:
@@ -177,7 +190,7 @@ class Client:
             target.begin()
             t0 = time.perf_counter()
             if decoded is not None:
-                m.render(pose, decoded.frame, textures)
+                m.render(pose, decoded.frame, textures, scene_t)
             ctx.finish()
             ms = (time.perf_counter() - t0) * 1e3
             rgba = target.read()
@@ -205,13 +218,15 @@ class Client:
         t_hello = time.monotonic()
         hello = Hello(client="pibr-client/0.1", scene=cfg.scene, clock=cfg.clock,
                       output=OutputConfig(cfg.width, cfg.height, cfg.fov_deg, cfg.rate_hz),
-                      want_proxies=False, depth_codec=cfg.depth_codec)
+                      want_proxies=needs_proxies(cfg.methods), depth_codec=cfg.depth_codec)
         try:
             self.session = await self.conn.handshake(hello)
             t_welcome = time.monotonic()
             handshake_ms = (t_welcome - t_hello) * 1e3
             if self.session.clock != cfg.clock:
                 raise UnexpectedMessage(f"server runs the {self.session.clock} clock, we asked for {cfg.clock}")
+            if hello.want_proxies:
+                await self._receive_proxies(t_welcome)
             self._decoder = H264Decoder(self.session.atlas.width, self.session.atlas.height)
             self.gl = await loop.run_in_executor(None, GLThread, "pibr-client-gl")
             await self.gl.run(self._gl_setup)
@@ -233,7 +248,7 @@ class Client:
             await self.conn.send(Stats({"ticks": n_ticks, "missed_deadlines": self.missed,
                                         "frames_received": self.frames_received}))
             result = ClientResult(n_ticks, self.frames_received, self.missed, self.conn.bytes_received,
-                                  handshake_ms)
+                                  handshake_ms, {"proxies": self.proxy_stats or None})
             self._write_session(result, trace)
             return result
         finally:
@@ -249,6 +264,30 @@ class Client:
             self.gl.close()
         self._decode_pool.shutdown(wait=True)
 
+    async def _receive_proxies(self, t_welcome: float) -> None:
+        """The proxy bundle follows the Welcome: collect, decompress and parse it (off the loop)."""
+        from pibr.protocol.proxy import BundleAssembler, decode_bundle, decompress_bundle
+
+        info = self.session.proxies
+        if not info:
+            raise UnexpectedMessage("asked for proxies, but the server's Welcome announces none")
+        assembler = BundleAssembler()
+        while not assembler.complete:
+            env = await self.conn.recv(timeout=600)
+            if not isinstance(env.message, ProxyChunk):
+                raise UnexpectedMessage(f"expected ProxyChunk, got {env.message.NAME}")
+            assembler.add(env.message)
+        t_received = time.monotonic()
+        data = assembler.data()
+        loop = asyncio.get_running_loop()
+        self.proxies = await loop.run_in_executor(None, lambda: decode_bundle(decompress_bundle(data)))
+        self.proxy_stats = {"bytes": len(data), "chunks": assembler.count, "objects": len(self.proxies),
+                            "transfer_ms": (t_received - t_welcome) * 1e3,
+                            "decode_ms": (time.monotonic() - t_received) * 1e3}
+        log.info("proxies: %d objects, %.2f MB in %d chunks, received in %.0f ms, decoded in %.0f ms",
+                 len(self.proxies), len(data) / 1e6, assembler.count, self.proxy_stats["transfer_ms"],
+                 self.proxy_stats["decode_ms"])
+
     async def _decode(self, frame: Frame, arrival_us: int) -> None:
         data = frame.payload(PayloadKind.H264_ATLAS)
         if data is None:
@@ -263,7 +302,7 @@ class Client:
         ``scene_t`` is the scene-animation (server) time the ground truth must show."""
         offset = self._server_offset_us
         decoded = self._newest
-        results = await self.gl.run(self._gl_render, pose, decoded)
+        results = await self.gl.run(self._gl_render, pose, decoded, (t_us + offset) / 1e6)
         for name, (rgb, hole, ms) in zip(self.cfg.methods, results):
             rec = self.recorders.get(name)
             if rec is None:
@@ -375,6 +414,7 @@ class Client:
             "session": self.session.to_json(),
             "trace": {"name": trace.name, "start_s": self.cfg.start_s, "duration_s": self._duration},
             "result": asdict(result),
+            "proxies": self.proxy_stats or None,
         }
         with open(os.path.join(self.cfg.out_dir, "session.json"), "w") as f:
             json.dump(info, f, indent=2, default=str)

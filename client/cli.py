@@ -49,6 +49,12 @@ def register(sub) -> None:
     p.add_argument("--scene", default="", help="ask the server for this scene (default: the server's)")
     p.add_argument("--depth-codec", choices=("h264", "edge"), default=None, help="ask for this depth transport")
     p.add_argument("--no-lossless", action="store_true", help="skip the lossless recording used for metrics")
+    p.add_argument("--tau", type=float, default=0.1,
+                   help="proxy: relative depth error still taken as the same surface (default 0.1)")
+    p.add_argument("--lod-pixels", type=float, default=6.0,
+                   help="proxy: finest LoD whose edges cover at least this many pixels (default 6)")
+    p.add_argument("--lod-level", choices=("original", "proxy", "box"), default=None,
+                   help="proxy: draw this level for every object instead of choosing by distance")
     p.add_argument("--progress", choices=("bar", "lines", "none"), default="bar")
     p.set_defaults(func=cmd_client)
 
@@ -61,7 +67,8 @@ def cmd_client(args) -> int:
                        methods=tuple(args.method), out_dir=args.out, width=args.size[0], height=args.size[1],
                        fov_deg=args.fov, start_s=args.start, duration_s=args.duration, preroll_s=args.preroll,
                        scene=args.scene, depth_codec=args.depth_codec or "", lossless=not args.no_lossless,
-                       progress=args.progress)
+                       progress=args.progress, tau=args.tau, lod_pixels=args.lod_pixels,
+                       lod_level=args.lod_level)
     from .connection import ServerClosed
 
     try:
@@ -71,4 +78,8 @@ def cmd_client(args) -> int:
         return 2
     print(f"pibr client: {result.ticks} ticks, {result.frames_received} frames received, "
           f"{result.missed_deadlines} missed deadlines; recordings in {args.out}/")
+    if result.summary.get("proxies"):
+        p = result.summary["proxies"]
+        print(f"pibr client: proxies {p['objects']} objects, {p['bytes'] / 1e6:.2f} MB, received in "
+              f"{p['transfer_ms']:.0f} ms (decoded in {p['decode_ms']:.0f} ms)")
     return 0

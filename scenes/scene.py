@@ -12,7 +12,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from pibr.protocol.errors import SceneError
-from pibr.protocol.pose import Pose, quat_from_axis_angle, quat_to_matrix
+from pibr.protocol.motion import RigidMotion
+from pibr.protocol.pose import Pose
 
 
 @dataclass
@@ -128,58 +129,14 @@ class Material:
             self.texture = np.ascontiguousarray(t[:, :, :3])
 
 
-@dataclass
-class Animation:
-    """Rigid motion of an object over time, applied in the object's parent frame before ``transform``.
-
-    kind:
-      ``"spin"``   rotation about ``axis`` through ``pivot`` at ``speed`` rad/s;
-      ``"orbit"``  translation on a circle of ``radius`` about ``axis`` at ``speed`` rad/s;
-      ``"swing"``  rotation about ``axis`` through ``pivot`` by ``amplitude`` rad * sin(speed * t);
-      ``"slide"``  translation along ``axis`` by ``amplitude`` metres * sin(speed * t).
-    """
-
-    kind: str
-    axis: tuple = (0.0, 1.0, 0.0)
-    speed: float = 1.0
-    pivot: tuple = (0.0, 0.0, 0.0)
-    radius: float = 0.0
-    amplitude: float = 0.0
-    phase: float = 0.0
-
-    KINDS = ("spin", "orbit", "swing", "slide")
+class Animation(RigidMotion):
+    """A scene object's motion (see :class:`pibr.protocol.motion.RigidMotion`); bad values raise SceneError."""
 
     def __post_init__(self):
-        if self.kind not in self.KINDS:
-            raise SceneError(f"unknown animation kind {self.kind!r}; choose from {', '.join(self.KINDS)}")
-        axis = np.asarray(self.axis, dtype=np.float64)
-        if axis.shape != (3,) or not np.all(np.isfinite(axis)) or np.linalg.norm(axis) < 1e-12:
-            raise SceneError("animation axis must be a finite non-zero 3-vector")
-        self.axis = tuple(float(x) for x in axis / np.linalg.norm(axis))
-        for name in ("speed", "radius", "amplitude", "phase"):
-            if not math.isfinite(float(getattr(self, name))):
-                raise SceneError(f"animation {name} must be finite")
-
-    def matrix(self, t: float) -> np.ndarray:
-        """(4, 4) motion at time t seconds."""
-        m = np.eye(4)
-        axis = np.array(self.axis)
-        pivot = np.array(self.pivot, dtype=np.float64)
-        if self.kind in ("spin", "swing"):
-            angle = self.speed * t + self.phase if self.kind == "spin" else \
-                self.amplitude * math.sin(self.speed * t + self.phase)
-            r = quat_to_matrix(quat_from_axis_angle(axis, angle))
-            m[:3, :3] = r
-            m[:3, 3] = pivot - r @ pivot
-        elif self.kind == "orbit":
-            angle = self.speed * t + self.phase
-            ref = np.cross(axis, [1.0, 0, 0] if abs(axis[0]) < 0.9 else [0, 0, 1.0])
-            ref /= np.linalg.norm(ref)
-            r = quat_to_matrix(quat_from_axis_angle(axis, angle))
-            m[:3, 3] = self.radius * (r @ ref)
-        else:  # slide
-            m[:3, 3] = axis * self.amplitude * math.sin(self.speed * t + self.phase)
-        return m
+        try:
+            super().__post_init__()
+        except ValueError as exc:
+            raise SceneError(str(exc)) from None
 
 
 @dataclass

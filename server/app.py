@@ -39,6 +39,8 @@ class Server:
         self._scenes: dict[str, object] = {}
         self._scene_lock = asyncio.Lock()
         self._renderers: dict = {}  # touched only on the GL thread
+        self._bundles: dict = {}    # scene id -> ProxyBundle
+        self._bundle_lock = asyncio.Lock()
         self._server = None
         self.gl: GLThread | None = None
         self.encode_pool = concurrent.futures.ThreadPoolExecutor(max_workers=max(2, os.cpu_count() or 2),
@@ -125,10 +127,23 @@ class Server:
             self._renderers[key] = Renderer(ctx, scene, self.config.projection)
         return self._renderers[key]
 
+    async def get_bundle(self, scene):
+        """The scene's proxy bundle, built (or read from the LoD cache) once per server."""
+        async with self._bundle_lock:
+            if id(scene) not in self._bundles:
+                from .proxies import build_bundle
+
+                loop = asyncio.get_running_loop()
+                self._bundles[id(scene)] = await loop.run_in_executor(None, build_bundle, scene,
+                                                                      self.config.proxy_settings)
+            return self._bundles[id(scene)]
+
     async def setup_session(self, hello: Hello):
-        """Scene, session parameters, GL producer and encoders for a client's Hello."""
+        """Scene, session parameters, GL producer, encoders (and proxy bundle) for a client's Hello."""
         scene = await self.get_scene(hello.scene)
-        config, spec = plan_session(self.config, scene, hello)
+        bundle = await self.get_bundle(scene) if hello.want_proxies else None
+        config, spec = plan_session(self.config, scene, hello,
+                                    bundle.info(self.proxy_chunk_bytes) if bundle is not None else None)
 
         def make_producer(ctx):
             return FrameProducer(ctx, self._renderer(ctx, scene), spec)
@@ -136,7 +151,12 @@ class Server:
         producer = await self.gl.run(make_producer)
         cfg = self.config
         encoder = H264Encoder(spec.layout.width, spec.layout.height, cfg.fps, cfg.bitrate_kbps, cfg.keyint, cfg.preset)
-        return config, producer, encoder, None
+        return config, producer, encoder, None, bundle
+
+    @property
+    def proxy_chunk_bytes(self) -> int:
+        """Proxy chunks stay well inside the message size limit."""
+        return max(1024, min(1 << 20, self.config.max_message_size // 2))
 
     def record_frame_timings(self, timings_ms, nbytes: int) -> None:
         self.recent_timings.append((*timings_ms, nbytes))

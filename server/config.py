@@ -2,13 +2,14 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from pibr.protocol.atlas import check_view_size
 from pibr.protocol.errors import ConfigError
 from pibr.protocol.framing import DEFAULT_MAX_MESSAGE_SIZE
 from pibr.protocol.pose import Pose, quat_from_axis_angle
 
+from .proxies import ProxySettings
 from .renderer import DEFAULT_PROJECTION, PROJECTIONS
 
 DEFAULT_PORT = 7450
@@ -44,7 +45,7 @@ class ServerConfig:
     max_message_size: int = DEFAULT_MAX_MESSAGE_SIZE
     max_sessions: int = 8
     hello_timeout_s: float = 10.0
-    allowed_scenes: tuple | None = None  # None: built-in names and files under the working directory
+    proxy_settings: ProxySettings = field(default_factory=ProxySettings)
 
     def __post_init__(self):
         if not (0 < self.port < 65536) and self.port != 0:

@@ -6,7 +6,8 @@ ways through a :class:`~pibr.protocol.link.LinkModel` per direction. It reads th
 
 * **virtual**: frames are forwarded at once, their header ``vtime_us`` rewritten to the
   modelled arrival time (deterministic: jitter comes from a seeded generator); the
-  handshake (``Hello``, ``Welcome``) precedes the simulated timeline and passes unchanged;
+  handshake (``Hello``, ``Welcome``, the proxies' ``ProxyChunk``) precedes the simulated
+  timeline and passes unchanged;
 * **real**: frames are held until their modelled arrival on the wall clock, unchanged.
 
 The relay parses framing (never payloads, except the first ``Hello``), so a peer sending
@@ -24,7 +25,7 @@ from pibr.protocol.connection import Connection
 from pibr.protocol.errors import ProtocolError, UnexpectedMessage
 from pibr.protocol.framing import DEFAULT_MAX_MESSAGE_SIZE, FrameReader, encode_frame
 from pibr.protocol.link import LinkModel, LinkParams
-from pibr.protocol.messages import Clock, Error, Hello, Welcome
+from pibr.protocol.messages import Clock, Error, Hello, ProxyChunk, Welcome
 
 log = logging.getLogger(__name__)
 
@@ -106,9 +107,10 @@ class _Pair:
                         self.clock.set_result(Hello.parse(f.payload).clock)
                     clock = await self.clock
                     is_clock = f.type == Clock.TYPE
-                    if clock == "virtual" and f.type in (Hello.TYPE, Welcome.TYPE):
-                        # The handshake happens before the simulated timeline starts; passing it
-                        # through the link model would push the link's FIFO clock past the ticks.
+                    if clock == "virtual" and f.type in (Hello.TYPE, Welcome.TYPE, ProxyChunk.TYPE):
+                        # The handshake and the proxies sent with it come before the simulated
+                        # timeline starts; through the link model they would push the link's
+                        # FIFO clock past the first ticks.
                         await queue.put((None, encode_frame(f.type, f.payload, f.vtime_us)))
                     elif clock == "virtual":
                         arrive = model.arrival_us(f.vtime_us, f.wire_size, is_clock)

@@ -137,11 +137,15 @@ class Session:
         if hello.protocol != PROTOCOL_VERSION:
             raise UnsupportedVersion(f"client speaks protocol {hello.protocol}, this server speaks {PROTOCOL_VERSION}")
         setup = await self.server.setup_session(hello)
-        self.config, self.producer, self.encoder, self.depth_encoder = setup
+        self.config, self.producer, self.encoder, self.depth_encoder, bundle = setup
         setup_us = int((time.monotonic() - t_hello) * 1e6)
         self.conn.send(Welcome(server=self.server.name, session=self.id, config=self.config.to_json(),
                                setup_us=setup_us))
         await self._flush()
+        if bundle is not None:  # sent ahead of the first frame, outside the simulated timeline
+            for chunk in bundle.chunks(self.server.proxy_chunk_bytes):
+                self.conn.send(chunk)
+                await self._flush()
         log.info("session %d: scene %s, %s clock, %dx%d output at %g Hz", self.id, self.config.scene["name"],
                  hello.clock, hello.output.width, hello.output.height, hello.output.rate_hz)
         return hello

@@ -20,7 +20,7 @@ def extra_offset_for(cfg: ServerConfig, scene):
     return extra_offset_pose(*PAPER_EXTRA_OFFSET)
 
 
-def plan_session(cfg: ServerConfig, scene, hello: Hello) -> tuple[SessionConfig, ProducerSpec]:
+def plan_session(cfg: ServerConfig, scene, hello: Hello, proxies: dict | None = None) -> tuple[SessionConfig, ProducerSpec]:
     depth_codec = hello.depth_codec or cfg.depth_codec
     if depth_codec not in ("h264", "edge"):
         raise ConfigError(f"unknown depth codec {depth_codec!r}; choose h264 or edge")
@@ -38,6 +38,6 @@ def plan_session(cfg: ServerConfig, scene, hello: Hello) -> tuple[SessionConfig,
         primary=ViewConfig(pw, ph), extra=ViewConfig(*extra_size) if extra_size else None,
         extra_offset=offset, atlas=layout, video_bitrate_kbps=cfg.bitrate_kbps, keyint=cfg.keyint,
         depth_codec=depth_codec, depth_bits=quantizer.bits, depth_min_code=quantizer.min_code,
-        motion=False, proxies=None, options={"projection": cfg.projection})
+        motion=False, proxies=proxies, options={"projection": cfg.projection})
     spec = ProducerSpec((pw, ph), layout, quantizer, cfg.projection, extra_size, offset)
     return config, spec

@@ -35,8 +35,9 @@ class Method:
     def __init__(self, ctx, output: OutputConfig, config: SessionConfig):
         self.ctx, self.output, self.config = ctx, output, config
 
-    def render(self, out_pose: Pose, frame, textures) -> None:
-        """Draw the view at ``out_pose`` from ``frame`` (protocol Frame) whose atlas is in ``textures``."""
+    def render(self, out_pose: Pose, frame, textures, scene_t: float = 0.0) -> None:
+        """Draw the view at ``out_pose`` from ``frame`` (protocol Frame) whose atlas is in ``textures``;
+        ``scene_t`` is the scene time of the display (where moving objects' proxies are)."""
         raise NotImplementedError
 
     def release(self) -> None:

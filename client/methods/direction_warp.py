@@ -43,7 +43,7 @@ class DirectionWarp(Method):
         self.prog["u_color_rect"].value = rect_uniform(config, "primary.color")
         self.vbo, self.vao = fullscreen_quad(ctx, self.prog)
 
-    def render(self, out_pose: Pose, frame, textures) -> None:
+    def render(self, out_pose: Pose, frame, textures, scene_t: float = 0.0) -> None:
         src = frame.primary_pose
         view_rotation = out_pose.rotation() if self.follow_rotation else src.rotation()
         out_to_src = src.rotation().T @ view_rotation

@@ -1,0 +1,213 @@
+"""``proxy``: proxy-guided image-based rendering (Reinert et al. 2016).
+
+One pass over the scene's level-of-detail proxy at the *current* pose. Per fragment, with
+f_p and f_e its distances to the primary and extra cameras and d_p, d_e the distances
+those views stored where it back-projects, e = |(d - f) / f|:
+
+* e_p < tau: the primary view saw this very surface point: take its colour;
+* else e_e < tau: the extra view saw it: take the extra view's colour;
+* else the proxy is not where the true surface is (an encaging proxy bulges past the
+  silhouette, or the surface was hidden in both views). The fragment is not discarded but
+  *deprioritised*: written behind every accepted fragment (depth mapped to [0.5, 1) instead
+  of [0, 0.5)) and coloured from the view with the lower error. Silhouettes stay carved —
+  any accepted fragment behind wins — and holes are inpainted at no extra cost. Its alpha
+  is 0, so the client counts the pixel as one no view covered.
+
+Where the primary view shows sky the fragment is dropped so the sky behind shows. A
+background pass first fills every pixel from the primary view along its ray (the sky, and
+a rotation-only fallback, alpha 0, where no proxy is drawn).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from pibr.protocol.pose import Pose
+
+from ..frame_textures import ATLAS_GLSL, bind_atlas_uniforms, rect_uniform
+from ..lod_select import DEFAULT_TARGET_PX, LodSelector
+from .base import FULLSCREEN_VS, Method, fullscreen_quad, output_tan_half
+
+DEFAULT_TAU = 0.1
+
+_BACKGROUND_FS = """
+#version 410
+%(atlas)s
+uniform mat3 u_out_to_src;
+uniform vec2 u_tan_half;
+uniform vec2 u_out_size;
+uniform vec4 u_color_rect;
+uniform vec4 u_depth_rect;
+out vec4 f_color;
+void main() {
+    vec2 ndc = vec2(2.0 * gl_FragCoord.x / u_out_size.x - 1.0, 1.0 - 2.0 * gl_FragCoord.y / u_out_size.y);
+    vec3 d = u_out_to_src * normalize(vec3(ndc * u_tan_half, -1.0));
+    if (d.z > 0.0) { f_color = vec4(0.0); return; }
+    vec2 uv = wa_uv(wa_project(d).xy);
+    bool sky = atlas_distance(u_depth_rect, uv) <= 0.0;
+    f_color = vec4(atlas_rgb(u_color_rect, uv), sky ? 1.0 : 0.0);
+}
+"""
+
+_PROXY_VS = """
+#version 410
+uniform mat4 u_mvp;          // object -> clip space of the output camera
+uniform mat4 u_to_primary;   // object -> primary camera space
+uniform mat4 u_to_extra;     // object -> extra camera space
+in vec3 in_position;
+out vec3 v_p;
+out vec3 v_e;
+void main() {
+    vec4 p = vec4(in_position, 1.0);
+    v_p = (u_to_primary * p).xyz;
+    v_e = (u_to_extra * p).xyz;
+    gl_Position = u_mvp * p;
+    gl_Position.y = -gl_Position.y;   // top-row-first images
+}
+"""
+
+_PROXY_FS = """
+#version 410
+%(atlas)s
+uniform vec4 u_primary_color;
+uniform vec4 u_primary_depth;
+uniform vec4 u_extra_color;
+uniform vec4 u_extra_depth;
+uniform bool u_has_extra;
+uniform float u_tau;
+in vec3 v_p;
+in vec3 v_e;
+out vec4 f_color;
+const float NO_MATCH = 1e30;
+// Relative error between the view's stored distance and the fragment's; NO_MATCH behind the
+// camera, at its centre, or where the view stores sky (then 'sky' is set).
+float view_error(vec3 c, vec4 depth_rect, out vec2 uv, out bool sky) {
+    sky = false;
+    uv = vec2(0.0);
+    float f = length(c);
+    if (c.z > 0.0 || f < 1e-6) return NO_MATCH;
+    uv = wa_uv(wa_project(c).xy);
+    float d = atlas_distance(depth_rect, uv);
+    if (d <= 0.0) { sky = true; return NO_MATCH; }
+    return abs(d - f) / f;
+}
+void main() {
+    vec2 uv_p, uv_e;
+    bool sky_p, sky_e;
+    float e_p = view_error(v_p, u_primary_depth, uv_p, sky_p);
+    float e_e = NO_MATCH;
+    if (u_has_extra) e_e = view_error(v_e, u_extra_depth, uv_e, sky_e);
+    float z = gl_FragCoord.z;
+    if (e_p < u_tau) {
+        f_color = vec4(atlas_rgb(u_primary_color, uv_p), 1.0);
+        gl_FragDepth = 0.5 * z;
+    } else if (e_e < u_tau) {
+        f_color = vec4(atlas_rgb(u_extra_color, uv_e), 1.0);
+        gl_FragDepth = 0.5 * z;
+    } else {
+        if (sky_p) discard;   // the primary sees nothing there: carve, let the sky show
+        vec3 c = (e_e < e_p) ? atlas_rgb(u_extra_color, uv_e)
+               : (v_p.z <= 0.0 ? atlas_rgb(u_primary_color, uv_p) : vec3(0.0));
+        f_color = vec4(c, 0.0);
+        gl_FragDepth = 0.5 + 0.5 * z;
+    }
+}
+"""
+
+
+def _perspective(output, near: float, far: float) -> np.ndarray:
+    tx, ty = output_tan_half(output)
+    m = np.zeros((4, 4))
+    m[0, 0], m[1, 1] = 1 / tx, 1 / ty
+    m[2, 2] = (far + near) / (near - far)
+    m[2, 3] = 2 * far * near / (near - far)
+    m[3, 2] = -1.0
+    return m
+
+
+class ProxyIBR(Method):
+    name = "proxy"
+    needs_proxies = True
+
+    def __init__(self, ctx, output, config, proxies=None, tau: float = DEFAULT_TAU,
+                 lod_target_px: float = DEFAULT_TARGET_PX, lod_level: str | None = None):
+        super().__init__(ctx, output, config)
+        if not proxies:
+            from pibr.protocol.errors import ConfigError
+
+            raise ConfigError("the proxy method needs the scene's proxies; the server sent none")
+        self.tau = tau
+        self.objects = proxies
+        self.selector = LodSelector(proxies, output, lod_target_px, force_level=lod_level)
+        atlas = {"atlas": ATLAS_GLSL}
+        self.bg = ctx.program(vertex_shader=FULLSCREEN_VS, fragment_shader=_BACKGROUND_FS % atlas)
+        self.prog = ctx.program(vertex_shader=_PROXY_VS, fragment_shader=_PROXY_FS % atlas)
+        for p in (self.bg, self.prog):
+            bind_atlas_uniforms(p, config)
+        self.bg["u_tan_half"].value = output_tan_half(output)
+        self.bg["u_out_size"].value = (float(output.width), float(output.height))
+        self.bg["u_color_rect"].value = rect_uniform(config, "primary.color")
+        self.bg["u_depth_rect"].value = rect_uniform(config, "primary.depth")
+        for k, rect in (("u_primary_color", "primary.color"), ("u_primary_depth", "primary.depth"),
+                        ("u_extra_color", "extra.color"), ("u_extra_depth", "extra.depth")):
+            if k in self.prog:
+                self.prog[k].value = rect_uniform(config, rect)
+        self.prog["u_has_extra"].value = config.extra is not None and config.atlas.rect("extra.depth") is not None
+        self.prog["u_tau"].value = float(tau)
+        self.bg_vbo, self.bg_vao = fullscreen_quad(ctx, self.bg)
+        self.near, self.far = config.near, config.far
+        self.projection = _perspective(output, self.near, self.far)
+        self._buffers = []
+        self.vaos = []   # per object: level -> (vao, triangles)
+        for o in proxies:
+            levels = {}
+            for level in ("original", "proxy", "box"):
+                v, f = o.level(level)
+                if len(f) == 0:
+                    continue
+                vbo = ctx.buffer(np.ascontiguousarray(v, np.float32).tobytes())
+                ibo = ctx.buffer(np.ascontiguousarray(f, np.uint32).tobytes())
+                vao = ctx.vertex_array(self.prog, [(vbo, "3f", "in_position")], index_buffer=ibo,
+                                       index_element_size=4)
+                self._buffers += [vbo, ibo]
+                levels[level] = (vao, len(f))
+            self.vaos.append(levels)
+        self.last_triangles = 0
+
+    def render(self, out_pose: Pose, frame, textures, scene_t: float = 0.0) -> None:
+        ctx = self.ctx
+        textures.use()
+        # Background: the primary view along each output ray (sky; fallback colour, alpha 0).
+        rot = frame.primary_pose.rotation().T @ out_pose.rotation()
+        self.bg["u_out_to_src"].write(rot.T.astype("f4").tobytes())
+        ctx.disable(ctx.DEPTH_TEST)
+        self.bg_vao.render(ctx.TRIANGLE_STRIP)
+        # Proxies, depth-tested, with deprioritised fragments pushed behind accepted ones.
+        ctx.enable(ctx.DEPTH_TEST)
+        view = out_pose.view_matrix()
+        to_p = frame.primary_pose.view_matrix()
+        to_e = frame.extra_pose.view_matrix() if frame.extra_pose is not None else to_p
+        vp = self.projection @ view
+        tris = 0
+        for sel in self.selector.select(out_pose, scene_t, self.near):
+            levels = self.vaos[sel.index]
+            level = sel.level if sel.level in levels else next(iter(levels), None)
+            if level is None:
+                continue
+            model = self.objects[sel.index].world_matrix(scene_t)
+            self.prog["u_mvp"].write((vp @ model).T.astype("f4").tobytes())
+            self.prog["u_to_primary"].write((to_p @ model).T.astype("f4").tobytes())
+            self.prog["u_to_extra"].write((to_e @ model).T.astype("f4").tobytes())
+            vao, n = levels[level]
+            vao.render(ctx.TRIANGLES)
+            tris += n
+        self.last_triangles = tris
+        ctx.disable(ctx.DEPTH_TEST)
+
+    def release(self) -> None:
+        for levels in self.vaos:
+            for vao, _ in levels.values():
+                vao.release()
+        for b in self._buffers:
+            b.release()
+        for r in (self.bg_vao, self.bg_vbo, self.bg, self.prog):
+            r.release()

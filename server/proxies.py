@@ -1,0 +1,61 @@
+"""The proxy bundle of a scene: every object's original mesh, its encaging simplified mesh
+(scenes/lod.py, cached on disk) and its box, zstd-compressed once per scene and cut into
+``ProxyChunk`` messages for each session that asks."""
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass
+
+from pibr.protocol.messages import ProxyChunk
+from pibr.protocol.proxy import ProxyObject, compress_bundle, encode_bundle, split_chunks
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class ProxySettings:
+    resolution: int = 128          # voxels along an object's longest side
+    target_fraction: float = 0.005  # proxy triangles / original triangles
+
+
+@dataclass
+class ProxyBundle:
+    compressed: bytes
+    raw_bytes: int
+    objects: int
+    triangles: dict          # level -> total triangles
+    seconds: float
+
+    def chunks(self, chunk_bytes: int) -> list[ProxyChunk]:
+        parts = split_chunks(self.compressed, chunk_bytes)
+        return [ProxyChunk(i, len(parts), len(self.compressed), p) for i, p in enumerate(parts)]
+
+    def info(self, chunk_bytes: int) -> dict:
+        return {"objects": self.objects, "bytes": len(self.compressed), "raw_bytes": self.raw_bytes,
+                "chunks": len(split_chunks(self.compressed, chunk_bytes)), "triangles": self.triangles}
+
+
+def build_bundle(scene, settings: ProxySettings = ProxySettings(), progress: bool = False) -> ProxyBundle:
+    """LoDs for every object (from the cache when it has them), packed and compressed."""
+    from pibr.scenes.lod_cache import lods_for_scene
+
+    t0 = time.perf_counter()
+    lods = lods_for_scene(scene, resolution=settings.resolution, target_fraction=settings.target_fraction,
+                          progress=progress)
+    objects = []
+    tris = {"original": 0, "proxy": 0, "box": 0}
+    for obj in scene.objects:
+        lod = lods[obj.name]
+        m = obj.mesh
+        objects.append(ProxyObject(obj.name, obj.transform, obj.animation, m.bounds().astype("f8"),
+                                   (m.vertices, m.faces), (lod.proxy.vertices, lod.proxy.faces)))
+        tris["original"] += m.triangle_count
+        tris["proxy"] += lod.proxy.triangle_count
+        tris["box"] += 12
+    raw = encode_bundle(objects)
+    bundle = ProxyBundle(compress_bundle(raw), len(raw), len(objects), tris, time.perf_counter() - t0)
+    log.info("proxies of %s: %d objects, %d -> %d triangles, %.1f MB -> %.1f MB zstd, %.1f s", scene.name,
+             len(objects), tris["original"], tris["proxy"], len(raw) / 1e6, len(bundle.compressed) / 1e6,
+             bundle.seconds)
+    return bundle
