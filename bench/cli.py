@@ -105,6 +105,22 @@ def register(sub) -> None:
     cov.add_argument("--out", default="out/bench")
     cov.set_defaults(func=cmd_bench_coverage)
 
+    i = bs.add_parser("ibr", help="none / rotation / proxy against ground truth, proxy speed against a floor",
+                      description="Quality of the client methods at the given latency on real traces (in one "
+                                  "process, on the virtual clock's schedule), the LoD trade, and proxy IBR's ms per "
+                                  "frame next to a full-screen pass with the same texture lookups.")
+    i.add_argument("--scene", default="room")
+    i.add_argument("--trace", type=_names, default=("pred6dof-1", "pred6dof-2"))
+    i.add_argument("--latency-ms", type=float, default=128.0)
+    i.add_argument("--start", type=float, default=10.0)
+    i.add_argument("--duration", type=float, default=8.0)
+    i.add_argument("--rate", type=float, default=30.0)
+    i.add_argument("--stride", type=int, default=2, help="score every Nth displayed tick (default 2)")
+    i.add_argument("--size", type=_size, default=(960, 540), metavar="WxH")
+    i.add_argument("--view-size", type=_size, default=(1024, 1024), metavar="WxH")
+    i.add_argument("--out", default="out/bench")
+    i.set_defaults(func=cmd_bench_ibr)
+
     o = bs.add_parser("optimize-offset", help="search the extra view's offset for the fewest holes",
                       description="Exhaustive (or coarse-to-fine) search over forward offset, height and tilt of "
                                   "the extra view, minimising the mean missing-pixel fraction over traces.")
@@ -174,6 +190,17 @@ def cmd_bench_coverage(args) -> int:
                                 view_size=args.view_size, out_size=args.size, offset=args.offset, out_dir=args.out)
     print_coverage_table(result)
     print(f"written: {args.out}/coverage.json, {args.out}/coverage.png")
+    return 0
+
+
+def cmd_bench_ibr(args) -> int:
+    from .ibr_bench import print_ibr_tables, run_ibr_bench
+
+    r = run_ibr_bench(scene_spec=args.scene, traces=args.trace, latency_ms=args.latency_ms, start_s=args.start,
+                      duration_s=args.duration, rate_hz=args.rate, view_size=args.view_size, out_size=args.size,
+                      stride=max(1, args.stride), out_dir=args.out)
+    print_ibr_tables(r)
+    print(f"written: {args.out}/ibr.json")
     return 0
 
 

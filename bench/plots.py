@@ -75,7 +75,8 @@ def plot_offset_search(result: dict, path: str) -> None:
     grid = result["grid"]
     fw, up, tilt = (np.array(grid[k]) for k in ("forward", "up", "tilt"))
     values = np.array(result["surface"])  # (forward, up, tilt), NaN where not evaluated
-    fig, axes = plt.subplots(1, len(tilt), figsize=(3.2 * len(tilt), 3.4), squeeze=False)
+    fig, axes = plt.subplots(1, len(tilt), figsize=(2.6 * len(tilt) + 1.5, 3.6), squeeze=False,
+                             layout="constrained")
     finite = values[np.isfinite(values)]
     vmin, vmax = (100 * finite.min(), 100 * finite.max()) if finite.size else (0, 1)
     for k, ax in enumerate(axes[0]):
@@ -89,6 +90,6 @@ def plot_offset_search(result: dict, path: str) -> None:
     best = result["best"]
     fig.suptitle(f"mean missing % ({result['scene']}); best: forward {best['forward']:g} m, up {best['up']:g} m, "
                  f"tilt {best['tilt']:g} deg -> {100 * best['missing']:.2f} %", fontsize=10)
-    fig.colorbar(im, ax=axes[0].tolist(), shrink=0.8)
+    fig.colorbar(im, ax=axes[0].tolist(), shrink=0.8, label="missing %")
     fig.savefig(path, dpi=100)
     plt.close(fig)

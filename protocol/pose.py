@@ -273,3 +273,10 @@ class Pose:
     def distance_to(self, other: "Pose") -> tuple[float, float]:
         """(metres, radians) between two poses."""
         return float(np.linalg.norm(self.p - other.p)), float(quat_angle(self.q, other.q))
+
+
+def dual_view_offset(forward: float, up: float, tilt_deg: float) -> Pose:
+    """The dual view's extra camera relative to the primary: ``forward`` metres along the
+    primary's view direction (-Z), ``up`` metres along its +Y, pitched ``tilt_deg`` down."""
+    # Rotating about +X by a negative angle turns the view direction (-Z) downwards.
+    return Pose.make((0.0, up, -forward), quat_from_axis_angle((1.0, 0.0, 0.0), -math.radians(tilt_deg)))

@@ -1,13 +1,12 @@
 """Server settings (``pibr serve`` options), validated once at start-up."""
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 
 from pibr.protocol.atlas import check_view_size
 from pibr.protocol.errors import ConfigError
 from pibr.protocol.framing import DEFAULT_MAX_MESSAGE_SIZE
-from pibr.protocol.pose import Pose, quat_from_axis_angle
+from pibr.protocol.pose import dual_view_offset
 
 from .proxies import ProxySettings
 from .renderer import DEFAULT_PROJECTION, PROJECTIONS
@@ -15,12 +14,7 @@ from .renderer import DEFAULT_PROJECTION, PROJECTIONS
 DEFAULT_PORT = 7450
 
 
-def extra_offset_pose(forward: float, up: float, tilt_deg: float) -> Pose:
-    """The extra view's offset relative to the primary camera: ``forward`` metres along its
-    view direction (-Z), ``up`` metres along its +Y, pitched ``tilt_deg`` downwards."""
-    # Rotating about +X by a negative angle turns the view direction (-Z) downwards.
-    q = quat_from_axis_angle((1.0, 0.0, 0.0), -math.radians(tilt_deg))
-    return Pose.make((0.0, up, -forward), q)
+extra_offset_pose = dual_view_offset  # the server's name for it
 
 
 #: Reinert et al.'s offset: 1.5 m forward, 1.8 m up, tilted 15 degrees down.

@@ -1,0 +1,262 @@
+"""``pibr bench ibr``: the client methods' quality against ground truth and their speed.
+
+Quality runs the real pipeline in one process on the virtual clock's schedule
+(``coverage.LatencyModel``, the same arithmetic the processes follow, checked by the
+integration test): the server's renderer, packer and libx264 encoder make each frame, the
+client's H.264 decoder, textures and methods re-render every displayed tick, and the ground
+truth renderer scores it. No sockets, so nothing but the methods differs between them.
+
+Speed: median display ms of ``proxy`` at 960x540 and 1280x720 beside a floor measured in the
+same run — one full-screen pass at the same resolution doing the same texture lookups per
+pixel as the proxy pass (two depth fetches, three colour-plane samples). The LoD trade:
+ms, triangles drawn and DSSIM for several LoD targets and forced levels.
+"""
+from __future__ import annotations
+
+import json
+import os
+import sys
+import time
+
+import numpy as np
+
+from pibr.protocol.messages import Frame, Hello, OutputConfig, PayloadKind
+
+from .coverage import LatencyModel, display_samples
+from .metrics import dssim, psnr, ssim
+
+_FLOOR_FS = """
+#version 410
+%(atlas)s
+uniform vec4 u_color_rect;
+uniform vec4 u_depth_rect;
+uniform vec4 u_extra_depth;
+uniform vec2 u_out_size;
+out vec4 f_color;
+void main() {
+    vec2 uv = gl_FragCoord.xy / u_out_size;
+    float d = atlas_distance(u_depth_rect, uv) + atlas_distance(u_extra_depth, uv.yx);
+    f_color = vec4(atlas_rgb(u_color_rect, uv) + 1e-9 * d, 1.0);
+}
+"""
+
+
+class FloorPass:
+    """The speed floor: a full-screen pass with the proxy pass's texture lookups per pixel."""
+
+    name = "floor"
+
+    def __init__(self, ctx, output, config):
+        from pibr.client.frame_textures import ATLAS_GLSL, bind_atlas_uniforms, rect_uniform
+        from pibr.client.methods.base import FULLSCREEN_VS, fullscreen_quad
+
+        self.ctx = ctx
+        self.prog = ctx.program(vertex_shader=FULLSCREEN_VS, fragment_shader=_FLOOR_FS % {"atlas": ATLAS_GLSL})
+        bind_atlas_uniforms(self.prog, config)
+        self.prog["u_color_rect"].value = rect_uniform(config, "primary.color")
+        self.prog["u_depth_rect"].value = rect_uniform(config, "primary.depth")
+        if "u_extra_depth" in self.prog:
+            self.prog["u_extra_depth"].value = rect_uniform(config, "extra.depth")
+        self.prog["u_out_size"].value = (float(output.width), float(output.height))
+        self.vbo, self.vao = fullscreen_quad(ctx, self.prog)
+
+    def render(self, out_pose, frame, textures, scene_t=0.0):
+        textures.use()
+        self.ctx.disable(self.ctx.DEPTH_TEST)
+        self.vao.render(self.ctx.TRIANGLE_STRIP)
+
+    def release(self):
+        for r in (self.vao, self.vbo, self.prog):
+            r.release()
+
+
+class Simulation:
+    """Server and client pipelines of one session in one process, on one GL context."""
+
+    def __init__(self, scene, view_size=(1024, 1024), out_size=(960, 540), fov_deg=90.0, fps=10.0,
+                 bitrate_kbps=16000.0, extra_view="auto", proxies=None, ctx=None):
+        from pibr.client.frame_textures import FrameTextures
+        from pibr.client.output_target import OutputTarget
+        from pibr.client.video import H264Decoder
+        from pibr.protocol.gl import create_context
+        from pibr.server.config import ServerConfig
+        from pibr.server.pipeline import FrameProducer
+        from pibr.server.renderer import Renderer, RenderTarget
+        from pibr.server.session_plan import plan_session
+        from pibr.server.video import H264Encoder
+
+        self.ctx = ctx or create_context()
+        self.scene, self.fps = scene, fps
+        cfg = ServerConfig(view_size=tuple(view_size), extra_view=extra_view, fps=fps, bitrate_kbps=bitrate_kbps)
+        info = {"objects": len(proxies)} if proxies else None
+        self.session, spec = plan_session(cfg, scene, Hello(want_proxies=bool(proxies)), info)
+        self.renderer = Renderer(self.ctx, scene, cfg.projection)
+        self.producer = FrameProducer(self.ctx, self.renderer, spec)
+        self.encoder = H264Encoder(spec.layout.width, spec.layout.height, fps, bitrate_kbps, cfg.keyint)
+        self.decoder = H264Decoder(spec.layout.width, spec.layout.height)
+        self.textures = FrameTextures(self.ctx, self.session)
+        self.output = OutputConfig(out_size[0], out_size[1], fov_deg, 60.0)
+        self.target = OutputTarget(self.ctx, *out_size)
+        self.gt = RenderTarget(self.ctx, *out_size)
+        self.proxies = proxies
+        self._frames = {}  # render time -> Frame (decoded and uploaded in order)
+        self._last_render = None
+        self.bytes = []
+
+    def frame_at(self, t_render: float, pose):
+        """Make (and decode, upload) the server frame rendered at ``t_render`` from ``pose``."""
+        if self._last_render is not None and t_render == self._last_render[0]:
+            return self._last_render[1]
+        p = self.producer.produce(pose, t_render)
+        data, key = self.encoder.encode(p.yuv)
+        self.bytes.append(len(data))
+        us = int(round(t_render * 1e6))
+        frame = Frame(len(self.bytes) - 1, us, us, 0, us, p.primary_pose, p.extra_pose, self.scene.near,
+                      self.scene.far, payloads=((PayloadKind.H264_ATLAS, data),), keyframe=key)
+        self.textures.upload(self.decoder.decode(data), frame.frame_id)
+        self._last_render = (t_render, frame)
+        return frame
+
+    def make_method(self, name, **options):
+        from pibr.client.methods import make_method
+
+        if name == "floor":
+            return FloorPass(self.ctx, self.output, self.session)
+        return make_method(name, self.ctx, self.output, self.session, proxies=self.proxies, **options)
+
+    def display(self, method, pose, frame, scene_t):
+        """-> (rgb (h, w, 3), hole fraction, ms of the display pass)."""
+        self.target.begin()
+        t0 = time.perf_counter()
+        method.render(pose, frame, self.textures, scene_t)
+        self.ctx.finish()
+        ms = (time.perf_counter() - t0) * 1e3
+        rgba = self.target.read()
+        return rgba[:, :, :3].copy(), float(np.mean(rgba[:, :, 3] == 0)), ms
+
+    def ground_truth(self, pose, t):
+        self.renderer.render_perspective(self.gt, pose, t, self.output.fov_deg)
+        return self.gt.read_color().copy()
+
+    def close(self):
+        self.producer.release()
+        self.renderer.release()
+        self.textures.release()
+        self.target.release()
+        self.gt.release()
+
+
+def _load_proxies(scene, progress):
+    from pibr.protocol.proxy import decode_bundle, decompress_bundle
+    from pibr.server.proxies import build_bundle
+
+    bundle = build_bundle(scene, progress=progress)
+    return decode_bundle(decompress_bundle(bundle.compressed)), bundle
+
+
+def evaluate_methods(sim: Simulation, samples, variants: dict, with_quality=True, bar=None) -> dict:
+    """variants: label -> (method name, options). -> label -> per-tick lists of metrics."""
+    methods = {label: sim.make_method(name, **opts) for label, (name, opts) in variants.items()}
+    out = {label: {"psnr": [], "ssim": [], "dssim": [], "holes": [], "ms": [], "triangles": []} for label in variants}
+    try:
+        for t_disp, display, t_render, rendered in samples:
+            frame = sim.frame_at(t_render, rendered)
+            gt = sim.ground_truth(display, t_disp) if with_quality else None
+            for label, m in methods.items():
+                rgb, holes, ms = sim.display(m, display, frame, t_disp)
+                r = out[label]
+                r["ms"].append(ms)
+                r["holes"].append(holes)
+                r["triangles"].append(getattr(m, "last_triangles", 0))
+                if gt is not None:
+                    s = ssim(gt, rgb)
+                    r["psnr"].append(psnr(gt, rgb))
+                    r["ssim"].append(s)
+                    r["dssim"].append(dssim(s))
+            if bar is not None:
+                bar.update(1)
+    finally:
+        for m in methods.values():
+            m.release()
+    return out
+
+
+def _summary(series: dict) -> dict:
+    def mean(k):
+        return float(np.mean(series[k])) if series[k] else None
+
+    return {"psnr_mean": mean("psnr"), "ssim_mean": mean("ssim"), "dssim_mean": mean("dssim"),
+            "hole_fraction_mean": mean("holes"), "client_ms_median": float(np.median(series["ms"][2:] or series["ms"])),
+            "triangles_mean": mean("triangles"), "frames": len(series["ms"])}
+
+
+def run_ibr_bench(scene_spec="room", traces=("pred6dof-1", "pred6dof-2"), latency_ms=128.0, start_s=10.0,
+                  duration_s=8.0, rate_hz=30.0, view_size=(1024, 1024), out_size=(960, 540), stride=2,
+                  lod_targets=(2.0, 6.0, 16.0), speed_sizes=((960, 540), (1280, 720)), speed_frames=20,
+                  out_dir="out/bench", progress=True) -> dict:
+    from pibr.scenes.registry import load_scene
+
+    scene = load_scene(scene_spec)
+    proxies, bundle = _load_proxies(scene, progress)
+    latency = LatencyModel(rate_hz=rate_hz, up_ms=latency_ms / 2, down_ms=latency_ms / 2)
+    result = {"scene": scene.name, "traces": list(traces), "latency_ms": latency_ms, "rate_hz": rate_hz,
+              "output": list(out_size), "view_size": list(view_size), "stride": stride,
+              "proxies": bundle.info(1 << 20) | {"build_s": bundle.seconds}, "quality": {}, "lod": {}, "speed": {}}
+    samples = {tr: display_samples(scene, tr, start_s, duration_s, rate_hz, latency)[::stride] for tr in traces}
+    quality_variants = {"none": ("none", {}), "rotation": ("rotation", {}), "proxy": ("proxy", {})}
+    lod_variants = {f"proxy lod {t:g}px": ("proxy", {"lod_target_px": t}) for t in lod_targets}
+    lod_variants.update({f"proxy all {lv}": ("proxy", {"lod_level": lv}) for lv in ("original", "proxy", "box")})
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=sum(len(s) for s in samples.values()) * 2 + len(speed_sizes) * speed_frames,
+                   unit="frame", desc="bench ibr", file=sys.stderr, leave=False, disable=None)
+    try:
+        for tr in traces:
+            sim = Simulation(scene, view_size, out_size, proxies=proxies, ctx=None)
+            try:
+                q = evaluate_methods(sim, samples[tr], quality_variants, bar=bar)
+                result["quality"][tr] = {k: _summary(v) for k, v in q.items()}
+                lod = evaluate_methods(sim, samples[tr], lod_variants, bar=bar)
+                result["lod"][tr] = {k: _summary(v) for k, v in lod.items()}
+                result.setdefault("video_kbps", {})[tr] = float(np.mean(sim.bytes) * 8 * sim.fps / 1000)
+            finally:
+                sim.close()
+                sim.ctx.release()
+        speed_samples = samples[traces[0]][:speed_frames]
+        for size in speed_sizes:
+            sim = Simulation(scene, view_size, size, proxies=proxies)
+            try:
+                s = evaluate_methods(sim, speed_samples, {"proxy": ("proxy", {}), "floor": ("floor", {})},
+                                     with_quality=False, bar=bar)
+                key = f"{size[0]}x{size[1]}"
+                result["speed"][key] = {"proxy_ms": _summary(s["proxy"])["client_ms_median"],
+                                        "floor_ms": _summary(s["floor"])["client_ms_median"]}
+                result["speed"][key]["ratio"] = result["speed"][key]["proxy_ms"] / result["speed"][key]["floor_ms"]
+            finally:
+                sim.close()
+                sim.ctx.release()
+    finally:
+        if bar is not None:
+            bar.close()
+    os.makedirs(out_dir, exist_ok=True)
+    with open(os.path.join(out_dir, "ibr.json"), "w") as f:
+        json.dump(result, f, indent=2)
+    return result
+
+
+def print_ibr_tables(r: dict) -> None:
+    print(f"pibr bench ibr: scene {r['scene']}, {r['latency_ms']:g} ms round trip, output "
+          f"{r['output'][0]}x{r['output'][1]}, every {r['stride']} tick(s)")
+    p = r["proxies"]
+    print(f"proxies: {p['objects']} objects, {p['triangles']['original']} -> {p['triangles']['proxy']} triangles, "
+          f"{p['bytes'] / 1e6:.2f} MB compressed")
+    for tr, q in r["quality"].items():
+        print(f"\n{tr}:{'':<14}{'PSNR dB':>9}{'SSIM':>8}{'DSSIM':>8}{'holes %':>9}{'ms':>8}{'triangles':>11}")
+        for label, s in list(q.items()) + list(r["lod"][tr].items()):
+            print(f"  {label:<20}{s['psnr_mean']:>9.2f}{s['ssim_mean']:>8.4f}{s['dssim_mean']:>8.4f}"
+                  f"{100 * s['hole_fraction_mean']:>9.2f}{s['client_ms_median']:>8.1f}{s['triangles_mean']:>11.0f}")
+    print("\nspeed (median ms per output frame, same run):")
+    for size, s in r["speed"].items():
+        print(f"  {size:>9}: proxy {s['proxy_ms']:.1f}  floor {s['floor_ms']:.1f}  ratio {s['ratio']:.2f}")
