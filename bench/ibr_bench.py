@@ -27,15 +27,13 @@ from .metrics import dssim, psnr, ssim
 
 _FLOOR_FS = """
 #version 410
-%(atlas)s
+%(frame)s
 uniform vec4 u_color_rect;
-uniform vec4 u_depth_rect;
-uniform vec4 u_extra_depth;
 uniform vec2 u_out_size;
 out vec4 f_color;
 void main() {
     vec2 uv = gl_FragCoord.xy / u_out_size;
-    float d = atlas_distance(u_depth_rect, uv) + atlas_distance(u_extra_depth, uv.yx);
+    float d = primary_distance(uv) + extra_distance(uv.yx);
     f_color = vec4(atlas_rgb(u_color_rect, uv) + 1e-9 * d, 1.0);
 }
 """
@@ -47,16 +45,13 @@ class FloorPass:
     name = "floor"
 
     def __init__(self, ctx, output, config):
-        from pibr.client.frame_textures import ATLAS_GLSL, bind_atlas_uniforms, rect_uniform
+        from pibr.client.frame_textures import bind_frame_uniforms, frame_glsl, rect_uniform
         from pibr.client.methods.base import FULLSCREEN_VS, fullscreen_quad
 
         self.ctx = ctx
-        self.prog = ctx.program(vertex_shader=FULLSCREEN_VS, fragment_shader=_FLOOR_FS % {"atlas": ATLAS_GLSL})
-        bind_atlas_uniforms(self.prog, config)
+        self.prog = ctx.program(vertex_shader=FULLSCREEN_VS, fragment_shader=_FLOOR_FS % {"frame": frame_glsl(config)})
+        bind_frame_uniforms(self.prog, config)
         self.prog["u_color_rect"].value = rect_uniform(config, "primary.color")
-        self.prog["u_depth_rect"].value = rect_uniform(config, "primary.depth")
-        if "u_extra_depth" in self.prog:
-            self.prog["u_extra_depth"].value = rect_uniform(config, "extra.depth")
         self.prog["u_out_size"].value = (float(output.width), float(output.height))
         self.vbo, self.vao = fullscreen_quad(ctx, self.prog)
 
@@ -92,7 +87,7 @@ class Simulation:
         self.session, spec = plan_session(cfg, scene, Hello(want_proxies=bool(proxies)), info)
         self.renderer = Renderer(self.ctx, scene, cfg.projection)
         self.producer = FrameProducer(self.ctx, self.renderer, spec)
-        self.encoder = H264Encoder(spec.layout.width, spec.layout.height, fps, bitrate_kbps, cfg.keyint)
+        self.encoder = H264Encoder(spec.layout.width, spec.layout.height, fps, bitrate_kbps, cfg.keyint, deterministic=True)
         self.decoder = H264Decoder(spec.layout.width, spec.layout.height)
         self.textures = FrameTextures(self.ctx, self.session)
         self.output = OutputConfig(out_size[0], out_size[1], fov_deg, 60.0)

@@ -58,7 +58,7 @@ def bench_server(scene_spec="room", trace="pred6dof-1", frames=40, view_size=(10
                               bitrate_kbps=bitrate_kbps, fps=fps)
             session, spec = plan_session(cfg, scene, Hello())
             producer = FrameProducer(ctx, renderer, spec)
-            encoder = H264Encoder(spec.layout.width, spec.layout.height, fps, bitrate_kbps, cfg.keyint)
+            encoder = H264Encoder(spec.layout.width, spec.layout.height, fps, bitrate_kbps, cfg.keyint, deterministic=True)
             stages = {"render": [], "readback": [], "pack": [], "encode": []}
             sizes, keys = [], []
             for i, (t, pose) in enumerate(poses):
@@ -130,7 +130,7 @@ def bench_client(scene_spec="room", trace="pred6dof-1", frames=40, view_size=(10
     session, spec = plan_session(cfg, scene, Hello())
     renderer = Renderer(ctx, scene, cfg.projection)
     producer = FrameProducer(ctx, renderer, spec)
-    encoder = H264Encoder(spec.layout.width, spec.layout.height, fps, cfg.bitrate_kbps, cfg.keyint)
+    encoder = H264Encoder(spec.layout.width, spec.layout.height, fps, cfg.bitrate_kbps, cfg.keyint, deterministic=True)
     stream = []
     for k, (t, pose) in enumerate(poses):
         p = producer.produce(pose, t)

@@ -1,6 +1,15 @@
-"""A decoded server frame on the GPU: the atlas's Y, U and V planes as textures, and the
-GLSL that samples a view's colour (bilinear, converted to RGB) or distance (nearest, dequantized)
-from them."""
+"""A decoded server frame on the GPU, and the GLSL that samples it.
+
+The atlas's Y, U and V planes are three textures; a view's colour is sampled bilinearly
+and converted to RGB in the shader. Depth comes from the transport the session uses:
+
+* ``h264``: the 8-bit disparity code in the atlas's luma, dequantized in the shader;
+* ``edge``: dense distance maps the client reconstructed from the edge codec (R32F).
+
+Shaders call ``primary_distance(uv)`` / ``extra_distance(uv)`` (radial distance, 0 = sky or
+nothing known) and ``atlas_rgb(rect, uv)``, whichever the transport; :func:`frame_glsl`
+writes the matching implementation.
+"""
 from __future__ import annotations
 
 import numpy as np
@@ -11,18 +20,16 @@ from pibr.protocol.session import SessionConfig
 
 from .video import YUVImage
 
-#: Texture units the atlas planes are bound to; methods use units from 4 upwards.
-UNIT_Y, UNIT_U, UNIT_V, UNIT_DEPTH = 0, 1, 2, 3
+#: Texture units of the frame; methods use units from 6 upwards.
+UNIT_Y, UNIT_U, UNIT_V, UNIT_DIST_PRIMARY, UNIT_DIST_EXTRA = 0, 1, 2, 3, 4
 
-ATLAS_GLSL = PROJECTION_GLSL + DEPTH_GLSL + """
+_COMMON = """
 uniform sampler2D u_atlas_y;
 uniform sampler2D u_atlas_u;
 uniform sampler2D u_atlas_v;
 uniform vec2 u_atlas_size;     // atlas width, height in pixels
-uniform float u_depth_near;
-uniform float u_depth_far;
-uniform float u_depth_min_code;
-uniform float u_depth_max_code;
+uniform vec4 u_rect_primary_depth;
+uniform vec4 u_rect_extra_depth;
 
 // Colour of a view at uv in [0,1]^2 (row 0 on top); rect = (x, y, w, h) of the view in the atlas.
 vec3 atlas_rgb(vec4 rect, vec2 uv) {
@@ -34,21 +41,50 @@ vec3 atlas_rgb(vec4 rect, vec2 uv) {
     float v = texture(u_atlas_v, uvc).r - 128.0 / 255.0;
     return clamp(vec3(y + 1.402 * v, y - 0.344136 * u - 0.714136 * v, y + 1.772 * u), 0.0, 1.0);
 }
+"""
 
+_H264_DEPTH = """
+uniform float u_depth_near;
+uniform float u_depth_far;
+uniform float u_depth_min_code;
+uniform float u_depth_max_code;
 // Radial distance stored for a view at uv (nearest texel), 0 for sky.
 float atlas_distance(vec4 rect, vec2 uv) {
+    if (rect.z <= 0.0) return 0.0;
     ivec2 p = ivec2(rect.xy + clamp(floor(uv * rect.zw), vec2(0.0), rect.zw - 1.0));
     float code = floor(texelFetch(u_atlas_y, p, 0).r * 255.0 + 0.5);
     return depth_dequantize(code, u_depth_near, u_depth_far, u_depth_min_code, u_depth_max_code);
 }
+float primary_distance(vec2 uv) { return atlas_distance(u_rect_primary_depth, uv); }
+float extra_distance(vec2 uv) { return atlas_distance(u_rect_extra_depth, uv); }
+"""
+
+_EDGE_DEPTH = """
+uniform sampler2D u_dist_primary;   // reconstructed radial distance (R32F), row 0 on top
+uniform sampler2D u_dist_extra;
+float map_distance(sampler2D map, vec2 uv) {
+    ivec2 size = textureSize(map, 0);
+    return texelFetch(map, clamp(ivec2(floor(uv * vec2(size))), ivec2(0), size - 1), 0).r;
+}
+float primary_distance(vec2 uv) { return map_distance(u_dist_primary, uv); }
+float extra_distance(vec2 uv) { return map_distance(u_dist_extra, uv); }
 """
 
 
-def bind_atlas_uniforms(prog, config: SessionConfig) -> None:
-    """Set the uniforms ATLAS_GLSL reads that stay fixed for the session."""
+def frame_glsl(config: SessionConfig) -> str:
+    """GLSL for sampling a frame of this session (projection maths included)."""
+    depth = _EDGE_DEPTH if config.depth_codec == "edge" else _H264_DEPTH
+    return PROJECTION_GLSL + DEPTH_GLSL + _COMMON + depth
+
+
+def bind_frame_uniforms(prog, config: SessionConfig) -> None:
+    """Set the uniforms :func:`frame_glsl` reads that stay fixed for the session."""
     values = {
         "u_atlas_y": UNIT_Y, "u_atlas_u": UNIT_U, "u_atlas_v": UNIT_V,
+        "u_dist_primary": UNIT_DIST_PRIMARY, "u_dist_extra": UNIT_DIST_EXTRA,
         "u_atlas_size": (float(config.atlas.width), float(config.atlas.height)),
+        "u_rect_primary_depth": rect_uniform(config, "primary.depth"),
+        "u_rect_extra_depth": rect_uniform(config, "extra.depth"),
         "u_depth_near": config.near, "u_depth_far": config.far,
         "u_depth_min_code": float(config.depth_min_code),
         "u_depth_max_code": float((1 << config.depth_bits) - 1),
@@ -63,8 +99,12 @@ def rect_uniform(config: SessionConfig, name: str) -> tuple:
     return (0.0, 0.0, 0.0, 0.0) if r is None else tuple(float(x) for x in r)
 
 
+def has_extra_depth(config: SessionConfig) -> bool:
+    return config.extra is not None and (config.depth_codec == "edge" or config.atlas.rect("extra.depth") is not None)
+
+
 class FrameTextures:
-    """Y, U, V textures of the atlas; :meth:`upload` replaces their contents. GL thread only."""
+    """The newest frame's textures; :meth:`upload` replaces their contents. GL thread only."""
 
     def __init__(self, ctx, config: SessionConfig):
         self.ctx = ctx
@@ -75,19 +115,34 @@ class FrameTextures:
         for t in (self.y, self.u, self.v):
             t.filter = (ctx.LINEAR, ctx.LINEAR)
             t.repeat_x = t.repeat_y = False
+        self.distances = {}
+        if config.depth_codec == "edge":
+            views = {"primary": config.primary, "extra": config.extra}
+            for name, view in views.items():
+                size = (view.width, view.height) if view is not None else (1, 1)
+                t = ctx.texture(size, 1, dtype="f4")
+                t.filter = (ctx.NEAREST, ctx.NEAREST)
+                t.write(np.zeros(size[::-1], np.float32).tobytes())
+                self.distances[name] = t
         self.frame_id = None
 
-    def upload(self, image: YUVImage, frame_id: int) -> None:
+    def upload(self, image: YUVImage, frame_id: int, distances: dict | None = None) -> None:
+        """image: the atlas planes; distances: view name -> (h, w) float32 (edge codec)."""
         self.y.write(np.ascontiguousarray(image.y), alignment=1)
         self.u.write(np.ascontiguousarray(image.u), alignment=1)
         self.v.write(np.ascontiguousarray(image.v), alignment=1)
+        for name, d in (distances or {}).items():
+            self.distances[name].write(np.ascontiguousarray(d, np.float32).tobytes())
         self.frame_id = frame_id
 
     def use(self) -> None:
         self.y.use(UNIT_Y)
         self.u.use(UNIT_U)
         self.v.use(UNIT_V)
+        for name, unit in (("primary", UNIT_DIST_PRIMARY), ("extra", UNIT_DIST_EXTRA)):
+            if name in self.distances:
+                self.distances[name].use(unit)
 
     def release(self) -> None:
-        for t in (self.y, self.u, self.v):
+        for t in (self.y, self.u, self.v, *self.distances.values()):
             t.release()

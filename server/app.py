@@ -100,6 +100,8 @@ class Server:
         self._tasks.add(task)
         try:
             await session.run()
+        except asyncio.CancelledError:
+            pass  # shutting down while the session was closing; it has released what it could
         finally:
             self.sessions.pop(session_id, None)
             self._tasks.discard(task)
@@ -150,7 +152,8 @@ class Server:
 
         producer = await self.gl.run(make_producer)
         cfg = self.config
-        encoder = H264Encoder(spec.layout.width, spec.layout.height, cfg.fps, cfg.bitrate_kbps, cfg.keyint, cfg.preset)
+        encoder = H264Encoder(spec.layout.width, spec.layout.height, cfg.fps, cfg.bitrate_kbps, cfg.keyint, cfg.preset,
+                              deterministic=hello.clock == "virtual")
         return config, producer, encoder, None, bundle
 
     @property

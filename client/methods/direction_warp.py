@@ -11,12 +11,12 @@ import numpy as np
 
 from pibr.protocol.pose import Pose
 
-from ..frame_textures import ATLAS_GLSL, bind_atlas_uniforms, rect_uniform
+from ..frame_textures import bind_frame_uniforms, frame_glsl, rect_uniform
 from .base import FULLSCREEN_VS, Method, fullscreen_quad, output_tan_half
 
 _FS = """
 #version 410
-%(atlas)s
+%(frame)s
 uniform mat3 u_out_to_src;    // output camera -> source camera rotation
 uniform vec2 u_tan_half;
 uniform vec2 u_out_size;
@@ -28,7 +28,7 @@ void main() {
     if (d.z > 0.0) { f_color = vec4(0.0); return; }
     f_color = vec4(atlas_rgb(u_color_rect, wa_uv(wa_project(d).xy)), 1.0);
 }
-""" % {"atlas": ATLAS_GLSL}
+"""
 
 
 class DirectionWarp(Method):
@@ -36,8 +36,8 @@ class DirectionWarp(Method):
 
     def __init__(self, ctx, output, config):
         super().__init__(ctx, output, config)
-        self.prog = ctx.program(vertex_shader=FULLSCREEN_VS, fragment_shader=_FS)
-        bind_atlas_uniforms(self.prog, config)
+        self.prog = ctx.program(vertex_shader=FULLSCREEN_VS, fragment_shader=_FS % {"frame": frame_glsl(config)})
+        bind_frame_uniforms(self.prog, config)
         self.prog["u_tan_half"].value = output_tan_half(output)
         self.prog["u_out_size"].value = (float(output.width), float(output.height))
         self.prog["u_color_rect"].value = rect_uniform(config, "primary.color")

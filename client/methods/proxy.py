@@ -23,7 +23,7 @@ import numpy as np
 
 from pibr.protocol.pose import Pose
 
-from ..frame_textures import ATLAS_GLSL, bind_atlas_uniforms, rect_uniform
+from ..frame_textures import bind_frame_uniforms, frame_glsl, has_extra_depth, rect_uniform
 from ..lod_select import DEFAULT_TARGET_PX, LodSelector
 from .base import FULLSCREEN_VS, Method, fullscreen_quad, output_tan_half
 
@@ -31,19 +31,18 @@ DEFAULT_TAU = 0.1
 
 _BACKGROUND_FS = """
 #version 410
-%(atlas)s
+%(frame)s
 uniform mat3 u_out_to_src;
 uniform vec2 u_tan_half;
 uniform vec2 u_out_size;
 uniform vec4 u_color_rect;
-uniform vec4 u_depth_rect;
 out vec4 f_color;
 void main() {
     vec2 ndc = vec2(2.0 * gl_FragCoord.x / u_out_size.x - 1.0, 1.0 - 2.0 * gl_FragCoord.y / u_out_size.y);
     vec3 d = u_out_to_src * normalize(vec3(ndc * u_tan_half, -1.0));
     if (d.z > 0.0) { f_color = vec4(0.0); return; }
     vec2 uv = wa_uv(wa_project(d).xy);
-    bool sky = atlas_distance(u_depth_rect, uv) <= 0.0;
+    bool sky = primary_distance(uv) <= 0.0;
     f_color = vec4(atlas_rgb(u_color_rect, uv), sky ? 1.0 : 0.0);
 }
 """
@@ -67,35 +66,33 @@ void main() {
 
 _PROXY_FS = """
 #version 410
-%(atlas)s
+%(frame)s
 uniform vec4 u_primary_color;
-uniform vec4 u_primary_depth;
 uniform vec4 u_extra_color;
-uniform vec4 u_extra_depth;
 uniform bool u_has_extra;
 uniform float u_tau;
 in vec3 v_p;
 in vec3 v_e;
 out vec4 f_color;
 const float NO_MATCH = 1e30;
-// Relative error between the view's stored distance and the fragment's; NO_MATCH behind the
-// camera, at its centre, or where the view stores sky (then 'sky' is set).
-float view_error(vec3 c, vec4 depth_rect, out vec2 uv, out bool sky) {
+// Relative error between a view's stored distance d and the fragment's f; NO_MATCH behind
+// the camera, at its centre, or where the view stores sky (then 'sky' is set).
+float view_error(vec3 c, bool extra, out vec2 uv, out bool sky) {
     sky = false;
     uv = vec2(0.0);
     float f = length(c);
     if (c.z > 0.0 || f < 1e-6) return NO_MATCH;
     uv = wa_uv(wa_project(c).xy);
-    float d = atlas_distance(depth_rect, uv);
+    float d = extra ? extra_distance(uv) : primary_distance(uv);
     if (d <= 0.0) { sky = true; return NO_MATCH; }
     return abs(d - f) / f;
 }
 void main() {
     vec2 uv_p, uv_e;
     bool sky_p, sky_e;
-    float e_p = view_error(v_p, u_primary_depth, uv_p, sky_p);
+    float e_p = view_error(v_p, false, uv_p, sky_p);
     float e_e = NO_MATCH;
-    if (u_has_extra) e_e = view_error(v_e, u_extra_depth, uv_e, sky_e);
+    if (u_has_extra) e_e = view_error(v_e, true, uv_e, sky_e);
     float z = gl_FragCoord.z;
     if (e_p < u_tau) {
         f_color = vec4(atlas_rgb(u_primary_color, uv_p), 1.0);
@@ -138,20 +135,18 @@ class ProxyIBR(Method):
         self.tau = tau
         self.objects = proxies
         self.selector = LodSelector(proxies, output, lod_target_px, force_level=lod_level)
-        atlas = {"atlas": ATLAS_GLSL}
-        self.bg = ctx.program(vertex_shader=FULLSCREEN_VS, fragment_shader=_BACKGROUND_FS % atlas)
-        self.prog = ctx.program(vertex_shader=_PROXY_VS, fragment_shader=_PROXY_FS % atlas)
+        frame = {"frame": frame_glsl(config)}
+        self.bg = ctx.program(vertex_shader=FULLSCREEN_VS, fragment_shader=_BACKGROUND_FS % frame)
+        self.prog = ctx.program(vertex_shader=_PROXY_VS, fragment_shader=_PROXY_FS % frame)
         for p in (self.bg, self.prog):
-            bind_atlas_uniforms(p, config)
+            bind_frame_uniforms(p, config)
         self.bg["u_tan_half"].value = output_tan_half(output)
         self.bg["u_out_size"].value = (float(output.width), float(output.height))
         self.bg["u_color_rect"].value = rect_uniform(config, "primary.color")
-        self.bg["u_depth_rect"].value = rect_uniform(config, "primary.depth")
-        for k, rect in (("u_primary_color", "primary.color"), ("u_primary_depth", "primary.depth"),
-                        ("u_extra_color", "extra.color"), ("u_extra_depth", "extra.depth")):
+        for k, rect in (("u_primary_color", "primary.color"), ("u_extra_color", "extra.color")):
             if k in self.prog:
                 self.prog[k].value = rect_uniform(config, rect)
-        self.prog["u_has_extra"].value = config.extra is not None and config.atlas.rect("extra.depth") is not None
+        self.prog["u_has_extra"].value = has_extra_depth(config)
         self.prog["u_tau"].value = float(tau)
         self.bg_vbo, self.bg_vao = fullscreen_quad(ctx, self.bg)
         self.near, self.far = config.near, config.far
