@@ -1,0 +1,422 @@
+"""Dense depth from the edge codec's sparse samples: push-pull diffusion (Pajak et al. 2011, Sec. 5).
+
+**Push-pull** (:func:`push_pull`) fills the pixels without a sample. *Push* builds a pyramid:
+each level halves the resolution in two quincunx steps, first every pixel with x + y even
+averages itself (weight 1/2) and its four axial neighbours (1/8 each), then every pixel with x
+and y even averages itself and its four diagonal neighbours from that lattice; weights are
+multiplied by validity, so only samples contribute, and a coarse pixel is valid when anything
+contributed. *Pull* goes back down: a coarse value is copied to its even pixel where that
+pixel has nothing of its own, the odd-odd pixels take the mean of their four diagonal
+neighbours, then the remaining pixels the mean of their four axial neighbours. Samples are
+never overwritten. After the pull, every level runs red-black Gauss-Seidel sweeps of the
+Laplace equation on its unknown pixels (``iterations`` at the finest level, twice as many
+per coarser level, which cost little: a cascadic multigrid), so the result approaches the
+harmonic interpolation of the samples, which reproduces planes. On the image border the
+missing neighbour is extrapolated linearly (not mirrored), so a slanted plane running into
+the border stays a plane. The same scheme exists as vectorised numpy (:func:`push_pull`) and
+as a numba kernel (:func:`push_pull_fast`), equal to rounding.
+
+**Edge-aware diffusion** (:func:`diffuse`). Plain push-pull averages samples from both sides of
+a depth discontinuity at its coarse levels and smears the step over many pixels. But the
+edges are two pixels wide, each side carrying its own value, so the pixels without a sample
+fall into regions (4-connected components of non-edge pixels) each of which touches only the
+samples of its own side: the edge pixels 4-adjacent to it, and the regular samples inside it.
+(Those inner samples are the ones whose Laplacian sign points into the region; the sign
+itself is not needed once the components are known.) Each region is push-pulled from its
+own samples only, inside its bounding box, so nothing blends across a closed edge; where an
+edge line has a gap the two regions are one and may blend there. (The finest level's sweeps
+only ever read a region pixel's 4-neighbours, which are its region or its own samples, so
+they pull a blended value back towards its own side.) A region without any sample takes the
+plain push-pull value. The total work is bounded: regions whose bounding boxes would exceed
+``max_work`` times the image area also fall back to plain push-pull.
+
+Measured on a 1024^2 room frame (threshold 3.5, 4.1 % edge samples): edge-aware 62.1 dB PSNR
+of the 12-bit codes, max error 37 codes, 60 ms; plain push-pull 54.1 dB, max 276 codes, 24 ms.
+
+Codes are diffused (disparity is linear on planes, so diffusion between edge samples
+reconstructs planes); :func:`codes_to_distance` turns them into distance, with 0 (sky) where
+the sky code dominates (a diffused code below min_code / 2).
+"""
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from pibr.protocol.depth import DEQUANTIZE, DepthQuantizer
+from pibr.protocol.edgecodec.codec import DecodedSamples
+
+_C_SELF, _C_NEIGHBOUR = 0.5, 0.125
+#: Gauss-Seidel sweeps after the pull at the finest level (twice as many per coarser level).
+DEFAULT_ITERATIONS = 4
+#: Sweeps at a coarse level are capped here.
+_MAX_ITERATIONS = 64
+_AXIAL = ((-1, 0), (1, 0), (0, -1), (0, 1))
+_DIAGONAL = ((-1, -1), (-1, 1), (1, -1), (1, 1))
+
+
+# ------------------------------------------------------------------------------------------
+# numpy push-pull
+# ------------------------------------------------------------------------------------------
+
+def _shift(a: np.ndarray, dy: int, dx: int) -> np.ndarray:
+    """b[y, x] = a[y + dy, x + dx], 0 outside."""
+    h, w = a.shape
+    b = np.zeros_like(a)
+    b[max(0, -dy):min(h, h - dy), max(0, -dx):min(w, w - dx)] = a[max(0, dy):min(h, h + dy), max(0, dx):min(w, w + dx)]
+    return b
+
+
+def _gather(wv: np.ndarray, wm: np.ndarray, offsets) -> tuple[np.ndarray, np.ndarray]:
+    """Weighted sums (values, weights) of self (1/2) and the neighbours at ``offsets`` (1/8 each)."""
+    num = _C_SELF * wv
+    den = _C_SELF * wm
+    for dy, dx in offsets:
+        num = num + _C_NEIGHBOUR * _shift(wv, dy, dx)
+        den = den + _C_NEIGHBOUR * _shift(wm, dy, dx)
+    return num, den
+
+
+def _mean_inside(a: np.ndarray, offsets) -> np.ndarray:
+    """Mean of a over the neighbours at ``offsets`` that are inside the image."""
+    ones = np.ones_like(a)
+    total = sum(_shift(a, dy, dx) for dy, dx in offsets)
+    count = sum(_shift(ones, dy, dx) for dy, dx in offsets)
+    return total / np.maximum(count, 1.0)
+
+
+def _smooth_np(u, fixed, iterations):
+    """Red-black Gauss-Seidel sweeps of the Laplace equation on the pixels that are not ``fixed``.
+
+    On the image border the missing neighbour is extrapolated linearly (zero second
+    derivative, exact for planes), which reduces to a 1-D Laplace equation along the border;
+    corners stay as they are.
+    """
+    h, w = u.shape
+    yy, xx = np.indices((h, w))
+    row_border = (yy == 0) | (yy == h - 1)
+    col_border = (xx == 0) | (xx == w - 1)
+    horizontal = row_border & ~col_border & (w > 1)
+    vertical = col_border & ~row_border & (h > 1)
+    interior = ~row_border & ~col_border
+    for _ in range(iterations):
+        for colour in (0, 1):
+            sel = ((yy + xx) % 2 == colour) & ~fixed
+            u = np.where(sel & interior, _mean_inside(u, _AXIAL), u)
+            u = np.where(sel & horizontal, 0.5 * (_shift(u, 0, -1) + _shift(u, 0, 1)), u)
+            u = np.where(sel & vertical, 0.5 * (_shift(u, -1, 0) + _shift(u, 1, 0)), u)
+    return u
+
+
+def push_pull(values, valid, iterations: int = DEFAULT_ITERATIONS) -> np.ndarray:
+    """Fill the pixels where ``valid`` is False: values (h, w) float, valid (h, w) bool -> (h, w) float64.
+
+    Samples keep their values; with no sample at all the result is 0. ``iterations`` red-black
+    Gauss-Seidel sweeps follow the pull at the finest level, twice as many at each coarser one.
+    """
+    v = np.asarray(values, dtype=np.float64)
+    m = np.asarray(valid, dtype=bool)
+    if v.shape != m.shape or v.ndim != 2:
+        raise ValueError(f"values and valid must be (h, w) arrays of one shape, got {v.shape} and {m.shape}")
+    if not m.any():
+        return np.zeros_like(v)
+    return _push_pull_np(v, m, int(iterations))
+
+
+def _push_pull_np(v, m, iterations):
+    h, w = v.shape
+    if m.all() or (h == 1 and w == 1):
+        return np.where(m, v, 0.0)
+    yy, xx = np.indices((h, w))
+    quincunx = (yy + xx) % 2 == 0
+    even = (yy % 2 == 0) & (xx % 2 == 0)
+    # push, step 1: the quincunx lattice gathers its axial neighbours
+    num, den = _gather(np.where(m, v, 0.0), m.astype(np.float64), _AXIAL)
+    qm = quincunx & (den > 0)
+    qv = np.where(qm, num / np.where(den > 0, den, 1.0), 0.0)
+    # push, step 2: the even lattice gathers its diagonal neighbours (all on the quincunx lattice)
+    num, den = _gather(qv, qm.astype(np.float64), _DIAGONAL)
+    cm = (den > 0)[::2, ::2]
+    cv = np.where(cm, num[::2, ::2] / np.where(cm, den[::2, ::2], 1.0), 0.0)
+    coarse = _push_pull_np(cv, cm, min(2 * iterations, _MAX_ITERATIONS))
+    # pull: even pixels from the coarse level, odd-odd ones from their diagonals, the rest from axial neighbours
+    q = np.zeros((h, w))
+    q[::2, ::2] = coarse
+    q = np.where(qm, qv, q)
+    q = np.where(quincunx & ~even & ~qm, _mean_inside(np.where(even, q, 0.0), _DIAGONAL), q)
+    full = np.where(quincunx, q, _mean_inside(np.where(quincunx, q, 0.0), _AXIAL))
+    return _smooth_np(np.where(m, v, full), m, iterations)
+
+
+# ------------------------------------------------------------------------------------------
+# numba push-pull
+# ------------------------------------------------------------------------------------------
+
+@njit(cache=True)
+def _smooth_nb(u, m, iterations):
+    """numba twin of :func:`_smooth_np` (in place)."""
+    h, w = u.shape
+    for _ in range(iterations):
+        for colour in range(2):
+            for y in range(1, h - 1):
+                for x in range(1 + ((y + colour + 1) & 1), w - 1, 2):
+                    if not m[y, x]:
+                        u[y, x] = 0.25 * (u[y - 1, x] + u[y + 1, x] + u[y, x - 1] + u[y, x + 1])
+            if w > 2:
+                for y in (0, h - 1):
+                    for x in range(1 + ((y + colour + 1) & 1), w - 1, 2):
+                        if not m[y, x]:
+                            u[y, x] = 0.5 * (u[y, x - 1] + u[y, x + 1])
+                    if h == 1:
+                        break
+            if h > 2:
+                for x in (0, w - 1):
+                    for y in range(1 + ((x + colour + 1) & 1), h - 1, 2):
+                        if not m[y, x]:
+                            u[y, x] = 0.5 * (u[y - 1, x] + u[y + 1, x])
+                    if w == 1:
+                        break
+
+
+@njit(cache=True)
+def _push_pull_nb(v, m, iterations):
+    """(h, w) float64 values and uint8 validity -> filled (h, w) float64 (recursive over levels)."""
+    h, w = v.shape
+    out = np.empty((h, w))
+    n_valid = 0
+    for y in range(h):
+        for x in range(w):
+            if m[y, x]:
+                n_valid += 1
+    if n_valid == h * w or (h == 1 and w == 1):
+        for y in range(h):
+            for x in range(w):
+                out[y, x] = v[y, x] if m[y, x] else 0.0
+        return out
+    qv = np.zeros((h, w))
+    qm = np.zeros((h, w), dtype=np.uint8)
+    for y in range(h):
+        for x in range((y & 1), w, 2):
+            num = 0.0
+            den = 0.0
+            if m[y, x]:
+                num += _C_SELF * v[y, x]
+                den += _C_SELF
+            if y > 0 and m[y - 1, x]:
+                num += _C_NEIGHBOUR * v[y - 1, x]
+                den += _C_NEIGHBOUR
+            if y + 1 < h and m[y + 1, x]:
+                num += _C_NEIGHBOUR * v[y + 1, x]
+                den += _C_NEIGHBOUR
+            if x > 0 and m[y, x - 1]:
+                num += _C_NEIGHBOUR * v[y, x - 1]
+                den += _C_NEIGHBOUR
+            if x + 1 < w and m[y, x + 1]:
+                num += _C_NEIGHBOUR * v[y, x + 1]
+                den += _C_NEIGHBOUR
+            if den > 0:
+                qv[y, x] = num / den
+                qm[y, x] = 1
+    ch, cw = (h + 1) // 2, (w + 1) // 2
+    cv = np.zeros((ch, cw))
+    cm = np.zeros((ch, cw), dtype=np.uint8)
+    for i in range(ch):
+        for j in range(cw):
+            y, x = 2 * i, 2 * j
+            num = 0.0
+            den = 0.0
+            if qm[y, x]:
+                num += _C_SELF * qv[y, x]
+                den += _C_SELF
+            for dy in (-1, 1):
+                for dx in (-1, 1):
+                    yy, xx = y + dy, x + dx
+                    if 0 <= yy < h and 0 <= xx < w and qm[yy, xx]:
+                        num += _C_NEIGHBOUR * qv[yy, xx]
+                        den += _C_NEIGHBOUR
+            if den > 0:
+                cv[i, j] = num / den
+                cm[i, j] = 1
+    coarse = _push_pull_nb(cv, cm, min(2 * iterations, _MAX_ITERATIONS))
+    q = np.zeros((h, w))
+    for y in range(0, h, 2):
+        for x in range(0, w, 2):
+            q[y, x] = qv[y, x] if qm[y, x] else coarse[y // 2, x // 2]
+    for y in range(1, h, 2):
+        for x in range(1, w, 2):
+            if qm[y, x]:
+                q[y, x] = qv[y, x]
+            else:
+                s = 0.0
+                n = 0
+                for dy in (-1, 1):
+                    for dx in (-1, 1):
+                        yy, xx = y + dy, x + dx
+                        if 0 <= yy < h and 0 <= xx < w:
+                            s += q[yy, xx]
+                            n += 1
+                q[y, x] = s / n
+    for y in range(h):
+        for x in range(w):
+            if m[y, x]:
+                out[y, x] = v[y, x]
+            elif (y + x) % 2 == 0:
+                out[y, x] = q[y, x]
+            else:
+                s = 0.0
+                n = 0
+                if y > 0:
+                    s += q[y - 1, x]
+                    n += 1
+                if y + 1 < h:
+                    s += q[y + 1, x]
+                    n += 1
+                if x > 0:
+                    s += q[y, x - 1]
+                    n += 1
+                if x + 1 < w:
+                    s += q[y, x + 1]
+                    n += 1
+                out[y, x] = s / n
+    _smooth_nb(out, m, iterations)
+    return out
+
+
+def push_pull_fast(values, valid, iterations: int = DEFAULT_ITERATIONS) -> np.ndarray:
+    """numba twin of :func:`push_pull` (same result up to float rounding)."""
+    v = np.ascontiguousarray(values, dtype=np.float64)
+    m = np.ascontiguousarray(valid, dtype=np.uint8)
+    if v.shape != m.shape or v.ndim != 2:
+        raise ValueError(f"values and valid must be (h, w) arrays of one shape, got {v.shape} and {m.shape}")
+    if not m.any():
+        return np.zeros_like(v)
+    return _push_pull_nb(v, m, int(iterations))
+
+
+# ------------------------------------------------------------------------------------------
+# Edge-aware diffusion
+# ------------------------------------------------------------------------------------------
+
+@njit(cache=True)
+def _label_regions(edges, labels):
+    """4-connected components of non-edge pixels: labels (h, w) int32 from 1 (0 on edges);
+    returns (n, boxes (n + 1, 4) int64 as y0, y1, x0, x1 inclusive, sizes (n + 1,))."""
+    h, w = edges.shape
+    stack = np.empty(h * w, dtype=np.int64)
+    boxes = np.zeros((h * w // 2 + 2, 4), dtype=np.int64)
+    sizes = np.zeros(h * w // 2 + 2, dtype=np.int64)
+    n = 0
+    for sy in range(h):
+        for sx in range(w):
+            if edges[sy, sx] or labels[sy, sx] != 0:
+                continue
+            n += 1
+            if n >= len(sizes):  # cannot happen: components are separated by edges
+                return -1, boxes, sizes
+            labels[sy, sx] = n
+            top = 0
+            stack[top] = sy * w + sx
+            top += 1
+            y0, y1, x0, x1 = sy, sy, sx, sx
+            size = 0
+            while top > 0:
+                top -= 1
+                p = stack[top]
+                y, x = p // w, p % w
+                size += 1
+                y0, y1, x0, x1 = min(y0, y), max(y1, y), min(x0, x), max(x1, x)
+                for dy, dx in ((-1, 0), (1, 0), (0, -1), (0, 1)):
+                    yy, xx = y + dy, x + dx
+                    if 0 <= yy < h and 0 <= xx < w and not edges[yy, xx] and labels[yy, xx] == 0:
+                        labels[yy, xx] = n
+                        stack[top] = yy * w + xx
+                        top += 1
+            boxes[n, 0], boxes[n, 1], boxes[n, 2], boxes[n, 3] = y0, y1, x0, x1
+            sizes[n] = size
+    return n, boxes, sizes
+
+
+@njit(cache=True)
+def _diffuse_regions(codes, valid, edges, labels, n, boxes, max_work, iterations, out, done):
+    """Push-pull every region from its own samples into ``out``, marking the pixels set in ``done``;
+    regions without samples or beyond the work budget are left alone."""
+    h, w = codes.shape
+    budget = max_work * h * w
+    used = 0
+    for c in range(1, n + 1):
+        # one pixel of margin: the region's boundary edge samples
+        y0, y1 = max(boxes[c, 0] - 1, 0), min(boxes[c, 1] + 1, h - 1)
+        x0, x1 = max(boxes[c, 2] - 1, 0), min(boxes[c, 3] + 1, w - 1)
+        bh, bw = y1 - y0 + 1, x1 - x0 + 1
+        if used + bh * bw > budget:
+            continue
+        used += bh * bw
+        lv = np.zeros((bh, bw))
+        lm = np.zeros((bh, bw), dtype=np.uint8)
+        n_samples = 0
+        n_unknown = 0
+        for y in range(y0, y1 + 1):
+            for x in range(x0, x1 + 1):
+                own = False
+                if labels[y, x] == c:
+                    if valid[y, x]:
+                        own = True
+                    else:
+                        n_unknown += 1
+                elif edges[y, x] and valid[y, x]:
+                    if (y > 0 and labels[y - 1, x] == c) or (y + 1 < h and labels[y + 1, x] == c) or \
+                            (x > 0 and labels[y, x - 1] == c) or (x + 1 < w and labels[y, x + 1] == c):
+                        own = True
+                if own:
+                    lv[y - y0, x - x0] = codes[y, x]
+                    lm[y - y0, x - x0] = 1
+                    n_samples += 1
+        if n_samples == 0 or n_unknown == 0:
+            continue
+        filled = _push_pull_nb(lv, lm, iterations)
+        for y in range(y0, y1 + 1):
+            for x in range(x0, x1 + 1):
+                if labels[y, x] == c and not valid[y, x]:
+                    out[y, x] = filled[y - y0, x - x0]
+                    done[y, x] = 1
+    return used
+
+
+def _check(samples: DecodedSamples):
+    if not isinstance(samples, DecodedSamples):
+        raise TypeError(f"expected DecodedSamples, got {type(samples).__name__}")
+
+
+def diffuse_plain(samples: DecodedSamples, iterations: int = DEFAULT_ITERATIONS) -> np.ndarray:
+    """Dense codes (h, w) float32 by plain push-pull over all samples (no edge awareness)."""
+    _check(samples)
+    return push_pull_fast(samples.codes, samples.valid, iterations).astype(np.float32)
+
+
+def diffuse(samples: DecodedSamples, max_work: float = 16.0, iterations: int = DEFAULT_ITERATIONS) -> np.ndarray:
+    """Dense codes (h, w) float32 by edge-aware push-pull (module docstring); samples keep their codes."""
+    _check(samples)
+    codes = np.ascontiguousarray(samples.codes, dtype=np.float64)
+    valid = np.ascontiguousarray(samples.valid, dtype=np.uint8)
+    edges = np.ascontiguousarray(samples.edges, dtype=np.uint8)
+    labels = np.zeros(edges.shape, dtype=np.int32)
+    n, boxes, _ = _label_regions(edges, labels)
+    out = np.array(codes)
+    done = np.zeros(edges.shape, dtype=np.uint8)
+    _diffuse_regions(codes, valid, edges, labels, n, boxes, float(max_work), int(iterations), out, done)
+    missing = ~(done.astype(bool) | samples.valid)
+    if missing.any():  # regions without samples or over the work budget
+        out[missing] = push_pull_fast(codes, valid, iterations)[missing]
+    return out.astype(np.float32)
+
+
+def codes_to_distance(dense, quantizer: DepthQuantizer) -> np.ndarray:
+    """Dense (fractional) codes (h, w) -> radial distance (h, w) float32; 0 where the sky code dominates."""
+    r = DEQUANTIZE.numpy(code=np.asarray(dense, dtype=np.float64), near=quantizer.near, far=quantizer.far,
+                         min_code=float(quantizer.min_code), max_code=float(quantizer.max_code))
+    return r.astype(np.float32)
+
+
+def reconstruct_depth(samples: DecodedSamples, quantizer: DepthQuantizer, edge_aware: bool = True) -> np.ndarray:
+    """Decoded samples -> dense radial distance (h, w) float32 (0 = sky)."""
+    dense = diffuse(samples) if edge_aware else diffuse_plain(samples)
+    return codes_to_distance(dense, quantizer)

@@ -1,0 +1,438 @@
+"""The edge codec's API: :class:`EdgeEncoder`, :class:`EdgeDecoder` and the temporal warp both use.
+
+A frame of radial distance (h, w) becomes a payload (see :mod:`.bitstream`) of
+
+* the binary **edge image**: pixels where the Laplacian of the quantized disparity codes is
+  significant, two pixels wide so each side of a discontinuity keeps its own value
+  (:func:`select_edges`; the server's ``edge_extract`` computes a richer significance);
+* one **regular sample** per 32 x 32 cell (:mod:`.regular`);
+* the edge samples' **Laplacian signs and values** (:mod:`.values`);
+* optionally the **motion** of moving objects (:mod:`.motion`).
+
+The client diffuses the samples into a dense map (``pibr.client.diffusion``).
+
+**Temporal context.** Both ends warp the previous frame's *decoded* samples to the current
+view with :func:`warp_samples` (deterministic numpy: same inputs, same bytes) and hand the
+result to ``encode`` / ``decode``. The header records whether the encoder used it; a decoder
+without it then refuses the payload instead of decoding garbage.
+
+Everything the decoder reads from the payload is checked; a payload that does not decode
+raises :class:`~pibr.protocol.errors.CodecError` and nothing else.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from numba import njit
+
+from ..depth import DEQUANTIZE, DepthQuantizer
+from ..errors import CodecError
+from ..pose import Pose
+from ..projection import FORWARD, INVERSE
+from . import bitstream
+from .bitstream import FrameHeader, grid_shape
+from .edges import decode_edge_image, encode_edge_image, temporal_context
+from .motion import decode_motion, encode_motion
+from .regular import decode_regular, encode_regular, nearest_index, sample_positions
+from .values import decode_values, encode_values, temporal_values
+
+#: Default significance threshold in code units: above the Laplacian of a quantized plane (|L| <= 3).
+DEFAULT_THRESHOLD = 3.5
+DEFAULT_SPACING_LOG2 = 5
+
+
+def default_quantizer(bits: int = 12) -> DepthQuantizer:
+    """The edge codec's quantizer when none is given: near 0.1 m, far 1000 m, sky = 0, surfaces from 1."""
+    return DepthQuantizer(0.1, 1000.0, bits=bits, min_code=1)
+
+
+# ------------------------------------------------------------------------------------------
+# Edge selection (the server's edge_extract builds on these)
+# ------------------------------------------------------------------------------------------
+
+def _border_pad(c0, c1, c2):
+    """Value beyond a border row c0 (c1, c2 inside): linear extrapolation where c2, c1, c0 lie on a
+    line (up to quantization), else c0 repeated, so a step right at the border still shows."""
+    linear = np.abs(c0 - 2 * c1 + c2) <= 2
+    return np.where(linear, 2 * c0 - c1, c0)
+
+
+def laplacian(codes) -> np.ndarray:
+    """4-neighbour Laplacian (sum of neighbours - 4 * centre) of codes (h, w): (h, w) int32.
+
+    Outside the image the codes continue linearly where the last three rows (columns) are
+    linear, else the border value repeats: a plane running into the border has no Laplacian
+    there, a step at the border keeps its own. Positive on the far side of a step in
+    disparity, negative on the near side.
+    """
+    c = np.asarray(codes, dtype=np.int32)
+    h, w = c.shape
+    p = np.pad(c, 1, mode="edge")
+    if h >= 3:
+        p[0, 1:-1] = _border_pad(c[0], c[1], c[2])
+        p[-1, 1:-1] = _border_pad(c[-1], c[-2], c[-3])
+    if w >= 3:
+        p[1:-1, 0] = _border_pad(c[:, 0], c[:, 1], c[:, 2])
+        p[1:-1, -1] = _border_pad(c[:, -1], c[:, -2], c[:, -3])
+    return p[:-2, 1:-1] + p[2:, 1:-1] + p[1:-1, :-2] + p[1:-1, 2:] - 4 * c
+
+
+@njit(cache=True)
+def _select_kernel(c, sig, threshold, edges):
+    h, w = c.shape
+    for y in range(h):
+        for x in range(w):
+            v = int(c[y, x])
+            if sig[y, x] > threshold:
+                edges[y, x] = True
+                # the neighbour across the largest jump (first of up, down, left, right on ties)
+                best, by, bx = -1, 0, 0
+                if y > 0 and abs(v - int(c[y - 1, x])) > best:
+                    best, by, bx = abs(v - int(c[y - 1, x])), y - 1, x
+                if y + 1 < h and abs(v - int(c[y + 1, x])) > best:
+                    best, by, bx = abs(v - int(c[y + 1, x])), y + 1, x
+                if x > 0 and abs(v - int(c[y, x - 1])) > best:
+                    best, by, bx = abs(v - int(c[y, x - 1])), y, x - 1
+                if x + 1 < w and abs(v - int(c[y, x + 1])) > best:
+                    best, by, bx = abs(v - int(c[y, x + 1])), y, x + 1
+                if best > threshold:
+                    edges[by, bx] = True
+            # both pixels of every sky / surface boundary
+            if y + 1 < h and (v == 0) != (int(c[y + 1, x]) == 0):
+                edges[y, x] = True
+                edges[y + 1, x] = True
+            if x + 1 < w and (v == 0) != (int(c[y, x + 1]) == 0):
+                edges[y, x] = True
+                edges[y, x + 1] = True
+
+
+def select_edges(codes, threshold: float = DEFAULT_THRESHOLD, significance=None,
+                 lap=None) -> tuple[np.ndarray, np.ndarray]:
+    """Edge samples of a code image: (edges (h, w) bool, signs (h, w) int8: +1 / -1 on edges, 0 elsewhere).
+
+    codes : (h, w) int quantized disparity (0 = sky); significance : (h, w) float, default |Laplacian|;
+    lap : the Laplacian of ``codes`` if already computed.
+    A pixel is an edge where its significance exceeds ``threshold``; then the neighbour across
+    its largest jump (if that jump exceeds the threshold too), so both sides of a discontinuity
+    are sampled; and both pixels of every sky/surface boundary, whatever their significance.
+    The sign is that of the Laplacian (0 counts as negative).
+    """
+    c = np.ascontiguousarray(codes, dtype=np.int32)
+    L = laplacian(c) if lap is None else np.asarray(lap, dtype=np.int32)
+    sig = np.abs(L) if significance is None else significance
+    sig = np.ascontiguousarray(sig, dtype=np.float32)
+    if sig.shape != c.shape or L.shape != c.shape:
+        raise ValueError(f"significance and Laplacian must have the codes' shape {c.shape}")
+    edges = np.zeros(c.shape, dtype=bool)
+    _select_kernel(c, sig, np.float32(threshold), edges)
+    signs = np.where(edges, np.where(L > 0, 1, -1), 0).astype(np.int8)
+    return edges, signs
+
+
+# ------------------------------------------------------------------------------------------
+# Results
+# ------------------------------------------------------------------------------------------
+
+@dataclass
+class DecodedSamples:
+    """Everything a payload carries, as the decoder sees it.
+
+    edges : (h, w) bool edge samples; signs : (h, w) int8, Laplacian sign (+1 / -1) at edges, 0 elsewhere;
+    codes : (h, w) uint16 sample codes where ``valid``; valid : (h, w) bool, edges and regular samples;
+    regular : (rh, rw) uint16 regular samples at rows ``regular_rows`` (rh,) and cols ``regular_cols`` (rw,)
+    (where a regular sample sits on an edge pixel, ``codes`` holds the edge value);
+    motion : (h, w, 2) float32 pixels or None; moving : (h, w) bool or None.
+    """
+
+    edges: np.ndarray
+    signs: np.ndarray
+    codes: np.ndarray
+    valid: np.ndarray
+    regular: np.ndarray
+    regular_rows: np.ndarray
+    regular_cols: np.ndarray
+    bits: int
+    min_code: int
+    q: int = 1
+    motion: np.ndarray | None = None
+    moving: np.ndarray | None = None
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return self.edges.shape
+
+    @property
+    def regular_mask(self) -> np.ndarray:
+        """(h, w) bool: positions of the regular samples."""
+        m = np.zeros(self.edges.shape, dtype=bool)
+        m[np.ix_(self.regular_rows, self.regular_cols)] = True
+        return m
+
+
+@dataclass
+class EncodeStats:
+    """Sizes of one encoded frame (bytes) and its sample counts."""
+
+    header_bytes: int
+    edge_bytes: int
+    regular_bytes: int
+    value_bytes: int
+    motion_bytes: int
+    n_edges: int
+    n_regular: int
+    temporal: bool
+    four_passes: bool
+
+    @property
+    def total_bytes(self) -> int:
+        return self.header_bytes + self.edge_bytes + self.regular_bytes + self.value_bytes + self.motion_bytes
+
+    @property
+    def total_bits(self) -> int:
+        return 8 * self.total_bytes
+
+    def bits(self) -> dict:
+        """{part: bits} of header, edge image, regular samples, edge values, motion."""
+        return {"header": 8 * self.header_bytes, "edges": 8 * self.edge_bytes, "regular": 8 * self.regular_bytes,
+                "values": 8 * self.value_bytes, "motion": 8 * self.motion_bytes}
+
+
+@dataclass
+class EncodedDepth:
+    """payload : bytes to send; stats; samples : the decoder's view of the frame (keep it for the next warp)."""
+
+    payload: bytes
+    stats: EncodeStats
+    samples: DecodedSamples
+
+
+@dataclass
+class WarpedPrevious:
+    """The previous frame's edge samples in the current view: edges (h, w) bool, values (h, w) int32, -1 where none."""
+
+    edges: np.ndarray
+    values: np.ndarray = field(repr=False)
+
+
+# ------------------------------------------------------------------------------------------
+# Encoder / decoder
+# ------------------------------------------------------------------------------------------
+
+def _check_quantizer(quantizer, bits):
+    q = default_quantizer(bits) if quantizer is None else quantizer
+    if q.bits != bits:
+        raise ValueError(f"quantizer has {q.bits} bits, the codec {bits}")
+    if not (bitstream.MIN_BITS <= bits <= bitstream.MAX_BITS):
+        raise ValueError(f"edge codec bits must be {bitstream.MIN_BITS}..{bitstream.MAX_BITS}, got {bits}")
+    return q
+
+
+def _check_size(width, height):
+    if not (1 <= width <= bitstream.MAX_SIZE and 1 <= height <= bitstream.MAX_SIZE):
+        raise ValueError(f"edge codec size must be 1..{bitstream.MAX_SIZE} per side, got {width}x{height}")
+
+
+def _assemble(edges, signs, values, regular, rows, cols, bits, min_code, q, motion=None, moving=None):
+    h, w = edges.shape
+    codes = np.zeros((h, w), dtype=np.uint16)
+    valid = edges.copy()
+    codes[np.ix_(rows, cols)] = regular
+    valid[np.ix_(rows, cols)] = True
+    codes[edges] = values[edges]
+    return DecodedSamples(edges=edges, signs=signs, codes=codes, valid=valid, regular=regular.astype(np.uint16),
+                          regular_rows=rows, regular_cols=cols, bits=bits, min_code=min_code, q=q,
+                          motion=motion, moving=moving)
+
+
+class EdgeEncoder:
+    """Encoder of one depth stream (keep one per stream: nothing is shared between calls but settings).
+
+    width, height : view size; bits : code bits (10..16); quantizer : a :class:`DepthQuantizer`
+    with those bits (default :func:`default_quantizer`); q : residual step (1 = lossless codes);
+    temporal : use the warped previous frame as context when given; passes : 4 (interleaved) or
+    1 (raster); threshold : default significance threshold (code units).
+    """
+
+    def __init__(self, width: int, height: int, bits: int = 12, quantizer: DepthQuantizer | None = None,
+                 q: int = 1, temporal: bool = True, passes: int = 4, threshold: float = DEFAULT_THRESHOLD,
+                 spacing_log2: int = DEFAULT_SPACING_LOG2, motion_scale: int = 8, motion_block_log2: int = 3):
+        _check_size(width, height)
+        self.width, self.height, self.bits = int(width), int(height), int(bits)
+        self.quantizer = _check_quantizer(quantizer, bits)
+        self.max_code = (1 << bits) - 1
+        if not (1 <= q <= self.max_code):
+            raise ValueError(f"q must be 1..{self.max_code}, got {q}")
+        if passes not in (1, 4):
+            raise ValueError(f"passes must be 1 or 4, got {passes}")
+        if not (bitstream.MIN_SPACING_LOG2 <= spacing_log2 <= bitstream.MAX_SPACING_LOG2):
+            raise ValueError(f"spacing_log2 must be {bitstream.MIN_SPACING_LOG2}..{bitstream.MAX_SPACING_LOG2}")
+        self.q, self.temporal, self.passes, self.threshold = int(q), bool(temporal), passes, float(threshold)
+        self.spacing_log2 = spacing_log2
+        self.motion_scale, self.motion_block_log2 = motion_scale, motion_block_log2
+        self.rows, self.cols = sample_positions(self.width, self.height, spacing_log2)
+        self.nearest_rows = nearest_index(self.rows, self.height)
+        self.nearest_cols = nearest_index(self.cols, self.width)
+
+    def codes(self, distance) -> np.ndarray:
+        """distance (h, w) -> codes (h, w) int32 of this encoder's quantizer."""
+        d = np.asarray(distance)
+        if d.shape != (self.height, self.width):
+            raise ValueError(f"distance must have shape ({self.height}, {self.width}), got {d.shape}")
+        return self.quantizer.quantize(d).astype(np.int32)
+
+    def encode(self, distance, warped_prev_edges=None, warped_prev_values=None, threshold: float | None = None,
+               significance=None, edges=None, signs=None, motion=None, moving=None) -> EncodedDepth:
+        """Encode one frame.
+
+        distance : (h, w) float radial distance, 0 = sky. warped_prev_edges : (h, w) bool and
+        warped_prev_values : (h, w) int (-1 = none), from :func:`warp_samples` of the previous
+        frame's ``samples`` (used only with ``temporal``). threshold / significance : edge
+        selection (see :func:`select_edges`); or ``edges`` (h, w) bool (and optionally ``signs``)
+        chosen by the caller. motion : (h, w, 2) float pixels of moving objects; moving :
+        (h, w) bool (default: pixels with non-zero motion).
+        """
+        codes = self.codes(distance)
+        h, w = codes.shape
+        lap = laplacian(codes)
+        if edges is None:
+            thr = self.threshold if threshold is None else float(threshold)
+            edges, auto_signs = select_edges(codes, thr, significance, lap)
+        else:
+            edges = np.asarray(edges, dtype=bool)
+            if edges.shape != (h, w):
+                raise ValueError(f"edges must have shape ({h}, {w}), got {edges.shape}")
+            auto_signs = np.where(edges, np.where(lap > 0, 1, -1), 0).astype(np.int8)
+        if signs is None:
+            signs = auto_signs
+        else:
+            signs = np.where(edges, np.where(np.asarray(signs) > 0, 1, -1), 0).astype(np.int8)
+        use_t = self.temporal and warped_prev_edges is not None
+        four = self.passes == 4
+        tctx = temporal_context(warped_prev_edges, h, w) if use_t else None
+        tvals = temporal_values(warped_prev_values if use_t else None, h, w)
+
+        edge_bytes = encode_edge_image(edges, tctx, four)
+        reg_true = codes[np.ix_(self.rows, self.cols)]
+        reg_bytes, reg_dec = encode_regular(reg_true, self.q, self.max_code)
+        val_bytes, val_dec = encode_values(edges, codes, signs, reg_dec, self.nearest_rows, self.nearest_cols,
+                                           self.q, self.max_code, tvals)
+        mot_bytes, mot_dec, mov_dec = b"", None, None
+        if motion is not None:
+            motion = np.asarray(motion, dtype=np.float64)
+            if motion.shape != (h, w, 2):
+                raise ValueError(f"motion must have shape ({h}, {w}, 2), got {motion.shape}")
+            mov = np.any(motion != 0, axis=-1) & np.all(np.isfinite(motion), axis=-1) if moving is None \
+                else np.asarray(moving, dtype=bool)
+            mot_bytes, mot_dec, mov_dec = encode_motion(motion, mov, self.motion_scale, self.motion_block_log2)
+            if not mot_bytes:
+                mot_dec = mov_dec = None
+        n_edges = int(edges.sum())
+        head = FrameHeader(width=w, height=h, bits=self.bits, min_code=self.quantizer.min_code, q=self.q,
+                           n_edges=n_edges, temporal=use_t, four_passes=four, motion=bool(mot_bytes),
+                           spacing_log2=self.spacing_log2)
+        payload = head.pack((edge_bytes, reg_bytes, val_bytes, mot_bytes))
+        stats = EncodeStats(header_bytes=bitstream.HEADER_SIZE, edge_bytes=len(edge_bytes),
+                            regular_bytes=len(reg_bytes), value_bytes=len(val_bytes), motion_bytes=len(mot_bytes),
+                            n_edges=n_edges, n_regular=reg_true.size, temporal=use_t, four_passes=four)
+        dec_signs = np.where(edges, signs, 0).astype(np.int8)
+        samples = _assemble(edges, dec_signs, val_dec, reg_dec, self.rows, self.cols, self.bits,
+                            self.quantizer.min_code, self.q, mot_dec, mov_dec)
+        return EncodedDepth(payload=payload, stats=stats, samples=samples)
+
+
+class EdgeDecoder:
+    """Decoder of one depth stream: the size and quantizer must match the encoder's (checked)."""
+
+    def __init__(self, width: int, height: int, bits: int = 12, quantizer: DepthQuantizer | None = None):
+        _check_size(width, height)
+        self.width, self.height, self.bits = int(width), int(height), int(bits)
+        self.quantizer = _check_quantizer(quantizer, bits)
+
+    def decode(self, payload, warped_prev_edges=None, warped_prev_values=None) -> DecodedSamples:
+        """payload -> :class:`DecodedSamples`. Raises :class:`CodecError` when it does not decode."""
+        head, sections = bitstream.parse(payload)
+        if (head.width, head.height) != (self.width, self.height):
+            raise CodecError(f"edge codec: payload is {head.width}x{head.height}, decoder expects "
+                             f"{self.width}x{self.height}")
+        if head.bits != self.bits or head.min_code != self.quantizer.min_code:
+            raise CodecError(f"edge codec: payload has {head.bits} bits and min_code {head.min_code}, decoder "
+                             f"expects {self.bits} and {self.quantizer.min_code}")
+        h, w = self.height, self.width
+        if head.temporal and warped_prev_edges is None:
+            raise CodecError("edge codec: payload was coded against the previous frame, which the decoder lacks")
+        tctx = temporal_context(warped_prev_edges, h, w) if head.temporal else None
+        tvals = temporal_values(warped_prev_values if head.temporal else None, h, w)
+        max_code = (1 << head.bits) - 1
+
+        edges, ok = decode_edge_image(sections["edges"], h, w, tctx, head.four_passes)
+        if not ok:
+            raise CodecError("edge codec: edge image stream is corrupt")
+        n = int(edges.sum())
+        if n != head.n_edges:
+            raise CodecError(f"edge codec: edge image has {n} edges, header announces {head.n_edges}")
+        shape = grid_shape(w, h, head.spacing_log2)
+        regular, ok = decode_regular(sections["regular"], shape, head.q, max_code)
+        if not ok:
+            raise CodecError("edge codec: regular sample stream is corrupt")
+        rows, cols = sample_positions(w, h, head.spacing_log2)
+        values, signs, ok = decode_values(sections["values"], edges, regular, nearest_index(rows, h),
+                                          nearest_index(cols, w), head.q, max_code, tvals)
+        if not ok:
+            raise CodecError("edge codec: edge value stream is corrupt")
+        motion = moving = None
+        if head.motion:
+            motion, moving = decode_motion(sections["motion"], h, w)
+        return _assemble(edges, signs, values, regular, rows, cols, head.bits, head.min_code, head.q, motion, moving)
+
+
+# ------------------------------------------------------------------------------------------
+# Temporal warp (both ends)
+# ------------------------------------------------------------------------------------------
+
+def _rotate(m, x, y, z):
+    """Rows of m (3, 3) applied to vectors (x, y, z) (n,), written out so no BLAS reorders the sums."""
+    return (m[0, 0] * x + m[0, 1] * y + m[0, 2] * z,
+            m[1, 0] * x + m[1, 1] * y + m[1, 2] * z,
+            m[2, 0] * x + m[2, 1] * y + m[2, 2] * z)
+
+
+def warp_samples(samples: DecodedSamples, prev_pose: Pose, cur_pose: Pose,
+                 quantizer: DepthQuantizer) -> WarpedPrevious:
+    """Forward-splat the previous frame's decoded edge samples into the current wide-angle view.
+
+    Each edge sample is unprojected through its pixel centre at its decoded distance (sky: a
+    direction at infinity), moved from ``prev_pose`` to ``cur_pose`` (camera-to-world poses),
+    projected, and splatted to the pixel containing it with its re-quantized code; where
+    several land on one pixel the nearest (largest code) wins. Pure numpy, elementwise
+    IEEE operations only, so encoder and decoder get identical results.
+    """
+    h, w = samples.shape
+    values = np.full(h * w, -1, dtype=np.int32)
+    ys, xs = np.nonzero(samples.edges)
+    if len(ys):
+        code = samples.codes[ys, xs].astype(np.float64)
+        tx = (xs + 0.5) / w * 2.0 - 1.0
+        ty = 1.0 - (ys + 0.5) / h * 2.0
+        dx, dy, dz = INVERSE.numpy(vx=tx, vy=ty)
+        mc = float(quantizer.max_code)
+        r = DEQUANTIZE.numpy(code=code, near=quantizer.near, far=quantizer.far, min_code=float(quantizer.min_code),
+                             max_code=mc)
+        sky = r <= 0.0
+        r = np.where(sky, 1.0, r)
+        r_prev, r_cur = prev_pose.rotation(), cur_pose.rotation()
+        # world = R_prev p + t_prev; current camera = R_cur^T (world - t_cur); sky: rotation only
+        wx, wy, wz = _rotate(r_prev, dx * r, dy * r, dz * r)
+        t = np.asarray(prev_pose.position) - np.asarray(cur_pose.position)
+        wx = np.where(sky, wx, wx + t[0])
+        wy = np.where(sky, wy, wy + t[1])
+        wz = np.where(sky, wz, wz + t[2])
+        cx, cy, cz = _rotate(r_cur.T, wx, wy, wz)
+        px, py, dist = FORWARD.numpy(px=cx, py=cy, pz=cz)
+        col = np.floor((px + 1.0) * 0.5 * w).astype(np.int64)
+        row = np.floor((1.0 - py) * 0.5 * h).astype(np.int64)
+        keep = (cz <= 0.0) & (col >= 0) & (col < w) & (row >= 0) & (row < h)
+        new = quantizer.quantize(np.where(sky, 0.0, dist)).astype(np.int32)
+        np.maximum.at(values, row[keep] * w + col[keep], new[keep])
+    values = values.reshape(h, w)
+    return WarpedPrevious(edges=values >= 0, values=values)

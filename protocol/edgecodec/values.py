@@ -1,0 +1,348 @@
+"""Coding of the edge samples' values (Pajak et al. 2011, Sec. 4.2): predicted, quantized residuals.
+
+Samples are visited in raster order over the decoded edge image. Per sample:
+
+1. **Laplacian sign** (which side of a discontinuity the sample lies on), one adaptive bit;
+   context: the signs of the already coded W, N, NW, NE samples (none / - / +) and whether
+   the E and S pixels are edges.
+2. **Prediction** from one of ``N_PREDICTORS`` candidates, all from data the decoder has:
+
+   ====  ==========================================================================
+   W N   the left / upper sample, if it has the same sign (same surface)
+   NW NE the diagonal upper samples, same sign
+   W2    linear extrapolation 2 W - WW along the row (both same sign)
+   N2    linear extrapolation 2 N - NN along the column (both same sign)
+   W3 N3 the least-squares line through three samples along the row / column (less noise)
+   NW2   2 NW - NWNW and 2 NE - NENE along the diagonals
+   NE2
+   F     the nearest same-sign sample beyond the 3x3 (a causal window of radius 3)
+   T     the previous frame's decoded value warped to this pixel (temporal)
+   Wx Nx the left / upper sample of any sign (across a crease the value is continuous)
+   R     the nearest regular sample (always available)
+   P     the plane W + N - NW (all three same sign)
+   ====  ==========================================================================
+
+   The choice is *learnt* per 3x3 edge configuration (the 8 neighbours' edge bits, known to
+   the decoder from the edge image): every configuration keeps, per predictor, a decaying sum
+   of that predictor's past absolute errors, and the available predictor with the smallest
+   sum is used. Encoder and decoder update the sums identically from decoded values.
+3. **Residual** ``v - prediction`` quantized by the step ``q`` (q = 1: lossless) and coded as
+   an adaptive integer (:mod:`.arith`) whose context is the kind of predictor (axial or
+   diagonal same-sign neighbour, temporal, further same-sign sample, other sign or regular
+   sample) and the local activity (the residual sizes of the W, N, NW, NE samples plus the
+   spread of the same-sign W, N, NW, NE values).
+
+Measured on a 1024^2 room frame (43 k samples): 3.1 bits per value, 0.36 of them for the sign.
+Weighting several predictors by their error sums (instead of picking one) coded 2 % larger.
+
+With q > 1 the encoder runs the decoder's reconstruction (closed loop) and keeps sky exact:
+a sky code (0) always decodes to 0 and a surface code never decodes to 0.
+"""
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from .arith import (INT_SLOT, RATE_SHIFT, as_data, dec_raw, dec_sint, dec_start, decoder_ok, enc_finish, enc_raw,
+                    enc_sint, enc_start, encoder_bytes, model_p1, model_update, new_model)
+
+PAD = 3
+N_PREDICTORS = 16
+PREDICTOR_NAMES = ("W", "N", "NW", "NE", "W2", "N2", "T", "Wx", "Nx", "R", "P", "NW2", "NE2", "F", "W3", "N3")
+_T, _R = 6, 9
+#: Residual context kind per predictor: 0 axial same sign, 1 diagonal same sign, 2 temporal,
+#: 3 nearest same sign further away, 4 other sign or regular sample.
+_KIND = np.array([0, 0, 1, 1, 0, 0, 2, 4, 4, 4, 0, 1, 1, 3, 0, 0], dtype=np.int64)
+#: Causal offsets searched (in this order) for predictor F, the nearest same-sign sample beyond the 3x3.
+_FAR = np.array([(0, -2), (-2, 0), (-1, -2), (-1, 2), (-2, -1), (-2, 1), (-2, -2), (-2, 2), (0, -3), (-3, 0),
+                 (-1, -3), (-1, 3), (-3, -1), (-3, 1), (-2, -3), (-2, 3), (-3, -2), (-3, 2)], dtype=np.int64)
+_N_SIGN_CTX = 324
+_N_BUCKETS = 7
+_N_KINDS = 5
+N_CONTEXTS = _N_SIGN_CTX + _N_KINDS * _N_BUCKETS * INT_SLOT
+#: Error sums decay by 1/2^_SCORE_SHIFT per use; single errors are capped.
+_SCORE_SHIFT = 4
+_ERR_CAP = 1023
+#: Initial error sums: a tie-break order until errors are learnt (same-sign neighbours first).
+_PRIOR = np.array([0, 1, 3, 4, 5, 6, 2, 8, 9, 15, 7, 10, 11, 12, 13, 14], dtype=np.int32)
+
+
+@njit(cache=True)
+def quantize_residual(v, pred, q, max_code):
+    """(quantized residual, reconstruction) of true code v predicted as pred, step q; keeps sky (0) exact."""
+    r = v - pred
+    # round half towards zero: with q = 2 a residual of +-1 costs nothing
+    if r >= 0:
+        rq = (r + (q - 1) // 2) // q
+    else:
+        rq = -((-r + (q - 1) // 2) // q)
+    rec = min(max(pred + rq * q, 0), max_code)
+    if v == 0 and rec != 0:
+        rq = -((pred + q - 1) // q)
+        rec = 0
+    elif v != 0 and rec == 0:
+        rq = (1 - pred + q - 1) // q
+        rec = min(max(pred + rq * q, 0), max_code)
+    return rq, rec
+
+
+@njit(cache=True)
+def reconstruct(pred, rq, q, max_code):
+    return min(max(pred + rq * q, 0), max_code)
+
+
+@njit(cache=True)
+def _activity_bucket(a):
+    if a == 0:
+        return 0
+    if a <= 2:
+        return 1
+    if a <= 6:
+        return 2
+    if a <= 14:
+        return 3
+    if a <= 30:
+        return 4
+    if a <= 62:
+        return 5
+    return 6
+
+
+@njit(cache=True)
+def _sign_ctx(S, E, y, x):
+    return (int(S[y, x - 1]) + 3 * int(S[y - 1, x]) + 9 * int(S[y - 1, x - 1]) + 27 * int(S[y - 1, x + 1])
+            + 81 * (int(E[y, x + 1]) + 2 * int(E[y + 1, x])))
+
+
+@njit(cache=True)
+def _config(E, y, x):
+    return (int(E[y - 1, x - 1]) | (int(E[y - 1, x]) << 1) | (int(E[y - 1, x + 1]) << 2) | (int(E[y, x - 1]) << 3)
+            | (int(E[y, x + 1]) << 4) | (int(E[y + 1, x - 1]) << 5) | (int(E[y + 1, x]) << 6)
+            | (int(E[y + 1, x + 1]) << 7))
+
+
+@njit(cache=True)
+def _candidates(S, V, TV, RG, ri, ci, y, x, s, preds, avail):
+    """Fill preds/avail (N_PREDICTORS,) for padded pixel (y, x) whose sign code is s (1 or 2)."""
+    for k in range(N_PREDICTORS):
+        avail[k] = 0
+    sw = int(S[y, x - 1])
+    sn = int(S[y - 1, x])
+    snw = int(S[y - 1, x - 1])
+    if sw == s:
+        preds[0] = V[y, x - 1]
+        avail[0] = 1
+        if int(S[y, x - 2]) == s:
+            preds[4] = 2 * int(V[y, x - 1]) - int(V[y, x - 2])
+            avail[4] = 1
+            if int(S[y, x - 3]) == s:  # least-squares line through three: less rounding noise
+                preds[14] = (4 * int(V[y, x - 1]) + int(V[y, x - 2]) - 2 * int(V[y, x - 3]) + 1) // 3
+                avail[14] = 1
+    if sn == s:
+        preds[1] = V[y - 1, x]
+        avail[1] = 1
+        if int(S[y - 2, x]) == s:
+            preds[5] = 2 * int(V[y - 1, x]) - int(V[y - 2, x])
+            avail[5] = 1
+            if int(S[y - 3, x]) == s:
+                preds[15] = (4 * int(V[y - 1, x]) + int(V[y - 2, x]) - 2 * int(V[y - 3, x]) + 1) // 3
+                avail[15] = 1
+    if snw == s:
+        preds[2] = V[y - 1, x - 1]
+        avail[2] = 1
+        if sw == s and sn == s:
+            preds[10] = int(V[y, x - 1]) + int(V[y - 1, x]) - int(V[y - 1, x - 1])
+            avail[10] = 1
+        if int(S[y - 2, x - 2]) == s:
+            preds[11] = 2 * int(V[y - 1, x - 1]) - int(V[y - 2, x - 2])
+            avail[11] = 1
+    if int(S[y - 1, x + 1]) == s:
+        preds[3] = V[y - 1, x + 1]
+        avail[3] = 1
+        if int(S[y - 2, x + 2]) == s:
+            preds[12] = 2 * int(V[y - 1, x + 1]) - int(V[y - 2, x + 2])
+            avail[12] = 1
+    for i in range(len(_FAR)):
+        yy = y + _FAR[i, 0]
+        xx = x + _FAR[i, 1]
+        if int(S[yy, xx]) == s:
+            preds[13] = V[yy, xx]
+            avail[13] = 1
+            break
+    t = int(TV[y, x])
+    if t >= 0:
+        preds[_T] = t
+        avail[_T] = 1
+    if sw > 0:
+        preds[7] = V[y, x - 1]
+        avail[7] = 1
+    if sn > 0:
+        preds[8] = V[y - 1, x]
+        avail[8] = 1
+    preds[_R] = RG[ri[y - PAD], ci[x - PAD]]
+    avail[_R] = 1
+
+
+@njit(cache=True)
+def _choose(scores, cfg, avail):
+    best = _R
+    best_score = scores[cfg, _R]
+    for k in range(N_PREDICTORS):
+        if avail[k] == 1 and scores[cfg, k] < best_score:
+            best = k
+            best_score = scores[cfg, k]
+    return best
+
+
+@njit(cache=True)
+def _learn(scores, cfg, preds, avail, value, max_code):
+    for k in range(N_PREDICTORS):
+        if avail[k] == 1:
+            p = min(max(int(preds[k]), 0), max_code)
+            err = min(abs(value - p), _ERR_CAP)
+            scores[cfg, k] += err - (scores[cfg, k] >> _SCORE_SHIFT)
+
+
+@njit(cache=True)
+def _residual_slot(A, y, x, kind, preds, avail):
+    a = int(A[y, x - 1]) + int(A[y - 1, x]) + int(A[y - 1, x - 1]) + int(A[y - 1, x + 1])
+    lo = 1 << 30
+    hi = -1
+    for k in range(4):
+        if avail[k] == 1:
+            lo = min(lo, int(preds[k]))
+            hi = max(hi, int(preds[k]))
+    if hi >= lo:
+        a += hi - lo
+    return _N_SIGN_CTX + (kind * _N_BUCKETS + _activity_bucket(a)) * INT_SLOT
+
+
+@njit(cache=True)
+def _encode_kernel(E, codes, signs, TV, RG, ri, ci, h, w, q, max_code, buf, m, rate, V, S, A):
+    """codes, signs: (h, w) true values and signs (+1 / -1) at edges; V, S, A: padded outputs."""
+    es = enc_start()
+    scores = np.empty((256, N_PREDICTORS), dtype=np.int32)
+    for i in range(256):
+        scores[i, :] = _PRIOR
+    preds = np.zeros(N_PREDICTORS, dtype=np.int64)
+    avail = np.zeros(N_PREDICTORS, dtype=np.int64)
+    for y in range(PAD, PAD + h):
+        for x in range(PAD, PAD + w):
+            if E[y, x] == 0:
+                continue
+            c = _sign_ctx(S, E, y, x)
+            b = 1 if signs[y - PAD, x - PAD] > 0 else 0
+            es = enc_raw(es, buf, b, model_p1(m, c))
+            model_update(m, c, b, rate)
+            s = 2 if b == 1 else 1
+            _candidates(S, V, TV, RG, ri, ci, y, x, s, preds, avail)
+            cfg = _config(E, y, x)
+            k = _choose(scores, cfg, avail)
+            pred = min(max(int(preds[k]), 0), max_code)
+            rq, rec = quantize_residual(int(codes[y - PAD, x - PAD]), pred, q, max_code)
+            es = enc_sint(es, buf, m, rate, _residual_slot(A, y, x, _KIND[k], preds, avail), rq)
+            S[y, x] = s
+            V[y, x] = rec
+            A[y, x] = min(abs(rq), 1 << 16)
+            _learn(scores, cfg, preds, avail, rec, max_code)
+    return enc_finish(es, buf)
+
+
+@njit(cache=True)
+def _decode_kernel(data, E, TV, RG, ri, ci, h, w, q, max_code, m, rate, V, S, A):
+    ds = dec_start(data)
+    scores = np.empty((256, N_PREDICTORS), dtype=np.int32)
+    for i in range(256):
+        scores[i, :] = _PRIOR
+    preds = np.zeros(N_PREDICTORS, dtype=np.int64)
+    avail = np.zeros(N_PREDICTORS, dtype=np.int64)
+    for y in range(PAD, PAD + h):
+        for x in range(PAD, PAD + w):
+            if E[y, x] == 0:
+                continue
+            c = _sign_ctx(S, E, y, x)
+            ds, b = dec_raw(ds, data, model_p1(m, c))
+            model_update(m, c, b, rate)
+            s = 2 if b == 1 else 1
+            _candidates(S, V, TV, RG, ri, ci, y, x, s, preds, avail)
+            cfg = _config(E, y, x)
+            k = _choose(scores, cfg, avail)
+            pred = min(max(int(preds[k]), 0), max_code)
+            ds, rq = dec_sint(ds, data, m, rate, _residual_slot(A, y, x, _KIND[k], preds, avail))
+            rec = reconstruct(pred, rq, q, max_code)
+            S[y, x] = s
+            V[y, x] = rec
+            A[y, x] = min(abs(rq), 1 << 16)
+            _learn(scores, cfg, preds, avail, rec, max_code)
+        if ds[3] != 0:
+            return ds
+    return ds
+
+
+def _padded(a, dtype, fill=0):
+    h, w = a.shape
+    out = np.full((h + 2 * PAD, w + 2 * PAD), fill, dtype=dtype)
+    out[PAD:-PAD, PAD:-PAD] = a
+    return out
+
+
+def temporal_values(prev_values, height: int, width: int) -> np.ndarray:
+    """Padded (h + 4, w + 4) int32 of warped previous values, -1 where none.
+
+    prev_values : (h, w) int, -1 (or any negative) where the warped previous frame has no sample; or None.
+    """
+    if prev_values is None:
+        return np.full((height + 2 * PAD, width + 2 * PAD), -1, dtype=np.int32)
+    v = np.asarray(prev_values)
+    if v.shape != (height, width):
+        raise ValueError(f"warped previous values must have shape ({height}, {width}), got {v.shape}")
+    return _padded(np.where(v < 0, -1, v).astype(np.int32), np.int32, -1)
+
+
+def encode_values(edges, codes, signs, regular, nearest_rows, nearest_cols, q: int, max_code: int,
+                  tvalues=None) -> tuple[bytes, np.ndarray]:
+    """Code the values of the edge samples.
+
+    edges : (h, w) bool; codes : (h, w) int true codes; signs : (h, w) int, > 0 for a positive
+    Laplacian; regular : (rh, rw) decoded regular samples; nearest_rows (h,) / nearest_cols (w,) :
+    index of the nearest regular sample per row / column; tvalues : from :func:`temporal_values`.
+    Returns (bytes, decoded codes (h, w) int32: what the decoder will reconstruct at the edges).
+    """
+    h, w = edges.shape
+    E = _padded(edges.astype(np.uint8), np.uint8)
+    if tvalues is None:
+        tvalues = temporal_values(None, h, w)
+    codes = np.ascontiguousarray(codes, dtype=np.int32)
+    signs = np.ascontiguousarray(signs, dtype=np.int8)
+    RG = np.ascontiguousarray(regular, dtype=np.int32)
+    n = int(edges.sum())
+    capacity = 2 * n + 256
+    while True:
+        V = np.zeros(E.shape, dtype=np.int32)
+        S = np.zeros(E.shape, dtype=np.int8)
+        A = np.zeros(E.shape, dtype=np.int32)
+        buf = np.zeros(capacity, dtype=np.uint8)
+        es = _encode_kernel(E, codes, signs, tvalues, RG, nearest_rows, nearest_cols, h, w, q, max_code, buf,
+                            new_model(N_CONTEXTS), RATE_SHIFT, V, S, A)
+        out = encoder_bytes(es, buf)
+        if out is not None:
+            return out, V[PAD:-PAD, PAD:-PAD].copy()
+        capacity = int(es[4]) + 16
+
+
+def decode_values(data, edges, regular, nearest_rows, nearest_cols, q: int, max_code: int,
+                  tvalues=None) -> tuple[np.ndarray, np.ndarray, bool]:
+    """-> (codes (h, w) int32, signs (h, w) int8 in {-1, 0, +1}, stream decoded cleanly)."""
+    h, w = edges.shape
+    E = _padded(edges.astype(np.uint8), np.uint8)
+    if tvalues is None:
+        tvalues = temporal_values(None, h, w)
+    V = np.zeros(E.shape, dtype=np.int32)
+    S = np.zeros(E.shape, dtype=np.int8)
+    A = np.zeros(E.shape, dtype=np.int32)
+    arr = as_data(data)
+    ds = _decode_kernel(arr, E, tvalues, np.ascontiguousarray(regular, dtype=np.int32), nearest_rows, nearest_cols,
+                        h, w, q, max_code, new_model(N_CONTEXTS), RATE_SHIFT, V, S, A)
+    s = S[PAD:-PAD, PAD:-PAD]
+    signs = np.where(s == 2, 1, np.where(s == 1, -1, 0)).astype(np.int8)
+    return V[PAD:-PAD, PAD:-PAD].copy(), signs, decoder_ok(ds, arr)
