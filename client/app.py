@@ -101,6 +101,7 @@ class _Decoded:
     frame: Frame
     arrival_us: int
     image: object
+    distances: dict | None = None   # edge codec: view -> dense distance (h, w) float32
 
 
 @dataclass
@@ -150,6 +151,7 @@ class Client:
         self._last_shown: dict = {}
         self.proxies = None
         self.proxy_stats: dict = {}
+        self._depth_decoder = None
         #: server time = client time + this (0 on the virtual clock, estimated on the real one)
         self._server_offset_us = 0
 
@@ -184,7 +186,7 @@ class Client:
         """Upload the newest frame if new, render every method; -> [(rgb, hole fraction, ms)]."""
         textures, methods, target = self._gl_state
         if decoded is not None and textures.frame_id != decoded.frame.frame_id:
-            textures.upload(decoded.image, decoded.frame.frame_id)
+            textures.upload(decoded.image, decoded.frame.frame_id, decoded.distances)
         out = []
         for m in methods:
             target.begin()
@@ -228,6 +230,10 @@ class Client:
             if hello.want_proxies:
                 await self._receive_proxies(t_welcome)
             self._decoder = H264Decoder(self.session.atlas.width, self.session.atlas.height)
+            if self.session.depth_codec == "edge":
+                from .depth_stream import EdgeDepthDecoder
+
+                self._depth_decoder = EdgeDepthDecoder(self.session)
             self.gl = await loop.run_in_executor(None, GLThread, "pibr-client-gl")
             await self.gl.run(self._gl_setup)
             if cfg.record:
@@ -293,8 +299,14 @@ class Client:
         if data is None:
             raise UnexpectedMessage(f"frame {frame.frame_id} carries no H.264 atlas")
         loop = asyncio.get_running_loop()
-        image = await loop.run_in_executor(self._decode_pool, self._decoder.decode, data)
-        self._newest = _Decoded(frame, arrival_us, image)
+
+        def decode():  # every frame, in order: both decoders keep state from the previous frame
+            image = self._decoder.decode(data)
+            depth = self._depth_decoder.decode(frame) if self._depth_decoder is not None else None
+            return image, depth
+
+        image, distances = await loop.run_in_executor(self._decode_pool, decode)
+        self._newest = _Decoded(frame, arrival_us, image, distances)
         self.frames_received += 1
 
     async def _display(self, tick: int, t_us: int, pose: Pose) -> None:

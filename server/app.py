@@ -154,7 +154,12 @@ class Server:
         cfg = self.config
         encoder = H264Encoder(spec.layout.width, spec.layout.height, cfg.fps, cfg.bitrate_kbps, cfg.keyint, cfg.preset,
                               deterministic=hello.clock == "virtual")
-        return config, producer, encoder, None, bundle
+        depth_encoder = None
+        if config.depth_codec == "edge":
+            from .depth_stream import EdgeDepthEncoder
+
+            depth_encoder = EdgeDepthEncoder(config, cfg.fps, cfg.edge)
+        return config, producer, encoder, depth_encoder, bundle
 
     @property
     def proxy_chunk_bytes(self) -> int:

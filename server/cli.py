@@ -61,6 +61,12 @@ def register(sub) -> None:
                    help="virtual clock: modelled render + encode time of a frame (default 20)")
     p.add_argument("--depth-codec", choices=("h264", "edge"), default="h264",
                    help="depth transport: 8-bit disparity in the H.264 atlas, or the edge codec")
+    p.add_argument("--edge-kbps", type=float, default=0.0,
+                   help="edge codec: target bitrate of the depth streams, reached by scaling the edge threshold "
+                        "(default 0: a fixed threshold)")
+    p.add_argument("--edge-perceptual", action="store_true",
+                   help="edge codec: weight edges by their visibility in the colour (contrast transducer)")
+    p.add_argument("--edge-no-temporal", action="store_true", help="edge codec: no temporal context")
     p.add_argument("--max-sessions", type=int, default=8)
     p.set_defaults(func=cmd_serve)
 
@@ -79,12 +85,15 @@ def register(sub) -> None:
 def cmd_serve(args) -> int:
     from .app import run_server
     from .config import ServerConfig
+    from .depth_stream import EdgeSettings
 
     config = ServerConfig(host=args.host, port=args.port, scene=args.scene, fps=args.fps,
                           view_size=tuple(args.view_size), extra_view=args.extra_view,
                           extra_offset=args.extra_offset, bitrate_kbps=args.bitrate_kbps, keyint=args.keyint,
                           preset=args.preset, projection=args.projection, server_delay_ms=args.server_delay_ms,
-                          depth_codec=args.depth_codec, max_sessions=args.max_sessions)
+                          depth_codec=args.depth_codec, max_sessions=args.max_sessions,
+                          edge=EdgeSettings(kbps=args.edge_kbps, temporal=not args.edge_no_temporal,
+                                            perceptual=args.edge_perceptual))
     try:
         asyncio.run(run_server(config, _announce("serve")))
     except KeyboardInterrupt:

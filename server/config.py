@@ -8,6 +8,7 @@ from pibr.protocol.errors import ConfigError
 from pibr.protocol.framing import DEFAULT_MAX_MESSAGE_SIZE
 from pibr.protocol.pose import dual_view_offset
 
+from .depth_stream import EdgeSettings
 from .proxies import ProxySettings
 from .renderer import DEFAULT_PROJECTION, PROJECTIONS
 
@@ -40,6 +41,7 @@ class ServerConfig:
     max_sessions: int = 8
     hello_timeout_s: float = 10.0
     proxy_settings: ProxySettings = field(default_factory=ProxySettings)
+    edge: EdgeSettings = field(default_factory=EdgeSettings)
 
     def __post_init__(self):
         if not (0 < self.port < 65536) and self.port != 0:

@@ -33,6 +33,8 @@ class ProducerSpec:
     keep_distance: bool = False   # hand the float distance maps to the caller (edge codec)
     peel: bool = True             # depth-peel the extra view against the primary
     peel_tolerance: float = PEEL_TOLERANCE
+    motion_dt: float | None = None  # render the primary's object motion over this many seconds
+    low_colour: int = 0            # hand a colour image downsampled by this factor (0: none)
 
 
 @dataclass
@@ -47,6 +49,9 @@ class ProducedFrame:
     readback_ms: float
     pack_ms: float
     distances: dict = field(default_factory=dict)
+    motion: np.ndarray | None = None       # (h, w, 2) pixels of moving objects, primary view
+    moving: np.ndarray | None = None       # (h, w) bool: pixels of moving objects
+    low_colour: np.ndarray | None = None   # (h / k, w / k, 3) uint8 primary colour
 
 
 class FrameProducer:
@@ -54,14 +59,14 @@ class FrameProducer:
 
     def __init__(self, ctx, renderer: Renderer, spec: ProducerSpec):
         self.ctx, self.renderer, self.spec = ctx, renderer, spec
-        self.primary = RenderTarget(ctx, *spec.primary_size)
+        self.primary = RenderTarget(ctx, *spec.primary_size, motion=spec.motion_dt is not None)
         self.extra = RenderTarget(ctx, *spec.extra_size) if spec.extra_size else None
         self.packer = AtlasPacker(ctx, spec.layout, spec.quantizer)
 
     def produce(self, pose: Pose, t: float) -> ProducedFrame:
         ctx = self.ctx
         t0 = time.perf_counter()
-        self.renderer.render_wide(self.primary, pose, t, self.spec.projection)
+        self.renderer.render_wide(self.primary, pose, t, self.spec.projection, motion_dt=self.spec.motion_dt)
         extra_pose = None
         if self.extra is not None:
             extra_pose = pose.compose(self.spec.extra_offset)
@@ -76,13 +81,20 @@ class FrameProducer:
         ctx.finish()
         t2 = time.perf_counter()
         yuv = self.packer.read().copy()
-        distances = {}
+        distances, motion, moving, low = {}, None, None, None
         if self.spec.keep_distance:
             distances["primary"] = self.primary.read_distance().copy()
             if self.extra is not None:
                 distances["extra"] = self.extra.read_distance().copy()
+        if self.spec.motion_dt is not None:
+            m, moving = self.primary.read_motion()
+            motion = np.where(moving[:, :, None], m, 0.0).astype(np.float32)
+        if self.spec.low_colour:
+            k = self.spec.low_colour
+            low = self.primary.read_color()[k // 2::k, k // 2::k].copy()
         t3 = time.perf_counter()
-        return ProducedFrame(yuv, pose, extra_pose, t, (t1 - t0) * 1e3, (t3 - t2) * 1e3, (t2 - t1) * 1e3, distances)
+        return ProducedFrame(yuv, pose, extra_pose, t, (t1 - t0) * 1e3, (t3 - t2) * 1e3, (t2 - t1) * 1e3, distances,
+                             motion, moving, low)
 
     def release(self) -> None:
         self.primary.release()

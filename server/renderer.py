@@ -80,15 +80,19 @@ _FRAGMENT = """
 #version 410
 %(defines)s
 in vec3 v_cam;
+in vec3 v_prev_cam;
 in vec3 v_world;
 in vec3 v_normal;
 in vec2 v_uv;
 in vec4 v_color;
 layout(location = 0) out vec4 f_color;
 layout(location = 1) out float f_dist;
+layout(location = 2) out vec4 f_motion;   // (dx, dy) pixels, moving flag; only wide views keep it
+uniform bool u_moving;
+uniform vec2 u_half_px;                   // pixels per unit of t' (wide views)
 %(shading)s
-#ifdef PEEL
 %(projection)s
+#ifdef PEEL
 // Depth peeling against the primary view (Reinert et al.): a fragment of the extra view is
 // dropped when the primary view already shows the same surface point, i.e. when one of the
 // four primary texels around its back-projection stores a distance within a relative
@@ -118,6 +122,11 @@ void main() {
 #endif
     f_color = vec4(shade(v_world, v_normal, v_uv, v_color), 1.0);
     f_dist = length(v_cam);
+    // Motion the camera does not explain: where this surface point was one server frame ago,
+    // seen from the current camera. Rows grow downwards, t'_y upwards.
+    f_motion = vec4(0.0);
+    if (u_moving)
+        f_motion = vec4((wa_project(v_cam).xy - wa_project(v_prev_cam).xy) * vec2(1.0, -1.0) * u_half_px, 1.0, 0.0);
 }
 """
 
@@ -131,6 +140,7 @@ PEEL_TOLERANCE = 0.03
 _COMMON_VS_UNIFORMS = """
 uniform mat4 u_model;
 uniform mat4 u_model_view;
+uniform mat4 u_prev_model_view;   // where the object was one server frame ago (moving objects)
 uniform mat3 u_normal_matrix;
 uniform float u_near;
 uniform float u_far;
@@ -145,6 +155,7 @@ _WIDE_VERTEX_VS = """
 %(uniforms)s
 %(projection)s
 out vec3 v_cam;
+out vec3 v_prev_cam;
 out vec3 v_world;
 out vec3 v_normal;
 out vec2 v_uv;
@@ -153,6 +164,7 @@ out float gl_ClipDistance[1];
 void main() {
     vec3 cam = (u_model_view * vec4(in_position, 1.0)).xyz;
     v_cam = cam;
+    v_prev_cam = (u_prev_model_view * vec4(in_position, 1.0)).xyz;
     v_world = (u_model * vec4(in_position, 1.0)).xyz;
     v_normal = u_normal_matrix * in_normal;
     v_uv = in_uv;
@@ -167,12 +179,14 @@ _TESS_VS = """
 #version 410
 %(uniforms)s
 out vec3 c_cam;
+out vec3 c_prev_cam;
 out vec3 c_world;
 out vec3 c_normal;
 out vec2 c_uv;
 out vec4 c_color;
 void main() {
     c_cam = (u_model_view * vec4(in_position, 1.0)).xyz;
+    c_prev_cam = (u_prev_model_view * vec4(in_position, 1.0)).xyz;
     c_world = (u_model * vec4(in_position, 1.0)).xyz;
     c_normal = u_normal_matrix * in_normal;
     c_uv = in_uv;
@@ -189,11 +203,13 @@ uniform float u_max_screen_edge;   // pixels
 uniform vec2 u_half_size;          // pixels per unit of t'
 %(projection)s
 in vec3 c_cam[];
+in vec3 c_prev_cam[];
 in vec3 c_world[];
 in vec3 c_normal[];
 in vec2 c_uv[];
 in vec4 c_color[];
 out vec3 e_cam[];
+out vec3 e_prev_cam[];
 out vec3 e_world[];
 out vec3 e_normal[];
 out vec2 e_uv[];
@@ -214,6 +230,7 @@ float edge_level(vec3 a, vec3 b) {
 }
 void main() {
     e_cam[gl_InvocationID] = c_cam[gl_InvocationID];
+    e_prev_cam[gl_InvocationID] = c_prev_cam[gl_InvocationID];
     e_world[gl_InvocationID] = c_world[gl_InvocationID];
     e_normal[gl_InvocationID] = c_normal[gl_InvocationID];
     e_uv[gl_InvocationID] = c_uv[gl_InvocationID];
@@ -243,11 +260,13 @@ layout(triangles, equal_spacing, ccw) in;
 uniform float u_near;
 uniform float u_far;
 in vec3 e_cam[];
+in vec3 e_prev_cam[];
 in vec3 e_world[];
 in vec3 e_normal[];
 in vec2 e_uv[];
 in vec4 e_color[];
 out vec3 v_cam;
+out vec3 v_prev_cam;
 out vec3 v_world;
 out vec3 v_normal;
 out vec2 v_uv;
@@ -258,6 +277,7 @@ void main() {
     vec3 b = gl_TessCoord;
     vec3 cam = b.x * e_cam[0] + b.y * e_cam[1] + b.z * e_cam[2];
     v_cam = cam;
+    v_prev_cam = b.x * e_prev_cam[0] + b.y * e_prev_cam[1] + b.z * e_prev_cam[2];
     v_world = b.x * e_world[0] + b.y * e_world[1] + b.z * e_world[2];
     v_normal = b.x * e_normal[0] + b.y * e_normal[1] + b.z * e_normal[2];
     v_uv = b.x * e_uv[0] + b.y * e_uv[1] + b.z * e_uv[2];
@@ -273,6 +293,7 @@ _PERSPECTIVE_VS = """
 %(uniforms)s
 uniform mat4 u_projection;
 out vec3 v_cam;
+out vec3 v_prev_cam;
 out vec3 v_world;
 out vec3 v_normal;
 out vec2 v_uv;
@@ -280,6 +301,7 @@ out vec4 v_color;
 void main() {
     vec4 cam = u_model_view * vec4(in_position, 1.0);
     v_cam = cam.xyz;
+    v_prev_cam = cam.xyz;
     v_world = (u_model * vec4(in_position, 1.0)).xyz;
     v_normal = u_normal_matrix * in_normal;
     v_uv = in_uv;
@@ -337,17 +359,20 @@ class _GPUObject:
 
 
 class RenderTarget:
-    """Colour (RGBA8) + radial distance (R32F, 0 = sky) + depth buffer of ``width`` x ``height``."""
+    """Colour (RGBA8) + radial distance (R32F, 0 = sky) + depth buffer of ``width`` x ``height``;
+    with ``motion``, also the motion of moving objects (RGBA16F: dx, dy pixels, moving flag)."""
 
-    def __init__(self, ctx, width: int, height: int):
+    def __init__(self, ctx, width: int, height: int, motion: bool = False):
         self.ctx, self.width, self.height = ctx, width, height
         self.color = ctx.texture((width, height), 4)
         self.distance = ctx.texture((width, height), 1, dtype="f4")
-        for t in (self.color, self.distance):
+        self.motion = ctx.texture((width, height), 4, dtype="f2") if motion else None
+        attachments = [t for t in (self.color, self.distance, self.motion) if t is not None]
+        for t in attachments:
             t.filter = (ctx.NEAREST, ctx.NEAREST)
             t.repeat_x = t.repeat_y = False
         self.depth = ctx.depth_renderbuffer((width, height))
-        self.fbo = ctx.framebuffer(color_attachments=[self.color, self.distance], depth_attachment=self.depth)
+        self.fbo = ctx.framebuffer(color_attachments=attachments, depth_attachment=self.depth)
 
     def read_color(self) -> np.ndarray:
         """(height, width, 3) uint8, row 0 on top."""
@@ -359,9 +384,16 @@ class RenderTarget:
         data = self.fbo.read(components=1, attachment=1, dtype="f4", alignment=1)
         return np.frombuffer(data, np.float32).reshape(self.height, self.width)
 
+    def read_motion(self) -> tuple[np.ndarray, np.ndarray]:
+        """(motion (height, width, 2) float32 pixels, moving (height, width) bool)."""
+        data = self.fbo.read(components=4, attachment=2, dtype="f2", alignment=1)
+        m = np.frombuffer(data, np.float16).reshape(self.height, self.width, 4).astype(np.float32)
+        return np.ascontiguousarray(m[:, :, :2]), m[:, :, 2] > 0.5
+
     def release(self) -> None:
-        for r in (self.fbo, self.color, self.distance, self.depth):
-            r.release()
+        for r in (self.fbo, self.color, self.distance, self.depth, self.motion):
+            if r is not None:
+                r.release()
 
 
 class Renderer:
@@ -376,7 +408,7 @@ class Renderer:
         self.max_edge_angle = np.radians(max_edge_angle_deg)
         self.tess_max_level = tess_max_level
         shading = shading_glsl(scene.lights)
-        fragment = _FRAGMENT % {"shading": shading, "defines": "", "projection": ""}
+        fragment = _FRAGMENT % {"shading": shading, "defines": "", "projection": PROJECTION_GLSL}
         peeling = _FRAGMENT % {"shading": shading, "defines": "#define PEEL", "projection": PROJECTION_GLSL}
         self.programs = {
             "perspective": ctx.program(vertex_shader=_PERSPECTIVE_VS, fragment_shader=fragment),
@@ -416,7 +448,8 @@ class Renderer:
         log.debug("renderer: %d objects, %d triangles (%d pre-tessellated)", len(self.objects),
                   scene.triangle_count, self.tessellated_triangles)
 
-    def _draw(self, prog_name: str, view: np.ndarray, eye: np.ndarray, t: float, extra_uniforms: dict):
+    def _draw(self, prog_name: str, view: np.ndarray, eye: np.ndarray, t: float, extra_uniforms: dict,
+              motion_dt: float | None = None):
         prog = self.programs[prog_name]
         if "u_eye" in prog:
             prog["u_eye"].value = tuple(float(x) for x in eye)
@@ -428,9 +461,12 @@ class Renderer:
         for g in self.objects:
             model = g.obj.world_matrix(t)
             mv = view @ model
+            moving = motion_dt is not None and g.obj.is_dynamic
+            prev_mv = view @ g.obj.world_matrix(t - motion_dt) if moving else mv
             values = {
                 "u_model": model.T.astype(np.float32),
                 "u_model_view": mv.T.astype(np.float32),
+                "u_prev_model_view": prev_mv.T.astype(np.float32),
                 "u_normal_matrix": np.linalg.inv(model[:3, :3]).astype(np.float32),  # (M^-1)^T, column-major
                 "u_base_color": np.array(g.obj.material.base_color, np.float32),
             }
@@ -441,6 +477,8 @@ class Renderer:
                 g.texture.use(0)
             if "u_has_texture" in members:
                 prog["u_has_texture"].value = g.texture is not None
+            if "u_moving" in members:
+                prog["u_moving"].value = moving
             if prog_name.startswith("vertex"):
                 g.tessellated.vaos[prog_name].render(self.ctx.TRIANGLES)
             elif prog_name.startswith("tess"):
@@ -454,18 +492,20 @@ class Renderer:
         ctx.viewport = (0, 0, target.width, target.height)
         ctx.enable_only(ctx.DEPTH_TEST)
         target.fbo.clear(*self.scene.sky_color[:3], 1.0, depth=1.0)
-        # clear() sets every attachment to the same value; the distance must read 0 for sky.
-        target.fbo.color_mask = [(False, False, False, False), (True, False, False, False)]
+        # clear() sets every attachment to the same value; distance and motion must read 0.
+        n = len(target.fbo.color_attachments)
+        target.fbo.color_mask = [(False, False, False, False)] + [(True, True, True, True)] * (n - 1)
         target.fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
-        target.fbo.color_mask = [(True, True, True, True), (True, True, True, True)]
+        target.fbo.color_mask = [(True, True, True, True)] * n
 
     def render_wide(self, target: RenderTarget, pose: Pose, t: float, projection: str | None = None,
-                    peel: tuple | None = None) -> None:
+                    peel: tuple | None = None, motion_dt: float | None = None) -> None:
         """Wide-angle view at ``pose`` (camera-to-world) and scene time ``t`` into ``target``.
 
         ``peel = (primary_target, primary_pose, tolerance)`` depth-peels this view against a
         primary view already rendered into ``primary_target``: only surfaces the primary
-        view does not show are kept (the dual view's extra view).
+        view does not show are kept (the dual view's extra view). ``motion_dt``: also write the
+        motion of moving objects over the last ``motion_dt`` seconds (a target with motion).
         """
         projection = projection or self.projection
         if projection not in PROJECTIONS:
@@ -473,7 +513,8 @@ class Renderer:
         self._begin(target)
         self.ctx.enable_direct(GL_CLIP_DISTANCE0)
         name = projection
-        uniforms = {"u_near": float(self.scene.near), "u_far": float(self.scene.far)}
+        uniforms = {"u_near": float(self.scene.near), "u_far": float(self.scene.far),
+                    "u_half_px": (target.width / 2.0, target.height / 2.0)}
         if peel is not None:
             primary_target, primary_pose, tolerance = peel
             name = projection + "_peel"
@@ -486,7 +527,7 @@ class Renderer:
             self.ctx.patch_vertices = 3
             self.programs[name]["u_half_size"].value = (target.width / 2.0, target.height / 2.0)
         try:
-            self._draw(name, pose.view_matrix(), pose.p, t, uniforms)
+            self._draw(name, pose.view_matrix(), pose.p, t, uniforms, motion_dt)
         finally:  # shaders that never write gl_ClipDistance must not run with it enabled
             self.ctx.disable_direct(GL_CLIP_DISTANCE0)
 

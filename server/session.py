@@ -158,10 +158,10 @@ class Session:
         t0 = time.perf_counter()
         data, key = await loop.run_in_executor(self.server.encode_pool, self.encoder.encode, produced.yuv,
                                                force_keyframe)
-        encode_ms = (time.perf_counter() - t0) * 1e3
         payloads = [(PayloadKind.H264_ATLAS, data)]
         if self.depth_encoder is not None:
             payloads += await loop.run_in_executor(self.server.encode_pool, self.depth_encoder.encode, produced)
+        encode_ms = (time.perf_counter() - t0) * 1e3   # H.264 and, with the edge codec, depth
         frame = Frame(frame_id=self.frames_sent, render_t_us=t_us, pose_t_us=pose_msg.t_us, pose_seq=pose_msg.seq,
                       scene_t_us=t_us, primary_pose=produced.primary_pose, extra_pose=produced.extra_pose,
                       near=self.config.near, far=self.config.far,

@@ -8,6 +8,7 @@ from pibr.protocol.messages import Hello
 from pibr.protocol.session import SessionConfig, ViewConfig
 
 from .config import PAPER_EXTRA_OFFSET, ServerConfig, extra_offset_pose
+from .depth_stream import edge_quantizer
 from .pipeline import ProducerSpec
 
 
@@ -24,20 +25,22 @@ def plan_session(cfg: ServerConfig, scene, hello: Hello, proxies: dict | None = 
     depth_codec = hello.depth_codec or cfg.depth_codec
     if depth_codec not in ("h264", "edge"):
         raise ConfigError(f"unknown depth codec {depth_codec!r}; choose h264 or edge")
-    if depth_codec == "edge":
-        raise ConfigError("depth codec 'edge' is not available on this server yet; use h264")
     use_extra = cfg.extra_view == "on" or (cfg.extra_view == "auto" and scene.extra_view)
     pw, ph = cfg.view_size
     extra_size = (pw // 2, ph // 2) if use_extra else None
     offset = extra_offset_for(cfg, scene) if use_extra else None
-    layout = build_layout((pw, ph), extra_size, depth_in_atlas=(depth_codec == "h264"))
-    quantizer = h264_quantizer(scene.near, scene.far)
+    edge = depth_codec == "edge"
+    layout = build_layout((pw, ph), extra_size, depth_in_atlas=not edge)
+    quantizer = edge_quantizer(scene.near, scene.far) if edge else h264_quantizer(scene.near, scene.far)
+    motion = edge and scene.is_dynamic   # a scene with nothing moving sends no motion at all
     config = SessionConfig(
         scene=scene.info(), clock=hello.clock, server_fps=cfg.fps,
         server_delay_us=int(round(cfg.server_delay_ms * 1000)),
         primary=ViewConfig(pw, ph), extra=ViewConfig(*extra_size) if extra_size else None,
         extra_offset=offset, atlas=layout, video_bitrate_kbps=cfg.bitrate_kbps, keyint=cfg.keyint,
         depth_codec=depth_codec, depth_bits=quantizer.bits, depth_min_code=quantizer.min_code,
-        motion=False, proxies=proxies, options={"projection": cfg.projection})
-    spec = ProducerSpec((pw, ph), layout, quantizer, cfg.projection, extra_size, offset)
+        motion=motion, proxies=proxies, options={"projection": cfg.projection})
+    spec = ProducerSpec((pw, ph), layout, None if edge else quantizer, cfg.projection, extra_size, offset,
+                        keep_distance=edge, motion_dt=1.0 / cfg.fps if motion else None,
+                        low_colour=8 if edge and cfg.edge.perceptual else 0)
     return config, spec

@@ -1,0 +1,58 @@
+"""Decoding a session's edge-codec depth streams into dense distance maps (Pajak et al.).
+
+Each view's decoder warps its previous decoded samples to the new frame's pose exactly as
+the server's encoder did, decodes, and diffuses the sparse samples into a dense map.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from pibr.protocol.depth import DepthQuantizer
+from pibr.protocol.edgecodec.codec import DecodedSamples, EdgeDecoder, warp_samples
+from pibr.protocol.errors import CodecError
+from pibr.protocol.messages import Frame, PayloadKind
+from pibr.protocol.pose import Pose
+
+from .diffusion import reconstruct_depth
+
+
+class EdgeDepthStreamDecoder:
+    """One view's depth stream."""
+
+    def __init__(self, width: int, height: int, quantizer: DepthQuantizer, edge_aware: bool = True):
+        self.quantizer, self.edge_aware = quantizer, edge_aware
+        self.decoder = EdgeDecoder(width, height, quantizer.bits, quantizer)
+        self._prev: tuple[DecodedSamples, Pose] | None = None
+
+    def decode(self, payload: bytes, pose: Pose) -> tuple[np.ndarray, DecodedSamples]:
+        """-> (dense distance (h, w) float32, 0 = sky; the decoded samples)."""
+        warped = warp_samples(self._prev[0], self._prev[1], pose, self.quantizer) if self._prev else None
+        samples = self.decoder.decode(payload, None if warped is None else warped.edges,
+                                      None if warped is None else warped.values)
+        self._prev = (samples, pose)
+        return reconstruct_depth(samples, self.quantizer, self.edge_aware), samples
+
+
+class EdgeDepthDecoder:
+    """All depth streams of a session; ``decode(frame)`` -> {view: distance (h, w) float32}."""
+
+    def __init__(self, session, edge_aware: bool = True):
+        q = DepthQuantizer(session.near, session.far, bits=session.depth_bits, min_code=session.depth_min_code)
+        self.streams = {"primary": (EdgeDepthStreamDecoder(session.primary.width, session.primary.height, q,
+                                                           edge_aware), PayloadKind.EDGE_DEPTH)}
+        if session.extra is not None:
+            self.streams["extra"] = (EdgeDepthStreamDecoder(session.extra.width, session.extra.height, q, edge_aware),
+                                     PayloadKind.EDGE_DEPTH_EXTRA)
+        self.motion = None
+
+    def decode(self, frame: Frame) -> dict:
+        out = {}
+        poses = {"primary": frame.primary_pose, "extra": frame.extra_pose}
+        for name, (stream, kind) in self.streams.items():
+            payload = frame.payload(kind)
+            if payload is None or poses[name] is None:
+                raise CodecError(f"frame {frame.frame_id} lacks the {name} view's edge-coded depth")
+            out[name], samples = stream.decode(payload, poses[name])
+            if name == "primary":
+                self.motion = samples.motion
+        return out

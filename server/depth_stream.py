@@ -1,0 +1,101 @@
+"""The edge codec's depth streams of one session (Pajak et al.): one per transmitted view.
+
+Per frame and view: edge samples of the distance map (``edge_extract``), coded against the
+previous frame's decoded samples warped to the new pose (both ends warp identically), with
+the significance threshold steered towards a bitrate when one is set. Every ``intra_every``
+frames a view is coded without the temporal context, as H.264 sends keyframes.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from pibr.protocol.depth import DepthQuantizer
+from pibr.protocol.edgecodec.codec import DEFAULT_THRESHOLD, EdgeEncoder, EncodeStats, warp_samples
+from pibr.protocol.messages import PayloadKind
+from pibr.protocol.pose import Pose
+
+from .edge_extract import RateController, extract_edge_samples
+
+EDGE_BITS = 12
+
+
+def edge_quantizer(near: float, far: float, bits: int = EDGE_BITS) -> DepthQuantizer:
+    """The edge codec's depth quantizer: ``bits`` of disparity, sky = code 0, surfaces from 1."""
+    return DepthQuantizer(near, far, bits=bits, min_code=1)
+
+
+class EdgeDepthStream:
+    """One view's depth stream."""
+
+    def __init__(self, width: int, height: int, quantizer: DepthQuantizer, fps: float, kbps: float = 0.0,
+                 temporal: bool = True, intra_every: int = 30, q: int = 1, passes: int = 4,
+                 threshold: float = DEFAULT_THRESHOLD, perceptual: bool = False):
+        self.quantizer = quantizer
+        self.encoder = EdgeEncoder(width, height, bits=quantizer.bits, quantizer=quantizer, q=q, temporal=temporal,
+                                   passes=passes)
+        self.rate = RateController(kbps * 1000.0 / fps, threshold) if kbps > 0 else None
+        self.threshold = threshold
+        self.intra_every = max(1, intra_every)
+        self.perceptual = perceptual
+        self._prev = None
+        self.frames = 0
+
+    def encode(self, distance: np.ndarray, pose: Pose, motion=None, moving=None,
+               colour=None) -> tuple[bytes, EncodeStats]:
+        """distance (h, w) float32 -> (payload, stats). motion (h, w, 2) pixels and moving (h, w) bool
+        of moving objects, or None; colour a low-resolution (hl, wl, 3) image for perceptual
+        weighting (used when ``perceptual``)."""
+        warped = None
+        if self._prev is not None and self.frames % self.intra_every:
+            warped = warp_samples(self._prev[0], self._prev[1], pose, self.quantizer)
+        threshold = self.rate.threshold if self.rate is not None else self.threshold
+        found = extract_edge_samples(distance, self.quantizer, threshold, motion,
+                                     colour if self.perceptual else None)
+        enc = self.encoder.encode(distance, None if warped is None else warped.edges,
+                                  None if warped is None else warped.values, edges=found.edges, signs=found.signs,
+                                  motion=motion, moving=moving)
+        if self.rate is not None:
+            self.rate.update(enc.stats.total_bits)
+        self._prev = (enc.samples, pose)
+        self.frames += 1
+        return enc.payload, enc.stats
+
+
+@dataclass
+class EdgeSettings:
+    kbps: float = 0.0          # target for all depth streams together; 0: fixed threshold
+    temporal: bool = True
+    intra_every: int = 30
+    perceptual: bool = False
+
+
+class EdgeDepthEncoder:
+    """A session's depth encoding: the primary view's stream (with motion when the scene moves)
+    and the extra view's. ``encode(produced)`` gives the Frame's payloads."""
+
+    def __init__(self, session, fps: float, settings: EdgeSettings = EdgeSettings()):
+        q = edge_quantizer(session.near, session.far, session.depth_bits)
+        views = {"primary": (session.primary, PayloadKind.EDGE_DEPTH)}
+        if session.extra is not None:
+            views["extra"] = (session.extra, PayloadKind.EDGE_DEPTH_EXTRA)
+        # Split a bitrate target by pixel count.
+        pixels = {k: v.width * v.height for k, (v, _) in views.items()}
+        total = sum(pixels.values())
+        self.streams = {
+            name: (EdgeDepthStream(view.width, view.height, q, fps, settings.kbps * pixels[name] / total,
+                                   settings.temporal, settings.intra_every, perceptual=settings.perceptual), kind)
+            for name, (view, kind) in views.items()}
+        self.last_stats: dict = {}
+
+    def encode(self, produced) -> list[tuple[int, bytes]]:
+        payloads = []
+        poses = {"primary": produced.primary_pose, "extra": produced.extra_pose}
+        for name, (stream, kind) in self.streams.items():
+            primary = name == "primary"
+            data, stats = stream.encode(produced.distances[name], poses[name], produced.motion if primary else None,
+                                        produced.moving if primary else None, produced.low_colour)
+            payloads.append((kind, data))
+            self.last_stats[name] = stats
+        return payloads
