@@ -121,6 +121,19 @@ def register(sub) -> None:
     i.add_argument("--out", default="out/bench")
     i.set_defaults(func=cmd_bench_ibr)
 
+    cd = bs.add_parser("codec", help="depth transports: edge codec variants, zstd, 8-bit in H.264",
+                       description="Bits, depth error after reconstruction and speed of the edge codec (with and "
+                                   "without temporal context, four passes or one raster pass) against lossless zstd "
+                                   "and 8-bit disparity in the H.264 atlas, along real traces.")
+    cd.add_argument("--scene", default="room")
+    cd.add_argument("--trace", type=_names, default=("pred6dof-1", "pred6dof-2"))
+    cd.add_argument("--start", type=float, default=10.0)
+    cd.add_argument("--duration", type=float, default=4.0, help="seconds per trace (default 4)")
+    cd.add_argument("--view-size", type=_size, default=(1024, 1024), metavar="WxH")
+    cd.add_argument("--bitrate-kbps", type=float, default=16000.0, help="total bitrate for the equal-rate comparison")
+    cd.add_argument("--out", default="out/bench")
+    cd.set_defaults(func=cmd_bench_codec)
+
     o = bs.add_parser("optimize-offset", help="search the extra view's offset for the fewest holes",
                       description="Exhaustive (or coarse-to-fine) search over forward offset, height and tilt of "
                                   "the extra view, minimising the mean missing-pixel fraction over traces.")
@@ -201,6 +214,16 @@ def cmd_bench_ibr(args) -> int:
                       stride=max(1, args.stride), out_dir=args.out)
     print_ibr_tables(r)
     print(f"written: {args.out}/ibr.json")
+    return 0
+
+
+def cmd_bench_codec(args) -> int:
+    from .codec_bench import print_codec_table, run_codec_bench
+
+    r = run_codec_bench(scene_spec=args.scene, traces=args.trace, start_s=args.start, duration_s=args.duration,
+                        view_size=args.view_size, bitrate_kbps=args.bitrate_kbps, out_dir=args.out)
+    print_codec_table(r)
+    print(f"written: {args.out}/codec.json, {args.out}/codec.png")
     return 0
 
 

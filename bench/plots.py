@@ -93,3 +93,33 @@ def plot_offset_search(result: dict, path: str) -> None:
     fig.colorbar(im, ax=axes[0].tolist(), shrink=0.8, label="missing %")
     fig.savefig(path, dpi=100)
     plt.close(fig)
+
+
+def plot_codec(result: dict, path: str) -> None:
+    """Bits per frame by part and variant, and disparity PSNR per frame."""
+    plt = _pyplot()
+    s = result["summary"]
+    fig, (a, b) = plt.subplots(1, 2, figsize=(12, 4.2))
+    names = ["edge", "edge-intra", "edge-raster"]
+    bottom = np.zeros(len(names))
+    for part in ("bits_edges", "bits_values", "bits_regular", "bits_header"):
+        vals = np.array([(s[n].get(part) or 0) / 1000 for n in names])
+        a.bar(names, vals, bottom=bottom, label=part.replace("bits_", ""))
+        bottom += vals
+    a.bar(["zstd-lossless"], [s["zstd-lossless"]["bytes"] * 8 / 1000], label="zstd (all)")
+    a.set_ylabel("kbit per frame")
+    a.set_title("depth bits per frame (primary view)")
+    a.legend(fontsize=8)
+    frames = result["frames"]
+    x = np.arange(len(frames))
+    for n in ("edge", "edge-intra", "edge-raster", "zstd-lossless", "h264-8bit"):
+        b.plot(x, [f[n]["psnr_db"] for f in frames], label=n, lw=1)
+    b.plot(x, [f["edge"]["plain"]["psnr_db"] for f in frames], label="edge, plain push-pull", lw=1, ls=":")
+    b.set_xlabel("frame")
+    b.set_ylabel("disparity PSNR dB")
+    b.set_title("depth after reconstruction")
+    b.legend(fontsize=8)
+    b.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
