@@ -134,6 +134,16 @@ def register(sub) -> None:
     cd.add_argument("--out", default="out/bench")
     cd.set_defaults(func=cmd_bench_codec)
 
+    lo = bs.add_parser("lod", help="encaging level-of-detail proxies: triangles, enclosure, time per object",
+                       description="Generate (or read from the cache) every object's encaging proxy and report the "
+                                   "triangle counts, the fraction of original vertices enclosed and the time taken.")
+    lo.add_argument("--scene", type=_names, default=("room",), help="comma-separated scene specs")
+    lo.add_argument("--asset", type=_names, default=None, help="asset files to measure as well (default: the shipped real asset)")
+    lo.add_argument("--resolution", type=int, default=128, help="voxels along an object's longest side")
+    lo.add_argument("--fraction", type=float, default=0.005, help="proxy triangles / original triangles")
+    lo.add_argument("--out", default="out/bench")
+    lo.set_defaults(func=cmd_bench_lod)
+
     o = bs.add_parser("optimize-offset", help="search the extra view's offset for the fewest holes",
                       description="Exhaustive (or coarse-to-fine) search over forward offset, height and tilt of "
                                   "the extra view, minimising the mean missing-pixel fraction over traces.")
@@ -224,6 +234,16 @@ def cmd_bench_codec(args) -> int:
                         view_size=args.view_size, bitrate_kbps=args.bitrate_kbps, out_dir=args.out)
     print_codec_table(r)
     print(f"written: {args.out}/codec.json, {args.out}/codec.png")
+    return 0
+
+
+def cmd_bench_lod(args) -> int:
+    from .lod_bench import print_lod_table, run_lod_bench
+
+    r = run_lod_bench(scene_specs=args.scene, assets=args.asset, resolution=args.resolution,
+                      target_fraction=args.fraction, out_dir=args.out)
+    print_lod_table(r)
+    print(f"written: {args.out}/lod.json")
     return 0
 
 
