@@ -30,6 +30,10 @@ uniform sampler2D u_atlas_v;
 uniform vec2 u_atlas_size;     // atlas width, height in pixels
 uniform vec4 u_rect_primary_depth;
 uniform vec4 u_rect_extra_depth;
+uniform float u_depth_near;      // the depth transport's quantization
+uniform float u_depth_far;
+uniform float u_depth_min_code;
+uniform float u_depth_max_code;
 
 // Colour of a view at uv in [0,1]^2 (row 0 on top); rect = (x, y, w, h) of the view in the atlas.
 vec3 atlas_rgb(vec4 rect, vec2 uv) {
@@ -44,10 +48,6 @@ vec3 atlas_rgb(vec4 rect, vec2 uv) {
 """
 
 _H264_DEPTH = """
-uniform float u_depth_near;
-uniform float u_depth_far;
-uniform float u_depth_min_code;
-uniform float u_depth_max_code;
 // Radial distance stored for a view at uv (nearest texel), 0 for sky.
 float atlas_distance(vec4 rect, vec2 uv) {
     if (rect.z <= 0.0) return 0.0;

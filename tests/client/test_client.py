@@ -112,3 +112,33 @@ def test_records_reader_rejects_other_files(tmp_path):
     p.write_text(",".join(RECORD_FIELDS) + "\n" + ",".join(["x"] * len(RECORD_FIELDS)) + "\n")
     with pytest.raises(ConfigError, match=":2:"):
         read_records(p)
+
+
+async def test_proxies_over_the_wire_and_edge_depth_are_deterministic(tmp_path):
+    srv = Server(ServerConfig(port=0, scene="room", view_size=(192, 192), bitrate_kbps=3000, depth_codec="edge"))
+    host, port = await srv.start()
+    task = asyncio.create_task(srv.serve_forever())
+    try:
+        results = []
+        for run in ("a", "b"):
+            results.append(await run_client(_cfg(host, port, tmp_path / run, methods=("proxy",), duration_s=0.5)))
+    finally:
+        task.cancel()
+        await asyncio.gather(task, return_exceptions=True)
+        await srv.close()
+    stats = results[0].summary["proxies"]
+    assert stats["objects"] == len(load_scene_objects()) and stats["bytes"] > 10_000
+    info = json.load(open(tmp_path / "a" / "session.json"))
+    assert info["session"]["depth_codec"] == "edge" and info["session"]["motion"] is True
+    assert info["session"]["atlas"]["rects"].keys() == {"primary.color", "extra.color"}
+    a = _frames(tmp_path / "a" / "proxy.lossless.mkv")
+    b = _frames(tmp_path / "b" / "proxy.lossless.mkv")
+    assert len(a) == 15 and all(np.array_equal(x, y) for x, y in zip(a, b))
+    rows = read_records(tmp_path / "a" / "proxy.records.csv")
+    assert all(r["frame_id"] >= 0 for r in rows) and np.mean([r["hole_fraction"] for r in rows]) < 0.2
+
+
+def load_scene_objects():
+    from pibr.scenes.registry import load_scene
+
+    return load_scene("room").objects
