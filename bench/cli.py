@@ -46,11 +46,12 @@ def register(sub) -> None:
     d.add_argument("--scene", default="room")
     d.add_argument("--trace", default="pred6dof-1")
     d.add_argument("--start", type=float, default=10.0, help="seconds into the trace (default 10)")
-    d.add_argument("--duration", type=float, default=8.0, help="seconds to replay (default 8)")
+    d.add_argument("--duration", type=float, default=6.0, help="seconds to replay (default 6)")
     d.add_argument("--rate", type=float, default=30.0, help="output rate Hz (default 30)")
     d.add_argument("--size", type=_size, default=(960, 540), metavar="WxH")
     d.add_argument("--latency-ms", type=float, default=128.0, help="round trip, split evenly (default 128)")
-    d.add_argument("--method", type=_names, default=("none", "rotation"), help="methods to compare")
+    d.add_argument("--method", type=_names, default=("none", "rotation", "proxy"), help="methods to compare")
+    d.add_argument("--depth-codec", choices=("h264", "edge"), default="h264", help="depth transport")
     d.add_argument("--clock", choices=("virtual", "real"), default="virtual")
     d.add_argument("--flip-every", type=int, default=4, help="FLIP on every Nth frame, 0: never (default 4)")
     d.set_defaults(func=cmd_demo)
@@ -170,7 +171,8 @@ def cmd_demo(args) -> int:
 
     metrics = run_demo(out_dir=args.out, scene=args.scene, trace=args.trace, start_s=args.start,
                        duration_s=args.duration, rate_hz=args.rate, size=args.size, latency_ms=args.latency_ms,
-                       methods=args.method, clock=args.clock, flip_every=args.flip_every)
+                       methods=args.method, clock=args.clock, flip_every=args.flip_every,
+                       server_args=("--depth-codec", args.depth_codec))
     print_report(metrics, args.out)
     return 0
 
