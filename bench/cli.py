@@ -86,7 +86,7 @@ def register(sub) -> None:
     c.add_argument("--frames", type=int, default=40)
     c.add_argument("--view-size", type=_size, default=(1024, 1024), metavar="WxH")
     c.add_argument("--size", type=_size, default=(960, 540), metavar="WxH", help="client output size")
-    c.add_argument("--method", type=_names, default=("none", "rotation"))
+    c.add_argument("--method", type=_names, default=("none", "rotation", "proxy"))
     c.add_argument("--out", default="out/bench")
     c.set_defaults(func=cmd_bench_client)
 

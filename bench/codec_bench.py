@@ -52,7 +52,7 @@ def _colour_psnr(decoded_rgb: np.ndarray, true_rgb: np.ndarray) -> float:
 
 def run_codec_bench(scene_spec="room", traces=("pred6dof-1", "pred6dof-2"), start_s=10.0, duration_s=4.0,
                     fps=10.0, view_size=(1024, 1024), bitrate_kbps=16000.0, out_dir="out/bench",
-                    progress=True) -> dict:
+                    progress=True, with_end_to_end=True) -> dict:
     import zstandard
 
     from pibr.client.diffusion import codes_to_distance, diffuse, diffuse_plain
@@ -199,6 +199,9 @@ def run_codec_bench(scene_spec="room", traces=("pred6dof-1", "pred6dof-2"), star
     result = {"scene": scene.name, "traces": list(traces), "fps": fps, "view_size": list(view_size),
               "total_bitrate_kbps": bitrate_kbps, "edge_kbps": edge_kbps, "colour_only_kbps": colour_kbps,
               "summary": summary, "frames": per_frame}
+    if with_end_to_end:
+        result["end_to_end"] = end_to_end(scene_spec, traces[0], start_s, duration_s, total_kbps=bitrate_kbps,
+                                          view_size=view_size, progress=progress)
     os.makedirs(out_dir, exist_ok=True)
     with open(os.path.join(out_dir, "codec.json"), "w") as f:
         json.dump(result, f, indent=2)
@@ -206,6 +209,48 @@ def run_codec_bench(scene_spec="room", traces=("pred6dof-1", "pred6dof-2"), star
 
     plot_codec(result, os.path.join(out_dir, "codec.png"))
     return result
+
+
+def end_to_end(scene_spec="room", trace="pred6dof-1", start_s=10.0, duration_s=4.0, rate_hz=30.0,
+               latency_ms=128.0, total_kbps=16000.0, view_size=(1024, 1024), out_size=(960, 540), stride=3,
+               progress=True) -> dict:
+    """Client DSSIM of ``proxy`` with 8-bit depth in the H.264 atlas against edge-coded depth,
+    at the same total bitrate: the edge session's colour gets what its depth streams leave."""
+    from pibr.scenes.registry import load_scene
+
+    from .coverage import LatencyModel, display_samples
+    from .ibr_bench import Simulation, _load_proxies, _summary, evaluate_methods
+
+    scene = load_scene(scene_spec)
+    proxies, _ = _load_proxies(scene, progress)
+    latency = LatencyModel(rate_hz=rate_hz, up_ms=latency_ms / 2, down_ms=latency_ms / 2)
+    samples = display_samples(scene, trace, start_s, duration_s, rate_hz, latency)[::stride]
+    out = {}
+    edge_kbps = None
+    for codec in ("edge", "h264"):
+        if codec == "edge":  # a first pass learns the depth streams' rate, then colour gets the rest
+            probe = Simulation(scene, view_size, out_size, proxies=proxies, depth_codec="edge",
+                               bitrate_kbps=total_kbps)
+            try:
+                for s in samples:
+                    probe.frame_at(s[2], s[3])
+                edge_kbps = float(np.mean(probe.depth_bytes) * 8 * probe.fps / 1000)
+            finally:
+                probe.close()
+                probe.ctx.release()
+            colour_kbps = max(16.0, total_kbps - edge_kbps)
+        else:
+            colour_kbps = total_kbps
+        sim = Simulation(scene, view_size, out_size, proxies=proxies, depth_codec=codec, bitrate_kbps=colour_kbps)
+        try:
+            res = evaluate_methods(sim, samples, {"proxy": ("proxy", {})})
+            out[codec] = _summary(res["proxy"]) | {
+                "video_kbps": float(np.mean(sim.bytes) * 8 * sim.fps / 1000),
+                "depth_kbps": float(np.mean(sim.depth_bytes) * 8 * sim.fps / 1000) if sim.depth_bytes else 0.0}
+        finally:
+            sim.close()
+            sim.ctx.release()
+    return {"trace": trace, "total_kbps": total_kbps, "edge_kbps": edge_kbps, "results": out}
 
 
 def print_codec_table(r: dict) -> None:
@@ -232,3 +277,10 @@ def print_codec_table(r: dict) -> None:
     print(f"equal total bitrate {r['total_bitrate_kbps']:g} kbit/s: colour PSNR with 8-bit depth in the atlas "
           f"{s['h264-8bit']['colour_psnr_db']:.2f} dB; colour-only atlas at {r['colour_only_kbps']:.0f} kbit/s + "
           f"edge depth at {r['edge_kbps']:.0f} kbit/s: {s['edge']['colour_psnr_db']:.2f} dB")
+    e2e = r.get("end_to_end")
+    if e2e:
+        print(f"end to end ({e2e['trace']}, proxy IBR, {e2e['total_kbps']:g} kbit/s in total):")
+        for codec, v in e2e["results"].items():
+            print(f"  {codec:>5} depth: DSSIM {v['dssim_mean']:.4f}, PSNR {v['psnr_mean']:.2f} dB, holes "
+                  f"{100 * v['hole_fraction_mean']:.2f} %, colour {v['video_kbps']:.0f} + depth "
+                  f"{v['depth_kbps']:.0f} kbit/s")

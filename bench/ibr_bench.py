@@ -69,7 +69,8 @@ class Simulation:
     """Server and client pipelines of one session in one process, on one GL context."""
 
     def __init__(self, scene, view_size=(1024, 1024), out_size=(960, 540), fov_deg=90.0, fps=10.0,
-                 bitrate_kbps=16000.0, extra_view="auto", proxies=None, ctx=None):
+                 bitrate_kbps=16000.0, extra_view="auto", proxies=None, ctx=None, depth_codec="h264",
+                 edge_kbps=0.0):
         from pibr.client.frame_textures import FrameTextures
         from pibr.client.output_target import OutputTarget
         from pibr.client.video import H264Decoder
@@ -82,9 +83,19 @@ class Simulation:
 
         self.ctx = ctx or create_context()
         self.scene, self.fps = scene, fps
-        cfg = ServerConfig(view_size=tuple(view_size), extra_view=extra_view, fps=fps, bitrate_kbps=bitrate_kbps)
+        from pibr.server.depth_stream import EdgeSettings
+
+        cfg = ServerConfig(view_size=tuple(view_size), extra_view=extra_view, fps=fps, bitrate_kbps=bitrate_kbps,
+                           depth_codec=depth_codec, edge=EdgeSettings(kbps=edge_kbps))
         info = {"objects": len(proxies)} if proxies else None
         self.session, spec = plan_session(cfg, scene, Hello(want_proxies=bool(proxies)), info)
+        self.depth_encoder = self.depth_decoder = None
+        if depth_codec == "edge":
+            from pibr.client.depth_stream import EdgeDepthDecoder
+            from pibr.server.depth_stream import EdgeDepthEncoder
+
+            self.depth_encoder = EdgeDepthEncoder(self.session, fps, cfg.edge)
+            self.depth_decoder = EdgeDepthDecoder(self.session)
         self.renderer = Renderer(self.ctx, scene, cfg.projection)
         self.producer = FrameProducer(self.ctx, self.renderer, spec)
         self.encoder = H264Encoder(spec.layout.width, spec.layout.height, fps, bitrate_kbps, cfg.keyint, deterministic=True)
@@ -96,7 +107,8 @@ class Simulation:
         self.proxies = proxies
         self._frames = {}  # render time -> Frame (decoded and uploaded in order)
         self._last_render = None
-        self.bytes = []
+        self.bytes = []        # H.264 bytes per frame
+        self.depth_bytes = []  # edge-codec bytes per frame
 
     def frame_at(self, t_render: float, pose):
         """Make (and decode, upload) the server frame rendered at ``t_render`` from ``pose``."""
@@ -105,10 +117,16 @@ class Simulation:
         p = self.producer.produce(pose, t_render)
         data, key = self.encoder.encode(p.yuv)
         self.bytes.append(len(data))
+        payloads = [(PayloadKind.H264_ATLAS, data)]
+        if self.depth_encoder is not None:
+            depth = self.depth_encoder.encode(p)
+            self.depth_bytes.append(sum(len(d) for _, d in depth))
+            payloads += depth
         us = int(round(t_render * 1e6))
         frame = Frame(len(self.bytes) - 1, us, us, 0, us, p.primary_pose, p.extra_pose, self.scene.near,
-                      self.scene.far, payloads=((PayloadKind.H264_ATLAS, data),), keyframe=key)
-        self.textures.upload(self.decoder.decode(data), frame.frame_id)
+                      self.scene.far, payloads=tuple(payloads), keyframe=key)
+        distances = self.depth_decoder.decode(frame) if self.depth_decoder is not None else None
+        self.textures.upload(self.decoder.decode(data), frame.frame_id, distances)
         self._last_render = (t_render, frame)
         return frame
 

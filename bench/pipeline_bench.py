@@ -143,7 +143,14 @@ def bench_client(scene_spec="room", trace="pred6dof-1", frames=40, view_size=(10
     out = OutputConfig(out_size[0], out_size[1], 90.0, rate_hz)
     decoder = H264Decoder(session.atlas.width, session.atlas.height)
     textures = FrameTextures(ctx, session)
-    ms = [make_method(m, ctx, out, session) for m in methods]
+    proxies = None
+    from pibr.client.methods import needs_proxies
+
+    if needs_proxies(methods):
+        from .ibr_bench import _load_proxies
+
+        proxies, _ = _load_proxies(scene, progress=False)
+    ms = [make_method(m, ctx, out, session, proxies=proxies) for m in methods]
     target = OutputTarget(ctx, *out_size)
     stages = {"decode": [], "upload": []}
     display = {m: [] for m in methods}
@@ -164,7 +171,7 @@ def bench_client(scene_spec="room", trace="pred6dof-1", frames=40, view_size=(10
             for name, m in zip(methods, ms):
                 target.begin()
                 t3 = time.perf_counter()
-                m.render(pose, frame, textures)
+                m.render(pose, frame, textures, t_out)
                 ctx.finish()
                 t4 = time.perf_counter()
                 target.read()
