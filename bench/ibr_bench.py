@@ -112,7 +112,8 @@ class Simulation:
 
     def frame_at(self, t_render: float, pose):
         """Make (and decode, upload) the server frame rendered at ``t_render`` from ``pose``."""
-        if self._last_render is not None and t_render == self._last_render[0]:
+        cache_key = (t_render, pose.as_array().tobytes())
+        if self._last_render is not None and cache_key == self._last_render[0]:
             return self._last_render[1]
         p = self.producer.produce(pose, t_render)
         data, key = self.encoder.encode(p.yuv)
@@ -127,7 +128,7 @@ class Simulation:
                       self.scene.far, payloads=tuple(payloads), keyframe=key)
         distances = self.depth_decoder.decode(frame) if self.depth_decoder is not None else None
         self.textures.upload(self.decoder.decode(data), frame.frame_id, distances)
-        self._last_render = (t_render, frame)
+        self._last_render = (cache_key, frame)
         return frame
 
     def make_method(self, name, **options):

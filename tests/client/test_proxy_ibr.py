@@ -7,7 +7,8 @@ from pibr.bench.ibr_bench import Simulation, _load_proxies
 from pibr.bench.metrics import psnr
 from pibr.client.lod_select import LodSelector
 from pibr.protocol.messages import OutputConfig
-from pibr.protocol.pose import Pose, quat_from_euler
+from pibr.protocol.pose import Pose, quat_from_axis_angle, quat_from_euler, quat_multiply
+from pibr.protocol.proxy import ProxyObject
 from pibr.scenes.registry import load_scene
 
 pytestmark = pytest.mark.gl
@@ -100,3 +101,70 @@ def test_camera_inside_a_proxy_and_at_extremes(sim):
         pose = Pose.make((0.3, 1.6, -0.2), quat_from_euler([yaw, pitch, 0.0], "yxz"))
         rgb, holes = _run(sim, "proxy", pose, pose)
         assert np.isfinite(rgb).all() and 0 <= holes <= 1
+
+
+def _quad(centre, right, up, half: float) -> ProxyObject:
+    """A two-sided square proxy (4 vertices, 4 triangles) centred at ``centre`` spanning ``right`` x ``up``."""
+    c, r, u = (np.asarray(a, np.float64) for a in (centre, right, up))
+    v = np.array([c - half * r - half * u, c + half * r - half * u, c + half * r + half * u, c - half * r + half * u],
+                 np.float32)
+    f = np.array([[0, 1, 2], [0, 2, 3], [0, 2, 1], [0, 3, 2]], np.uint32)
+    return ProxyObject("crafted", np.eye(4), None, np.stack([v.min(0), v.max(0)]), (v, f), (v, f))
+
+
+def _render_with(sim, extra_objects, display, rendered):
+    """Proxy IBR of the room with ``extra_objects`` appended to its proxies (original meshes)."""
+    base = sim.proxies
+    sim.proxies = list(base) + list(extra_objects)
+    try:
+        frame = sim.frame_at(0.0, rendered)
+        m = sim.make_method("proxy", lod_level="original")
+        try:
+            sim.target.begin()
+            m.render(display, frame, sim.textures, 0.0)
+            return sim.target.read().copy()
+        finally:
+            m.release()
+    finally:
+        sim.proxies = base
+
+
+def test_false_proxies_at_the_extremes_are_deprioritised(sim):
+    """Proxy surfaces no view confirms -- one through the primary camera's centre (f -> 0 there,
+    back-projecting onto the hemisphere's rim), one at the far sphere -- are pushed behind the
+    accepted true surfaces: they neither cover new pixels nor spoil the image."""
+    rendered = sim.scene.viewer_origin
+    R = rendered.rotation()
+    right, up, back = R[:, 0], R[:, 1], R[:, 2]
+    display = Pose.make(rendered.p + 1.0 * back, rendered.q)  # 1 m behind the primary camera
+    gt = sim.ground_truth(display, 0.0)
+    base = _render_with(sim, [], display, rendered)
+    through_centre = _quad(rendered.p, right, up, 0.3)        # f_p = 0 at its centre
+    at_far = _quad(rendered.p - 0.999 * sim.scene.far * back, right, up, 0.5 * sim.scene.far)
+    for quad in (through_centre, at_far):
+        img = _render_with(sim, [quad], display, rendered)
+        newly_covered = (img[:, :, 3] > 0) & (base[:, :, 3] == 0)
+        assert newly_covered.mean() < 0.01
+        assert psnr(gt, img[:, :, :3]) > psnr(gt, base[:, :, :3]) - 0.5
+
+
+def test_back_projection_at_the_hemisphere_rim_and_behind_the_camera(sim):
+    """Turned 90 degrees left of the primary view: the output's right half looks into the
+    primary's hemisphere, its left half behind it, with the rim down the middle."""
+    rendered = sim.scene.viewer_origin
+    turned = Pose.make(rendered.p, quat_multiply(rendered.q, quat_from_axis_angle((0, 1, 0), np.pi / 2)))
+    frame = sim.frame_at(0.0, rendered)
+    m = sim.make_method("proxy")
+    try:
+        rgb, holes, _ = sim.display(m, turned, frame, 0.0)
+        alpha = sim.target.read()[:, :, 3]
+    finally:
+        m.release()
+    w = alpha.shape[1]
+    hole_left = np.mean(alpha[:, : w // 2 - 4] == 0)
+    hole_right = np.mean(alpha[:, w // 2 + 4:] == 0)
+    assert hole_right < 0.05                 # the primary's hemisphere: covered
+    assert hole_left > 0.3                   # behind the primary camera: only the extra view helps
+    # the ground truth agrees where the primary view covers the output
+    gt = sim.ground_truth(turned, 0.0)
+    assert psnr(gt[:, w // 2 + 8:], rgb[:, w // 2 + 8:]) > 20
