@@ -132,6 +132,8 @@ def register(sub) -> None:
     cd.add_argument("--duration", type=float, default=4.0, help="seconds per trace (default 4)")
     cd.add_argument("--view-size", type=_size, default=(1024, 1024), metavar="WxH")
     cd.add_argument("--bitrate-kbps", type=float, default=16000.0, help="total bitrate for the equal-rate comparison")
+    cd.add_argument("--size", type=_size, default=(960, 540), metavar="WxH",
+                    help="client output size of the end-to-end comparison (proxy IBR, h264 vs edge depth)")
     cd.add_argument("--out", default="out/bench")
     cd.set_defaults(func=cmd_bench_codec)
 
@@ -233,7 +235,8 @@ def cmd_bench_codec(args) -> int:
     from .codec_bench import print_codec_table, run_codec_bench
 
     r = run_codec_bench(scene_spec=args.scene, traces=args.trace, start_s=args.start, duration_s=args.duration,
-                        view_size=args.view_size, bitrate_kbps=args.bitrate_kbps, out_dir=args.out)
+                        view_size=args.view_size, bitrate_kbps=args.bitrate_kbps, out_size=args.size,
+                        out_dir=args.out)
     print_codec_table(r)
     print(f"written: {args.out}/codec.json, {args.out}/codec.png")
     return 0

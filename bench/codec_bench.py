@@ -52,7 +52,7 @@ def _colour_psnr(decoded_rgb: np.ndarray, true_rgb: np.ndarray) -> float:
 
 def run_codec_bench(scene_spec="room", traces=("pred6dof-1", "pred6dof-2"), start_s=10.0, duration_s=4.0,
                     fps=10.0, view_size=(1024, 1024), bitrate_kbps=16000.0, out_dir="out/bench",
-                    progress=True, with_end_to_end=True) -> dict:
+                    progress=True, with_end_to_end=True, out_size=(960, 540)) -> dict:
     import zstandard
 
     from pibr.client.diffusion import codes_to_distance, diffuse, diffuse_plain
@@ -201,7 +201,7 @@ def run_codec_bench(scene_spec="room", traces=("pred6dof-1", "pred6dof-2"), star
               "summary": summary, "frames": per_frame}
     if with_end_to_end:
         result["end_to_end"] = end_to_end(scene_spec, traces[0], start_s, duration_s, total_kbps=bitrate_kbps,
-                                          view_size=view_size, progress=progress)
+                                          view_size=view_size, out_size=out_size, progress=progress)
     os.makedirs(out_dir, exist_ok=True)
     with open(os.path.join(out_dir, "codec.json"), "w") as f:
         json.dump(result, f, indent=2)
@@ -219,10 +219,10 @@ def end_to_end(scene_spec="room", trace="pred6dof-1", start_s=10.0, duration_s=4
     from pibr.scenes.registry import load_scene
 
     from .coverage import LatencyModel, display_samples
-    from .ibr_bench import Simulation, _load_proxies, _summary, evaluate_methods
+    from .ibr_bench import Simulation, evaluate_methods, load_proxies, summarize
 
     scene = load_scene(scene_spec)
-    proxies, _ = _load_proxies(scene, progress)
+    proxies, _ = load_proxies(scene, progress)
     latency = LatencyModel(rate_hz=rate_hz, up_ms=latency_ms / 2, down_ms=latency_ms / 2)
     samples = display_samples(scene, trace, start_s, duration_s, rate_hz, latency)[::stride]
     out = {}
@@ -244,7 +244,7 @@ def end_to_end(scene_spec="room", trace="pred6dof-1", start_s=10.0, duration_s=4
         sim = Simulation(scene, view_size, out_size, proxies=proxies, depth_codec=codec, bitrate_kbps=colour_kbps)
         try:
             res = evaluate_methods(sim, samples, {"proxy": ("proxy", {})})
-            out[codec] = _summary(res["proxy"]) | {
+            out[codec] = summarize(res["proxy"]) | {
                 "video_kbps": float(np.mean(sim.bytes) * 8 * sim.fps / 1000),
                 "depth_kbps": float(np.mean(sim.depth_bytes) * 8 * sim.fps / 1000) if sim.depth_bytes else 0.0}
         finally:

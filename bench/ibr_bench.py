@@ -160,7 +160,8 @@ class Simulation:
         self.gt.release()
 
 
-def _load_proxies(scene, progress):
+def load_proxies(scene, progress=False):
+    """The scene's proxies as a client receives them: (list of ProxyObject, the server's bundle)."""
     from pibr.protocol.proxy import decode_bundle, decompress_bundle
     from pibr.server.proxies import build_bundle
 
@@ -195,7 +196,7 @@ def evaluate_methods(sim: Simulation, samples, variants: dict, with_quality=True
     return out
 
 
-def _summary(series: dict) -> dict:
+def summarize(series: dict) -> dict:
     def mean(k):
         return float(np.mean(series[k])) if series[k] else None
 
@@ -211,7 +212,7 @@ def run_ibr_bench(scene_spec="room", traces=("pred6dof-1", "pred6dof-2"), latenc
     from pibr.scenes.registry import load_scene
 
     scene = load_scene(scene_spec)
-    proxies, bundle = _load_proxies(scene, progress)
+    proxies, bundle = load_proxies(scene, progress)
     latency = LatencyModel(rate_hz=rate_hz, up_ms=latency_ms / 2, down_ms=latency_ms / 2)
     result = {"scene": scene.name, "traces": list(traces), "latency_ms": latency_ms, "rate_hz": rate_hz,
               "output": list(out_size), "view_size": list(view_size), "stride": stride,
@@ -231,9 +232,9 @@ def run_ibr_bench(scene_spec="room", traces=("pred6dof-1", "pred6dof-2"), latenc
             sim = Simulation(scene, view_size, out_size, proxies=proxies, ctx=None)
             try:
                 q = evaluate_methods(sim, samples[tr], quality_variants, bar=bar)
-                result["quality"][tr] = {k: _summary(v) for k, v in q.items()}
+                result["quality"][tr] = {k: summarize(v) for k, v in q.items()}
                 lod = evaluate_methods(sim, samples[tr], lod_variants, bar=bar)
-                result["lod"][tr] = {k: _summary(v) for k, v in lod.items()}
+                result["lod"][tr] = {k: summarize(v) for k, v in lod.items()}
                 result.setdefault("video_kbps", {})[tr] = float(np.mean(sim.bytes) * 8 * sim.fps / 1000)
             finally:
                 sim.close()
@@ -245,8 +246,8 @@ def run_ibr_bench(scene_spec="room", traces=("pred6dof-1", "pred6dof-2"), latenc
                 s = evaluate_methods(sim, speed_samples, {"proxy": ("proxy", {}), "floor": ("floor", {})},
                                      with_quality=False, bar=bar)
                 key = f"{size[0]}x{size[1]}"
-                result["speed"][key] = {"proxy_ms": _summary(s["proxy"])["client_ms_median"],
-                                        "floor_ms": _summary(s["floor"])["client_ms_median"]}
+                result["speed"][key] = {"proxy_ms": summarize(s["proxy"])["client_ms_median"],
+                                        "floor_ms": summarize(s["floor"])["client_ms_median"]}
                 result["speed"][key]["ratio"] = result["speed"][key]["proxy_ms"] / result["speed"][key]["floor_ms"]
             finally:
                 sim.close()

@@ -147,9 +147,9 @@ def bench_client(scene_spec="room", trace="pred6dof-1", frames=40, view_size=(10
     from pibr.client.methods import needs_proxies
 
     if needs_proxies(methods):
-        from .ibr_bench import _load_proxies
+        from .ibr_bench import load_proxies
 
-        proxies, _ = _load_proxies(scene, progress=False)
+        proxies, _ = load_proxies(scene, progress=False)
     ms = [make_method(m, ctx, out, session, proxies=proxies) for m in methods]
     target = OutputTarget(ctx, *out_size)
     stages = {"decode": [], "upload": []}

@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from pibr.bench.coverage import LatencyModel, display_samples
-from pibr.bench.ibr_bench import Simulation, _load_proxies
+from pibr.bench.ibr_bench import Simulation, load_proxies
 from pibr.bench.metrics import psnr
 from pibr.client.lod_select import LodSelector
 from pibr.protocol.messages import OutputConfig
@@ -17,7 +17,7 @@ pytestmark = pytest.mark.gl
 @pytest.fixture(scope="module")
 def room():
     scene = load_scene("room")
-    proxies, _ = _load_proxies(scene, progress=False)
+    proxies, _ = load_proxies(scene, progress=False)
     return scene, proxies
 
 
