@@ -4,12 +4,66 @@ from __future__ import annotations
 import argparse
 
 
+import math
+
+#: Sizes (pixels) a benchmark accepts; the server and client configurations check more.
+MIN_SIZE, MAX_SIZE = 8, 8192
+
+
 def _size(text: str) -> tuple[int, int]:
     try:
         w, _, h = text.lower().partition("x")
-        return int(w), int(h or w)
+        size = int(w), int(h or w)
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT, got {text!r}") from None
+    if not all(MIN_SIZE <= v <= MAX_SIZE for v in size):
+        raise argparse.ArgumentTypeError(f"width and height must be in {MIN_SIZE}..{MAX_SIZE}, got {text!r}")
+    return size
+
+
+def _number(text: str, kind=float) -> float:
+    try:
+        v = kind(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected {'an integer' if kind is int else 'a number'}, got {text!r}") from None
+    if not math.isfinite(v):
+        raise argparse.ArgumentTypeError(f"expected a finite number, got {text!r}")
+    return v
+
+
+def _positive(text: str) -> float:
+    v = _number(text)
+    if v <= 0:
+        raise argparse.ArgumentTypeError(f"must be positive, got {text}")
+    return v
+
+
+def _non_negative(text: str) -> float:
+    v = _number(text)
+    if v < 0:
+        raise argparse.ArgumentTypeError(f"must be >= 0, got {text}")
+    return v
+
+
+def _positive_int(text: str) -> int:
+    v = _number(text, int)
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"must be at least 1, got {text}")
+    return v
+
+
+def _non_negative_int(text: str) -> int:
+    v = _number(text, int)
+    if v < 0:
+        raise argparse.ArgumentTypeError(f"must be >= 0, got {text}")
+    return v
+
+
+def _fraction(text: str) -> float:
+    v = _number(text)
+    if not 0 < v <= 1:
+        raise argparse.ArgumentTypeError(f"must be in (0, 1], got {text}")
+    return v
 
 
 def _offset(text: str) -> tuple:
@@ -45,15 +99,15 @@ def register(sub) -> None:
     d.add_argument("--out", default="out", help="output directory (default out)")
     d.add_argument("--scene", default="room")
     d.add_argument("--trace", default="pred6dof-1")
-    d.add_argument("--start", type=float, default=10.0, help="seconds into the trace (default 10)")
-    d.add_argument("--duration", type=float, default=6.0, help="seconds to replay (default 6)")
-    d.add_argument("--rate", type=float, default=30.0, help="output rate Hz (default 30)")
+    d.add_argument("--start", type=_non_negative, default=10.0, help="seconds into the trace (default 10)")
+    d.add_argument("--duration", type=_positive, default=6.0, help="seconds to replay (default 6)")
+    d.add_argument("--rate", type=_positive, default=30.0, help="output rate Hz (default 30)")
     d.add_argument("--size", type=_size, default=(960, 540), metavar="WxH")
-    d.add_argument("--latency-ms", type=float, default=128.0, help="round trip, split evenly (default 128)")
+    d.add_argument("--latency-ms", type=_non_negative, default=128.0, help="round trip, split evenly (default 128)")
     d.add_argument("--method", type=_names, default=("none", "rotation", "proxy"), help="methods to compare")
     d.add_argument("--depth-codec", choices=("h264", "edge"), default="h264", help="depth transport")
     d.add_argument("--clock", choices=("virtual", "real"), default="virtual")
-    d.add_argument("--flip-every", type=int, default=4, help="FLIP on every Nth frame, 0: never (default 4)")
+    d.add_argument("--flip-every", type=_non_negative_int, default=4, help="FLIP on every Nth frame, 0: never (default 4)")
     d.set_defaults(func=cmd_demo)
 
     e = sub.add_parser("evaluate", help="score a client recording against ground truth",
@@ -61,8 +115,8 @@ def register(sub) -> None:
                                    "compute PSNR, SSIM, DSSIM, FLIP and hole fraction per method.")
     e.add_argument("run", help="the client's --out directory")
     e.add_argument("--scene", default=None, help="scene spec if the recording's scene name is not a built-in")
-    e.add_argument("--flip-every", type=int, default=1)
-    e.add_argument("--workers", type=int, default=2, help="metric worker processes (default 2)")
+    e.add_argument("--flip-every", type=_non_negative_int, default=1)
+    e.add_argument("--workers", type=_positive_int, default=2, help="metric worker processes (default 2)")
     e.add_argument("--no-video", action="store_true", help="skip side_by_side.mp4")
     e.set_defaults(func=cmd_evaluate)
 
@@ -73,17 +127,17 @@ def register(sub) -> None:
     s = bs.add_parser("server", help="server ms per frame by stage, and bitrate")
     s.add_argument("--scene", default="room")
     s.add_argument("--trace", default="pred6dof-1")
-    s.add_argument("--frames", type=int, default=40)
+    s.add_argument("--frames", type=_positive_int, default=40)
     s.add_argument("--view-size", type=_size, default=(1024, 1024), metavar="WxH")
     s.add_argument("--projection", type=_names, default=("vertex", "tess"), help="which to measure (default both)")
     s.add_argument("--extra-view", choices=("auto", "on", "off", "both"), default="auto")
-    s.add_argument("--bitrate-kbps", type=float, default=16000.0)
+    s.add_argument("--bitrate-kbps", type=_positive, default=16000.0)
     s.add_argument("--out", default="out/bench")
     s.set_defaults(func=cmd_bench_server)
     c = bs.add_parser("client", help="client ms per frame by stage")
     c.add_argument("--scene", default="room")
     c.add_argument("--trace", default="pred6dof-1")
-    c.add_argument("--frames", type=int, default=40)
+    c.add_argument("--frames", type=_positive_int, default=40)
     c.add_argument("--view-size", type=_size, default=(1024, 1024), metavar="WxH")
     c.add_argument("--size", type=_size, default=(960, 540), metavar="WxH", help="client output size")
     c.add_argument("--method", type=_names, default=("none", "rotation", "proxy"))
@@ -95,10 +149,10 @@ def register(sub) -> None:
                                     "transmitted view covers, for four dual-view variants, along real traces.")
     cov.add_argument("--scene", default="room")
     cov.add_argument("--trace", type=_names, default=("pred6dof-1", "pred6dof-2"), help="comma-separated traces")
-    cov.add_argument("--latency-ms", type=float, default=128.0)
-    cov.add_argument("--start", type=float, default=10.0)
-    cov.add_argument("--duration", type=float, default=8.0)
-    cov.add_argument("--rate", type=float, default=30.0)
+    cov.add_argument("--latency-ms", type=_non_negative, default=128.0)
+    cov.add_argument("--start", type=_non_negative, default=10.0)
+    cov.add_argument("--duration", type=_positive, default=8.0)
+    cov.add_argument("--rate", type=_positive, default=30.0)
     cov.add_argument("--view-size", type=_size, default=(1024, 1024), metavar="WxH")
     cov.add_argument("--size", type=_size, default=(320, 180), metavar="WxH", help="displayed view size")
     cov.add_argument("--offset", type=_offset, default=None, metavar="F,U,TILT",
@@ -112,11 +166,11 @@ def register(sub) -> None:
                                   "frame next to a full-screen pass with the same texture lookups.")
     i.add_argument("--scene", default="room")
     i.add_argument("--trace", type=_names, default=("pred6dof-1", "pred6dof-2"))
-    i.add_argument("--latency-ms", type=float, default=128.0)
-    i.add_argument("--start", type=float, default=10.0)
-    i.add_argument("--duration", type=float, default=8.0)
-    i.add_argument("--rate", type=float, default=30.0)
-    i.add_argument("--stride", type=int, default=2, help="score every Nth displayed tick (default 2)")
+    i.add_argument("--latency-ms", type=_non_negative, default=128.0)
+    i.add_argument("--start", type=_non_negative, default=10.0)
+    i.add_argument("--duration", type=_positive, default=8.0)
+    i.add_argument("--rate", type=_positive, default=30.0)
+    i.add_argument("--stride", type=_positive_int, default=2, help="score every Nth displayed tick (default 2)")
     i.add_argument("--size", type=_size, default=(960, 540), metavar="WxH")
     i.add_argument("--view-size", type=_size, default=(1024, 1024), metavar="WxH")
     i.add_argument("--out", default="out/bench")
@@ -128,10 +182,10 @@ def register(sub) -> None:
                                    "and 8-bit disparity in the H.264 atlas, along real traces.")
     cd.add_argument("--scene", default="room")
     cd.add_argument("--trace", type=_names, default=("pred6dof-1", "pred6dof-2"))
-    cd.add_argument("--start", type=float, default=10.0)
-    cd.add_argument("--duration", type=float, default=4.0, help="seconds per trace (default 4)")
+    cd.add_argument("--start", type=_non_negative, default=10.0)
+    cd.add_argument("--duration", type=_positive, default=4.0, help="seconds per trace (default 4)")
     cd.add_argument("--view-size", type=_size, default=(1024, 1024), metavar="WxH")
-    cd.add_argument("--bitrate-kbps", type=float, default=16000.0, help="total bitrate for the equal-rate comparison")
+    cd.add_argument("--bitrate-kbps", type=_positive, default=16000.0, help="total bitrate for the equal-rate comparison")
     cd.add_argument("--size", type=_size, default=(960, 540), metavar="WxH",
                     help="client output size of the end-to-end comparison (proxy IBR, h264 vs edge depth)")
     cd.add_argument("--out", default="out/bench")
@@ -143,7 +197,7 @@ def register(sub) -> None:
     lo.add_argument("--scene", type=_names, default=("room",), help="comma-separated scene specs")
     lo.add_argument("--asset", type=_names, default=None, help="asset files to measure as well (default: the shipped real asset)")
     lo.add_argument("--resolution", type=int, default=128, help="voxels along an object's longest side")
-    lo.add_argument("--fraction", type=float, default=0.005, help="proxy triangles / original triangles")
+    lo.add_argument("--fraction", type=_fraction, default=0.005, help="proxy triangles / original triangles")
     lo.add_argument("--out", default="out/bench")
     lo.set_defaults(func=cmd_bench_lod)
 
@@ -152,10 +206,10 @@ def register(sub) -> None:
                                   "the extra view, minimising the mean missing-pixel fraction over traces.")
     o.add_argument("--scene", default="room")
     o.add_argument("--trace", type=_names, default=("pred6dof-1", "pred6dof-2"))
-    o.add_argument("--latency-ms", type=float, default=128.0)
-    o.add_argument("--start", type=float, default=10.0)
-    o.add_argument("--duration", type=float, default=8.0)
-    o.add_argument("--frames", type=int, default=12, help="displayed frames per trace (default 12)")
+    o.add_argument("--latency-ms", type=_non_negative, default=128.0)
+    o.add_argument("--start", type=_non_negative, default=10.0)
+    o.add_argument("--duration", type=_positive, default=8.0)
+    o.add_argument("--frames", type=_positive_int, default=12, help="displayed frames per trace (default 12)")
     o.add_argument("--forward", type=_range, default="-1:2:0.5", help="metres, START:STOP:STEP or a,b,c")
     o.add_argument("--up", type=_range, default="0:1.8:0.3", help="metres")
     o.add_argument("--tilt", type=_range, default="-30:45:15", help="degrees down")
@@ -225,7 +279,7 @@ def cmd_bench_ibr(args) -> int:
 
     r = run_ibr_bench(scene_spec=args.scene, traces=args.trace, latency_ms=args.latency_ms, start_s=args.start,
                       duration_s=args.duration, rate_hz=args.rate, view_size=args.view_size, out_size=args.size,
-                      stride=max(1, args.stride), out_dir=args.out)
+                      stride=args.stride, out_dir=args.out)
     print_ibr_tables(r)
     print(f"written: {args.out}/ibr.json")
     return 0

@@ -70,7 +70,15 @@ def run_codec_bench(scene_spec="room", traces=("pred6dof-1", "pred6dof-2"), star
     from pibr.server.renderer import RenderTarget, Renderer
     from pibr.server.video import H264Encoder
 
+    from pibr.protocol.errors import ConfigError
+
+    frames_per_trace = int(duration_s * fps)
+    if frames_per_trace < 1:
+        raise ConfigError(f"{duration_s} s at {fps:g} fps is not a single frame")
     scene = load_scene(scene_spec)
+    for tr in traces:
+        if not 0 <= start_s < load_trace(tr).duration:
+            raise ConfigError(f"start {start_s} s is outside trace {tr!r} (0..{load_trace(tr).duration:.2f} s)")
     w, h = view_size
     q8 = h264_quantizer(scene.near, scene.far)
     q12 = edge_quantizer(scene.near, scene.far, EDGE_BITS)
@@ -85,7 +93,7 @@ def run_codec_bench(scene_spec="room", traces=("pred6dof-1", "pred6dof-2"), star
     per_frame = []
     frames_colour, frames_true_rgb = [], []
     bar = None
-    n_frames = sum(int(duration_s * fps) for _ in traces)
+    n_frames = frames_per_trace * len(traces)
     if progress:
         from tqdm import tqdm
 
@@ -99,7 +107,7 @@ def run_codec_bench(scene_spec="room", traces=("pred6dof-1", "pred6dof-2"), star
             dec_h264 = H264Decoder(with_depth.width, with_depth.height)
             coders = {name: (EdgeEncoder(w, h, EDGE_BITS, q12, temporal=v["temporal"], passes=v["passes"]),
                              EdgeDecoder(w, h, EDGE_BITS, q12), {"enc": None, "dec": None}) for name, v in variants.items()}
-            for k in range(int(duration_s * fps)):
+            for k in range(frames_per_trace):
                 t = k / fps
                 pose = scene.viewer_origin.compose(trace.pose_at(min(start_s + t, trace.duration)))
                 p = producer.produce(pose, t)

@@ -66,3 +66,6 @@ class ServerConfig:
             raise ConfigError(f"depth codec must be h264 or edge, got {self.depth_codec!r}")
         if self.max_sessions < 1:
             raise ConfigError("max sessions must be at least 1")
+        if not (0 <= self.edge.kbps <= 1e6):
+            raise ConfigError(f"edge codec bitrate must be in 0..1000000 kbit/s (0: a fixed threshold), "
+                              f"got {self.edge.kbps}")

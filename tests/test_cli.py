@@ -49,6 +49,30 @@ def test_bad_cli_values_are_reported(capsys):
     assert "expected HOST:PORT" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("argv, message", [
+    (["bench", "codec", "--size", "0x0"], "width and height must be in"),
+    (["bench", "coverage", "--rate", "0"], "--rate: must be positive"),
+    (["bench", "ibr", "--duration", "-1"], "--duration: must be positive"),
+    (["bench", "ibr", "--latency-ms", "nan"], "finite"),
+    (["bench", "optimize-offset", "--frames", "0"], "--frames: must be at least 1"),
+    (["bench", "lod", "--fraction", "2"], "must be in (0, 1]"),
+    (["demo", "--flip-every", "-1"], "--flip-every: must be >= 0"),
+])
+def test_bad_bench_arguments_are_named(capsys, argv, message):
+    with pytest.raises(SystemExit):
+        build_parser().parse_args(argv)
+    assert message in capsys.readouterr().err
+
+
+def test_bench_schedules_outside_the_trace_are_refused(capsys):
+    assert main(["bench", "coverage", "--trace", "pred6dof-1", "--start", "1000"]) == 2
+    assert "outside trace 'pred6dof-1'" in capsys.readouterr().err
+    assert main(["bench", "codec", "--trace", "pred6dof-1", "--duration", "0.01"]) == 2
+    assert "not a single frame" in capsys.readouterr().err
+    assert main(["serve", "--port", "0", "--edge-kbps", "-5"]) == 2
+    assert "edge codec bitrate" in capsys.readouterr().err
+
+
 def test_scenes_lists_builtins(capsys):
     assert main(["scenes"]) == 0
     out = capsys.readouterr().out
