@@ -5,6 +5,8 @@ the server's encoder did, decodes, and diffuses the sparse samples into a dense 
 """
 from __future__ import annotations
 
+import concurrent.futures
+
 import numpy as np
 
 from pibr.protocol.depth import DepthQuantizer
@@ -46,13 +48,26 @@ class EdgeDepthDecoder:
         self.motion = None
 
     def decode(self, frame: Frame) -> dict:
-        out = {}
         poses = {"primary": frame.primary_pose, "extra": frame.extra_pose}
+        jobs = {}
         for name, (stream, kind) in self.streams.items():
             payload = frame.payload(kind)
             if payload is None or poses[name] is None:
                 raise CodecError(f"frame {frame.frame_id} lacks the {name} view's edge-coded depth")
-            out[name], samples = stream.decode(payload, poses[name])
-            if name == "primary":
-                self.motion = samples.motion
+            jobs[name] = (stream, payload, poses[name])
+        # The views' streams are independent and their kernels release the GIL: decode the
+        # extra view on a helper thread while this one decodes the primary.
+        helper = None
+        if "extra" in jobs:
+            helper = concurrent.futures.ThreadPoolExecutor(max_workers=1, thread_name_prefix="pibr-depth")
+        try:
+            extra = helper.submit(jobs["extra"][0].decode, *jobs["extra"][1:]) if helper else None
+            out = {}
+            out["primary"], samples = jobs["primary"][0].decode(*jobs["primary"][1:])
+            self.motion = samples.motion
+            if extra is not None:
+                out["extra"], _ = extra.result()
+        finally:
+            if helper is not None:
+                helper.shutdown(wait=True)
         return out

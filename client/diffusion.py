@@ -151,7 +151,7 @@ def _push_pull_np(v, m, iterations):
 # numba push-pull
 # ------------------------------------------------------------------------------------------
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _smooth_nb(u, m, iterations):
     """numba twin of :func:`_smooth_np` (in place)."""
     h, w = u.shape
@@ -177,7 +177,7 @@ def _smooth_nb(u, m, iterations):
                         break
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _push_pull_nb(v, m, iterations):
     """(h, w) float64 values and uint8 validity -> filled (h, w) float64 (recursive over levels)."""
     h, w = v.shape
@@ -296,7 +296,7 @@ def push_pull_fast(values, valid, iterations: int = DEFAULT_ITERATIONS) -> np.nd
 # Edge-aware diffusion
 # ------------------------------------------------------------------------------------------
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _label_regions(edges, labels):
     """4-connected components of non-edge pixels: labels (h, w) int32 from 1 (0 on edges);
     returns (n, boxes (n + 1, 4) int64 as y0, y1, x0, x1 inclusive, sizes (n + 1,))."""
@@ -335,7 +335,7 @@ def _label_regions(edges, labels):
     return n, boxes, sizes
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _diffuse_regions(codes, valid, edges, labels, n, boxes, max_work, iterations, out, done):
     """Push-pull every region from its own samples into ``out``, marking the pixels set in ``done``;
     regions without samples or beyond the work budget are left alone."""

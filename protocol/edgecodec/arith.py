@@ -306,13 +306,13 @@ def decoder_ok(ds, data: np.ndarray) -> bool:
     return ds[3] == 0 and n <= ds[2] <= n + MAX_OVERRUN
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def model_p1(m, ctx):
     p = (int(m[ctx, 0]) + int(m[ctx, 1])) >> _MIX_SHIFT
     return min(max(p, 1), 32767)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def model_update(m, ctx, bit, rate):
     n = int(m[ctx, 2])
     s = int(rate[n])
@@ -331,12 +331,12 @@ def model_update(m, ctx, bit, rate):
         m[ctx, 2] = n + 1
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def enc_start():
     return (0, MASK32, 0, 1, 0)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _shift_low(low, cache, csize, pos, buf):
     if low < 0xFF000000 or low > MASK32:
         carry = low >> 32
@@ -353,7 +353,7 @@ def _shift_low(low, cache, csize, pos, buf):
     return (low & 0x00FFFFFF) << 8, cache, csize + 1, pos
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def enc_raw(es, buf, bit, p1):
     """Code one bit with probability ``p1`` (2^-15 units) of a 1, no model."""
     low, rng, cache, csize, pos = es
@@ -369,7 +369,7 @@ def enc_raw(es, buf, bit, p1):
     return (low, rng, cache, csize, pos)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def enc_finish(es, buf):
     low, rng, cache, csize, pos = es
     for _ in range(5):
@@ -377,14 +377,14 @@ def enc_finish(es, buf):
     return (low, rng, cache, csize, pos)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def enc_bit(es, buf, m, rate, ctx, bit):
     es = enc_raw(es, buf, bit, model_p1(m, ctx))
     model_update(m, ctx, bit, rate)
     return es
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _enc_magnitude(es, buf, m, rate, base, mag):
     v = mag + 1
     k = 0
@@ -404,7 +404,7 @@ def _enc_magnitude(es, buf, m, rate, base, mag):
     return es
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def enc_uint(es, buf, m, rate, base, v):
     """Code 0 <= v < 2^(KMAX + 1) with the integer slot at context ``base``."""
     if v == 0:
@@ -413,7 +413,7 @@ def enc_uint(es, buf, m, rate, base, v):
     return _enc_magnitude(es, buf, m, rate, base, v - 1)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def enc_sint(es, buf, m, rate, base, v):
     """Code |v| < 2^(KMAX + 1) with the integer slot at context ``base``."""
     if v == 0:
@@ -423,7 +423,7 @@ def enc_sint(es, buf, m, rate, base, v):
     return _enc_magnitude(es, buf, m, rate, base, abs(v) - 1)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def dec_start(data):
     code = 0
     for i in range(4):
@@ -431,7 +431,7 @@ def dec_start(data):
     return (code, MASK32, 4, 0)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def dec_raw(ds, data, p1):
     code, rng, pos, err = ds
     bound = (rng >> PROB_BITS) * p1
@@ -452,14 +452,14 @@ def dec_raw(ds, data, p1):
     return (code, rng, pos, err), bit
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def dec_bit(ds, data, m, rate, ctx):
     ds, bit = dec_raw(ds, data, model_p1(m, ctx))
     model_update(m, ctx, bit, rate)
     return ds, bit
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _dec_magnitude(ds, data, m, rate, base):
     k = 0
     while k < KMAX:
@@ -477,7 +477,7 @@ def _dec_magnitude(ds, data, m, rate, base):
     return ds, r + (1 << k) - 1
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def dec_uint(ds, data, m, rate, base):
     ds, z = dec_bit(ds, data, m, rate, base)
     if z == 1:
@@ -486,7 +486,7 @@ def dec_uint(ds, data, m, rate, base):
     return ds, v + 1
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def dec_sint(ds, data, m, rate, base):
     ds, z = dec_bit(ds, data, m, rate, base)
     if z == 1:
@@ -535,7 +535,7 @@ def decode_ops_python(data: bytes, kinds, ctxs, n_contexts: int) -> tuple[np.nda
     return np.array(out, dtype=np.int64), dec.check_end()
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _encode_ops_kernel(buf, m, rate, kinds, ctxs, values):
     es = enc_start()
     for i in range(len(kinds)):
@@ -551,7 +551,7 @@ def _encode_ops_kernel(buf, m, rate, kinds, ctxs, values):
     return enc_finish(es, buf)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _decode_ops_kernel(data, m, rate, kinds, ctxs, out):
     ds = dec_start(data)
     for i in range(len(kinds)):
@@ -598,7 +598,7 @@ def encode_bits_python(bits, ctxs, n_contexts: int) -> bytes:
     return enc.finish()
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _encode_bits_kernel(buf, m, rate, bits, ctxs):
     es = enc_start()
     for i in range(len(bits)):
@@ -609,7 +609,7 @@ def _encode_bits_kernel(buf, m, rate, bits, ctxs):
     return enc_finish(es, buf)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _decode_bits_kernel(data, m, rate, ctxs, out):
     ds = dec_start(data)
     for i in range(len(ctxs)):

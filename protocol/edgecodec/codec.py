@@ -78,7 +78,7 @@ def laplacian(codes) -> np.ndarray:
     return p[:-2, 1:-1] + p[2:, 1:-1] + p[1:-1, :-2] + p[1:-1, 2:] - 4 * c
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _select_kernel(c, sig, threshold, edges):
     h, w = c.shape
     for y in range(h):

@@ -72,7 +72,7 @@ def temporal_context(prev_edges, height: int, width: int) -> np.ndarray:
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _ctx_pass(img, tc, phase, y, x, big):
     """Context of padded pixel (y, x) in pass ``phase`` (0..3 = A..D) of the four-pass order.
 
@@ -111,7 +111,7 @@ def _ctx_pass(img, tc, phase, y, x, big):
     return _SMALL_D + (c << 2) + t
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _ctx_raster(img, tc, y, x):
     c = (int(img[y, x - 1]) | (int(img[y, x - 2]) << 1) | (int(img[y - 1, x - 1]) << 2)
          | (int(img[y - 1, x]) << 3) | (int(img[y - 1, x + 1]) << 4) | (int(img[y - 2, x]) << 5)
@@ -120,7 +120,7 @@ def _ctx_raster(img, tc, y, x):
     return (c << 2) + int(tc[y, x])
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _encode_kernel(img, tc, h, w, four_passes, big, buf, m, rate):
     es = enc_start()
     if four_passes:
@@ -143,7 +143,7 @@ def _encode_kernel(img, tc, h, w, four_passes, big, buf, m, rate):
     return enc_finish(es, buf)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _decode_kernel(data, tc, h, w, four_passes, big, m, rate, img):
     ds = dec_start(data)
     if four_passes:

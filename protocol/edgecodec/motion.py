@@ -54,7 +54,7 @@ def dequantize_motion(vq, scale: float) -> np.ndarray:
     return (np.sign(vq) * (vq / scale) ** 2).astype(np.float32)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _median_pred(G, M, i, j):
     """Median predictor of block (i, j) from the moving W, N, NE (or NW) blocks; (pred x, pred y, count)."""
     bw = G.shape[1]
@@ -88,12 +88,12 @@ def _median_pred(G, M, i, j):
     return mx, my, 3
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _ctx(comp, n):
     return (comp * 3 + (0 if n == 0 else (1 if n < 3 else 2))) * INT_SLOT
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _encode_vectors(M, V, buf, m, rate):
     es = enc_start()
     bh, bw = M.shape
@@ -107,7 +107,7 @@ def _encode_vectors(M, V, buf, m, rate):
     return enc_finish(es, buf)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _decode_vectors(data, M, m, rate, V):
     ds = dec_start(data)
     bh, bw = M.shape

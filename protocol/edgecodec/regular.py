@@ -44,7 +44,7 @@ def nearest_index(positions: np.ndarray, size: int) -> np.ndarray:
     return np.searchsorted(mid, np.arange(size), side="right").astype(np.int64)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _paeth(G, i, j):
     if i == 0 and j == 0:
         return 0, 0
@@ -65,7 +65,7 @@ def _paeth(G, i, j):
     return c, g
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _bucket(g):
     if g == 0:
         return 0
@@ -80,7 +80,7 @@ def _bucket(g):
     return 5
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _encode_kernel(values, q, max_code, buf, m, rate, G):
     es = enc_start()
     rh, rw = values.shape
@@ -93,7 +93,7 @@ def _encode_kernel(values, q, max_code, buf, m, rate, G):
     return enc_finish(es, buf)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _decode_kernel(data, q, max_code, m, rate, G):
     ds = dec_start(data)
     rh, rw = G.shape

@@ -67,7 +67,7 @@ _ERR_CAP = 1023
 _PRIOR = np.array([0, 1, 3, 4, 5, 6, 2, 8, 9, 15, 7, 10, 11, 12, 13, 14], dtype=np.int32)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def quantize_residual(v, pred, q, max_code):
     """(quantized residual, reconstruction) of true code v predicted as pred, step q; keeps sky (0) exact."""
     r = v - pred
@@ -86,12 +86,12 @@ def quantize_residual(v, pred, q, max_code):
     return rq, rec
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def reconstruct(pred, rq, q, max_code):
     return min(max(pred + rq * q, 0), max_code)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _activity_bucket(a):
     if a == 0:
         return 0
@@ -108,20 +108,20 @@ def _activity_bucket(a):
     return 6
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _sign_ctx(S, E, y, x):
     return (int(S[y, x - 1]) + 3 * int(S[y - 1, x]) + 9 * int(S[y - 1, x - 1]) + 27 * int(S[y - 1, x + 1])
             + 81 * (int(E[y, x + 1]) + 2 * int(E[y + 1, x])))
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _config(E, y, x):
     return (int(E[y - 1, x - 1]) | (int(E[y - 1, x]) << 1) | (int(E[y - 1, x + 1]) << 2) | (int(E[y, x - 1]) << 3)
             | (int(E[y, x + 1]) << 4) | (int(E[y + 1, x - 1]) << 5) | (int(E[y + 1, x]) << 6)
             | (int(E[y + 1, x + 1]) << 7))
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _candidates(S, V, TV, RG, ri, ci, y, x, s, preds, avail):
     """Fill preds/avail (N_PREDICTORS,) for padded pixel (y, x) whose sign code is s (1 or 2)."""
     for k in range(N_PREDICTORS):
@@ -183,7 +183,7 @@ def _candidates(S, V, TV, RG, ri, ci, y, x, s, preds, avail):
     avail[_R] = 1
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _choose(scores, cfg, avail):
     best = _R
     best_score = scores[cfg, _R]
@@ -194,7 +194,7 @@ def _choose(scores, cfg, avail):
     return best
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _learn(scores, cfg, preds, avail, value, max_code):
     for k in range(N_PREDICTORS):
         if avail[k] == 1:
@@ -203,7 +203,7 @@ def _learn(scores, cfg, preds, avail, value, max_code):
             scores[cfg, k] += err - (scores[cfg, k] >> _SCORE_SHIFT)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _residual_slot(A, y, x, kind, preds, avail):
     a = int(A[y, x - 1]) + int(A[y - 1, x]) + int(A[y - 1, x - 1]) + int(A[y - 1, x + 1])
     lo = 1 << 30
@@ -217,7 +217,7 @@ def _residual_slot(A, y, x, kind, preds, avail):
     return _N_SIGN_CTX + (kind * _N_BUCKETS + _activity_bucket(a)) * INT_SLOT
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _encode_kernel(E, codes, signs, TV, RG, ri, ci, h, w, q, max_code, buf, m, rate, V, S, A):
     """codes, signs: (h, w) true values and signs (+1 / -1) at edges; V, S, A: padded outputs."""
     es = enc_start()
@@ -248,7 +248,7 @@ def _encode_kernel(E, codes, signs, TV, RG, ri, ci, h, w, q, max_code, buf, m, r
     return enc_finish(es, buf)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _decode_kernel(data, E, TV, RG, ri, ci, h, w, q, max_code, m, rate, V, S, A):
     ds = dec_start(data)
     scores = np.empty((256, N_PREDICTORS), dtype=np.int32)
