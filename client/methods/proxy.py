@@ -13,14 +13,15 @@ those views stored where it back-projects, e = |(d - f) / f|:
   any accepted fragment behind wins — and holes are inpainted at no extra cost. Its alpha
   is 0, so the client counts the pixel as one no view covered.
 
-Where the primary view shows sky the fragment is dropped so the sky behind shows. A
-background pass first fills every pixel from the primary view along its ray (the sky, and
-a rotation-only fallback, alpha 0, where no proxy is drawn).
+Where the primary view shows sky the fragment is dropped so the sky behind shows. Pixels no
+proxy fragment reached take the primary view along their ray: the sky, or a rotation-only
+fallback (alpha 0).
 
 Shading is deferred: the proxy pass stores, per pixel, which view and where to sample; one
-full-screen pass then fetches each pixel's colour once. Measured here (960x540, room):
-48 ms per frame deferred against 80-88 ms with the colour fetched in the proxy pass, since
-every overlapping proxy fragment runs the shader when it writes its own depth.
+full-screen pass then fetches each pixel's colour once (or the background where no proxy
+was drawn). Measured here (960x540, room): 48 ms per frame deferred against 80-88 ms with the
+colour fetched in the proxy pass, since every overlapping proxy fragment runs the shader when
+it writes its own depth.
 """
 from __future__ import annotations
 
@@ -33,24 +34,6 @@ from ..lod_select import DEFAULT_TARGET_PX, LodSelector
 from .base import FULLSCREEN_VS, Method, fullscreen_quad, output_tan_half
 
 DEFAULT_TAU = 0.1
-
-_BACKGROUND_FS = """
-#version 410
-%(frame)s
-uniform mat3 u_out_to_src;
-uniform vec2 u_tan_half;
-uniform vec2 u_out_size;
-uniform vec4 u_color_rect;
-out vec4 f_color;
-void main() {
-    vec2 ndc = vec2(2.0 * gl_FragCoord.x / u_out_size.x - 1.0, 1.0 - 2.0 * gl_FragCoord.y / u_out_size.y);
-    vec3 d = u_out_to_src * normalize(vec3(ndc * u_tan_half, -1.0));
-    if (d.z > 0.0) { f_color = vec4(0.0); return; }
-    vec2 uv = wa_uv(wa_project(d).xy);
-    bool sky = primary_distance(uv) <= 0.0;
-    f_color = vec4(atlas_rgb(u_color_rect, uv), sky ? 1.0 : 0.0);
-}
-"""
 
 _PROXY_VS = """
 #version 410
@@ -71,17 +54,34 @@ void main() {
 
 # Colour is fetched once per pixel, after the depth test picked the fragment: on a software
 # rasteriser, writing gl_FragDepth rules out early depth tests, so every overlapping proxy
-# fragment runs the shader, and the three colour-plane lookups are the costly part.
+# fragment runs the shader, and the three colour-plane lookups are the costly part. Pixels no
+# proxy reached get the background here too, which saves a full-screen pass.
 _RESOLVE_FS = """
 #version 410
 %(frame)s
 uniform sampler2D u_refs;
 uniform vec4 u_primary_color;
 uniform vec4 u_extra_color;
+uniform mat3 u_out_to_src;   // output camera -> primary camera rotation
+uniform vec2 u_tan_half;
+uniform vec2 u_out_size;
 out vec4 f_color;
+// The primary view along this pixel's ray: the sky (alpha 1), else a rotation-only fallback
+// (alpha 0: no view vouches for it); nothing behind the primary camera.
+vec4 background() {
+    vec2 ndc = vec2(2.0 * gl_FragCoord.x / u_out_size.x - 1.0, 1.0 - 2.0 * gl_FragCoord.y / u_out_size.y);
+    vec3 d = u_out_to_src * normalize(vec3(ndc * u_tan_half, -1.0));
+    if (d.z > 0.0) return vec4(0.0);
+    vec2 uv = wa_uv(wa_project(d).xy);
+    bool sky = primary_distance(uv) <= 0.0;
+    return vec4(atlas_rgb(u_primary_color, uv), sky ? 1.0 : 0.0);
+}
 void main() {
     vec4 ref = texelFetch(u_refs, ivec2(gl_FragCoord.xy), 0);
-    if (ref.z < 0.0) discard;                 // no proxy here: keep the background
+    if (ref.z < 0.0) {                        // no proxy here
+        f_color = background();
+        return;
+    }
     vec3 c = ref.z < 0.5 ? atlas_rgb(u_primary_color, ref.xy)
            : ref.z < 1.5 ? atlas_rgb(u_extra_color, ref.xy) : vec3(0.0);
     f_color = vec4(c, ref.w);
@@ -164,19 +164,17 @@ class ProxyIBR(Method):
         self.objects = proxies
         self.selector = LodSelector(proxies, output, lod_target_px, force_level=lod_level)
         frame = {"frame": frame_glsl(config)}
-        self.bg = ctx.program(vertex_shader=FULLSCREEN_VS, fragment_shader=_BACKGROUND_FS % frame)
         self.prog = ctx.program(vertex_shader=_PROXY_VS, fragment_shader=_PROXY_FS % frame)
         self.resolve = ctx.program(vertex_shader=FULLSCREEN_VS, fragment_shader=_RESOLVE_FS % frame)
-        for p in (self.bg, self.prog, self.resolve):
+        for p in (self.prog, self.resolve):
             bind_frame_uniforms(p, config)
         self.refs = ctx.texture((output.width, output.height), 4, dtype="f4")
         self.refs.filter = (ctx.NEAREST, ctx.NEAREST)
         self.refs_depth = ctx.depth_renderbuffer((output.width, output.height))
         self.refs_fbo = ctx.framebuffer(color_attachments=[self.refs], depth_attachment=self.refs_depth)
         self.resolve["u_refs"].value = 5
-        self.bg["u_tan_half"].value = output_tan_half(output)
-        self.bg["u_out_size"].value = (float(output.width), float(output.height))
-        self.bg["u_color_rect"].value = rect_uniform(config, "primary.color")
+        self.resolve["u_tan_half"].value = output_tan_half(output)
+        self.resolve["u_out_size"].value = (float(output.width), float(output.height))
         for k, rect in (("u_primary_color", "primary.color"), ("u_extra_color", "extra.color")):
             if k in self.resolve:
                 self.resolve[k].value = rect_uniform(config, rect)
@@ -186,7 +184,6 @@ class ProxyIBR(Method):
         # or two. Measured (room, trace 1, 128 ms): edge slack 1 -> DSSIM 0.0417, holes 0.85 %;
         # 2 -> 0.0402, 0.68 %; 4 -> 0.0401, 0.66 %; h264 2.5 -> 0.0443; 4 -> 0.0439.
         self.prog["u_slack_codes"].value = 2.0 if config.depth_codec == "edge" else 2.5
-        self.bg_vbo, self.bg_vao = fullscreen_quad(ctx, self.bg)
         self.resolve_vbo, self.resolve_vao = fullscreen_quad(ctx, self.resolve)
         self.near, self.far = config.near, config.far
         self.projection = _perspective(output, self.near, self.far)
@@ -211,11 +208,6 @@ class ProxyIBR(Method):
         ctx = self.ctx
         output_fbo = ctx.fbo
         textures.use()
-        # Background: the primary view along each output ray (sky; fallback colour, alpha 0).
-        rot = frame.primary_pose.rotation().T @ out_pose.rotation()
-        self.bg["u_out_to_src"].write(rot.T.astype("f4").tobytes())
-        ctx.disable(ctx.DEPTH_TEST)
-        self.bg_vao.render(ctx.TRIANGLE_STRIP)
         # Proxies, depth-tested, with deprioritised fragments pushed behind accepted ones; each
         # pixel keeps where to fetch its colour.
         self.refs_fbo.use()
@@ -246,6 +238,8 @@ class ProxyIBR(Method):
         ctx.disable(ctx.DEPTH_TEST)
         output_fbo.use()
         self.refs.use(5)
+        rot = frame.primary_pose.rotation().T @ out_pose.rotation()
+        self.resolve["u_out_to_src"].write(rot.T.astype("f4").tobytes())
         self.resolve_vao.render(ctx.TRIANGLE_STRIP)
 
     def release(self) -> None:
@@ -254,6 +248,6 @@ class ProxyIBR(Method):
                 vao.release()
         for b in self._buffers:
             b.release()
-        for r in (self.bg_vao, self.bg_vbo, self.bg, self.prog, self.resolve_vao, self.resolve_vbo, self.resolve,
+        for r in (self.prog, self.resolve_vao, self.resolve_vbo, self.resolve,
                   self.refs_fbo, self.refs, self.refs_depth):
             r.release()
