@@ -85,6 +85,15 @@ def _range(text: str) -> list:
         raise argparse.ArgumentTypeError(str(exc)) from None
 
 
+def _angles(text: str) -> tuple:
+    from pibr.server.config import MAX_EDGE_DEG, MIN_EDGE_DEG
+
+    angles = tuple(_number(x.strip()) for x in text.split(",") if x.strip())
+    if not angles or not all(MIN_EDGE_DEG <= a <= MAX_EDGE_DEG for a in angles):
+        raise argparse.ArgumentTypeError(f"expected angles in {MIN_EDGE_DEG:g}..{MAX_EDGE_DEG:g} degrees, got {text!r}")
+    return angles
+
+
 def _names(text: str) -> tuple:
     names = tuple(x.strip() for x in text.split(",") if x.strip())
     if not names:
@@ -130,6 +139,9 @@ def register(sub) -> None:
     s.add_argument("--frames", type=_positive_int, default=40)
     s.add_argument("--view-size", type=_size, default=(1024, 1024), metavar="WxH")
     s.add_argument("--projection", type=_names, default=("vertex", "tess"), help="which to measure (default both)")
+    s.add_argument("--max-edge-deg", type=_angles, default=None, metavar="DEG[,DEG...]",
+                   help="edge angles to measure (default: the server's); several, or one that is not the "
+                        "default, also compare each with a finer reference render")
     s.add_argument("--extra-view", choices=("auto", "on", "off", "both"), default="auto")
     s.add_argument("--bitrate-kbps", type=_positive, default=16000.0)
     s.add_argument("--out", default="out/bench")
@@ -249,7 +261,7 @@ def cmd_bench_server(args) -> int:
 
     result = bench_server(scene_spec=args.scene, trace=args.trace, frames=args.frames, view_size=args.view_size,
                           projections=args.projection, extra_view=args.extra_view, bitrate_kbps=args.bitrate_kbps,
-                          out_dir=args.out)
+                          edge_angles=args.max_edge_deg, out_dir=args.out)
     print_server_table(result)
     return 0
 

@@ -96,7 +96,7 @@ class Simulation:
 
             self.depth_encoder = EdgeDepthEncoder(self.session, fps, cfg.edge)
             self.depth_decoder = EdgeDepthDecoder(self.session)
-        self.renderer = Renderer(self.ctx, scene, cfg.projection)
+        self.renderer = Renderer(self.ctx, scene, cfg.projection, max_edge_angle_deg=cfg.max_edge_deg)
         self.producer = FrameProducer(self.ctx, self.renderer, spec)
         self.encoder = H264Encoder(spec.layout.width, spec.layout.height, fps, bitrate_kbps, cfg.keyint, deterministic=True)
         self.decoder = H264Decoder(spec.layout.width, spec.layout.height)

@@ -34,33 +34,59 @@ def _median(xs) -> float:
     return float(np.median(xs)) if len(xs) else float("nan")
 
 
+def _distance_disagreement(reference: np.ndarray, distance: np.ndarray, tolerance: float = 0.01) -> float:
+    """Fraction of pixels whose distance is more than ``tolerance`` (relative) off the reference,
+    or sky (0) in one of the two images only. Both (h, w) float."""
+    sky_r, sky_d = reference <= 0, distance <= 0
+    off = np.abs(distance - reference) > tolerance * np.maximum(reference, 1e-9)
+    return float(np.mean((sky_r != sky_d) | (~sky_r & ~sky_d & off)))
+
+
+#: Edge angle of the reference render that ``--max-edge-deg`` variants are compared with.
+REFERENCE_EDGE_DEG = 2.0
+
+
 def bench_server(scene_spec="room", trace="pred6dof-1", frames=40, view_size=(1024, 1024),
                  projections=("vertex", "tess"), extra_view="auto", bitrate_kbps=16000.0, out_dir="out/bench",
-                 fps=10.0) -> dict:
+                 fps=10.0, edge_angles=None) -> dict:
+    """Server ms per frame by stage and bitrate, per projection, extra view and edge angle.
+
+    With several ``edge_angles`` (or one that is not the default), each variant's primary view is
+    also compared with a vertex-projection render at :data:`REFERENCE_EDGE_DEG`: colour PSNR and
+    the fraction of pixels whose distance is more than 1 % off (or sky on one side only).
+    """
     from pibr.protocol.gl import create_context
     from pibr.scenes.registry import load_scene
     from pibr.server.pipeline import FrameProducer
-    from pibr.server.renderer import Renderer
+    from pibr.server.renderer import MAX_EDGE_ANGLE_DEG, RenderTarget, Renderer
     from pibr.server.session_plan import plan_session
     from pibr.server.video import H264Encoder
+
+    from .metrics import psnr
 
     scene = load_scene(scene_spec)
     poses = _poses(scene, trace, frames + 3, fps)
     ctx = create_context()
     extras = ["off", "on"] if extra_view == "both" else [extra_view]
+    edge_angles = tuple(edge_angles or (MAX_EDGE_ANGLE_DEG,))
+    reference = None
+    if edge_angles != (MAX_EDGE_ANGLE_DEG,):
+        reference = (Renderer(ctx, scene, "vertex", max_edge_angle_deg=REFERENCE_EDGE_DEG),
+                     RenderTarget(ctx, *view_size))
     rows = []
-    for projection in projections:
+    for projection, angle in ((p, a) for p in projections for a in edge_angles):
         t0 = time.perf_counter()
-        renderer = Renderer(ctx, scene, projection)
+        renderer = Renderer(ctx, scene, projection, max_edge_angle_deg=angle)
         setup_s = time.perf_counter() - t0
         for extra in extras:
             cfg = _server_cfg(scene=scene_spec, view_size=tuple(view_size), extra_view=extra, projection=projection,
-                              bitrate_kbps=bitrate_kbps, fps=fps)
+                              bitrate_kbps=bitrate_kbps, fps=fps, max_edge_deg=angle)
             session, spec = plan_session(cfg, scene, Hello())
             producer = FrameProducer(ctx, renderer, spec)
             encoder = H264Encoder(spec.layout.width, spec.layout.height, fps, bitrate_kbps, cfg.keyint, deterministic=True)
             stages = {"render": [], "readback": [], "pack": [], "encode": []}
             sizes, keys = [], []
+            accuracy = {"psnr": [], "off": []}
             for i, (t, pose) in enumerate(poses):
                 p = producer.produce(pose, t)
                 te = time.perf_counter()
@@ -68,6 +94,12 @@ def bench_server(scene_spec="room", trace="pred6dof-1", frames=40, view_size=(10
                 encode_ms = (time.perf_counter() - te) * 1e3
                 if i < 3:
                     continue  # warm-up: shader compilation, encoder start
+                if reference is not None and extra == extras[0]:
+                    ref_renderer, ref_target = reference
+                    ref_renderer.render_wide(ref_target, pose, t)
+                    accuracy["psnr"].append(psnr(ref_target.read_color(), producer.primary.read_color()))
+                    accuracy["off"].append(_distance_disagreement(ref_target.read_distance(),
+                                                                  producer.primary.read_distance()))
                 stages["render"].append(p.render_ms)
                 stages["readback"].append(p.readback_ms)
                 stages["pack"].append(p.pack_ms)
@@ -77,7 +109,9 @@ def bench_server(scene_spec="room", trace="pred6dof-1", frames=40, view_size=(10
             producer.release()
             total = [sum(v) for v in zip(*stages.values())]
             rows.append({
-                "projection": projection, "extra_view": spec.extra_size is not None,
+                "projection": projection, "max_edge_deg": angle, "extra_view": spec.extra_size is not None,
+                "psnr_vs_reference_db": _median(accuracy["psnr"]) if accuracy["psnr"] else None,
+                "distance_off_fraction": float(np.mean(accuracy["off"])) if accuracy["off"] else None,
                 "view_size": list(view_size), "atlas": [spec.layout.width, spec.layout.height],
                 **{f"{k}_ms": _median(v) for k, v in stages.items()}, "total_ms": _median(total),
                 "kbps": float(np.mean(sizes) * 8 * fps / 1000), "frame_bytes_mean": float(np.mean(sizes)),
@@ -87,8 +121,12 @@ def bench_server(scene_spec="room", trace="pred6dof-1", frames=40, view_size=(10
                 "renderer_setup_s": setup_s, "frames": len(total),
             })
         renderer.release()
+    if reference is not None:
+        reference[0].release()
+        reference[1].release()
     ctx.release()
-    result = {"scene": scene.name, "trace": trace, "fps": fps, "bitrate_target_kbps": bitrate_kbps, "rows": rows}
+    result = {"scene": scene.name, "trace": trace, "fps": fps, "bitrate_target_kbps": bitrate_kbps,
+              "reference_edge_deg": REFERENCE_EDGE_DEG if reference is not None else None, "rows": rows}
     os.makedirs(out_dir, exist_ok=True)
     with open(os.path.join(out_dir, "bench_server.json"), "w") as f:
         json.dump(result, f, indent=2)
@@ -98,15 +136,24 @@ def bench_server(scene_spec="room", trace="pred6dof-1", frames=40, view_size=(10
 def print_server_table(result: dict) -> None:
     print(f"pibr bench server: scene {result['scene']}, {result['fps']:g} fps, target "
           f"{result['bitrate_target_kbps']:g} kbit/s (median ms per frame)")
-    head = f"{'projection':>10} {'extra':>5} {'atlas':>9} {'render':>7} {'readback':>8} {'pack':>6} {'encode':>7} " \
-           f"{'total':>7} {'kbit/s':>8} {'triangles':>10}"
+    accuracy = result.get("reference_edge_deg") is not None
+    head = f"{'projection':>10} {'edge':>5} {'extra':>5} {'atlas':>9} {'render':>7} {'readback':>8} {'pack':>6} " \
+           f"{'encode':>7} {'total':>7} {'kbit/s':>8} {'triangles':>10}"
+    if accuracy:
+        head += f" {'PSNR ref':>8} {'>1% off':>8}"
     print(head)
     print("-" * len(head))
     for r in result["rows"]:
-        print(f"{r['projection']:>10} {('on' if r['extra_view'] else 'off'):>5} "
-              f"{r['atlas'][0]:>4}x{r['atlas'][1]:<4} {r['render_ms']:7.1f} {r['readback_ms']:8.1f} "
-              f"{r['pack_ms']:6.1f} {r['encode_ms']:7.1f} {r['total_ms']:7.1f} {r['kbps']:8.0f} "
-              f"{r['rasterised_triangles']:>10}")
+        line = (f"{r['projection']:>10} {r.get('max_edge_deg', 0):4g}° {('on' if r['extra_view'] else 'off'):>5} "
+                f"{r['atlas'][0]:>4}x{r['atlas'][1]:<4} {r['render_ms']:7.1f} {r['readback_ms']:8.1f} "
+                f"{r['pack_ms']:6.1f} {r['encode_ms']:7.1f} {r['total_ms']:7.1f} {r['kbps']:8.0f} "
+                f"{r['rasterised_triangles']:>10}")
+        if accuracy and r["psnr_vs_reference_db"] is not None:
+            line += f" {r['psnr_vs_reference_db']:8.2f} {100 * r['distance_off_fraction']:7.3f}%"
+        print(line)
+    if accuracy:
+        print(f"PSNR ref, >1% off: primary view against a vertex-projection render with "
+              f"{result['reference_edge_deg']:g}° edges (colour PSNR; pixels whose distance is more than 1 % off)")
 
 
 def bench_client(scene_spec="room", trace="pred6dof-1", frames=40, view_size=(1024, 1024), out_size=(960, 540),

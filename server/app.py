@@ -126,7 +126,8 @@ class Server:
 
         key = (id(scene), self.config.projection)
         if key not in self._renderers:
-            self._renderers[key] = Renderer(ctx, scene, self.config.projection)
+            self._renderers[key] = Renderer(ctx, scene, self.config.projection,
+                                            max_edge_angle_deg=self.config.max_edge_deg)
         return self._renderers[key]
 
     async def get_bundle(self, scene):

@@ -35,7 +35,7 @@ def _announce(what: str):
 
 
 def register(sub) -> None:
-    from .renderer import DEFAULT_PROJECTION, PROJECTIONS
+    from .renderer import DEFAULT_PROJECTION, MAX_EDGE_ANGLE_DEG, PROJECTIONS
 
     p = sub.add_parser("serve", help="run the rendering server",
                        description="Serve wide-angle views of a scene to pibr clients over TCP.")
@@ -57,6 +57,10 @@ def register(sub) -> None:
     p.add_argument("--projection", choices=PROJECTIONS, default=DEFAULT_PROJECTION,
                    help=f"wide-angle rasterisation: pre-tessellated vertex projection or tessellation shader "
                         f"(default {DEFAULT_PROJECTION}; 'pibr bench server' measures both)")
+    p.add_argument("--max-edge-deg", type=float, default=MAX_EDGE_ANGLE_DEG, metavar="DEG",
+                   help=f"longest triangle edge, as a view angle, drawn straight in the wide-angle projection: "
+                        f"smaller follows its curves more closely and costs more triangles (default "
+                        f"{MAX_EDGE_ANGLE_DEG:g}; 'pibr bench server --max-edge-deg 3,6,12' measures the trade)")
     p.add_argument("--server-delay-ms", type=float, default=20.0,
                    help="virtual clock: modelled render + encode time of a frame (default 20)")
     p.add_argument("--depth-codec", choices=("h264", "edge"), default="h264",
@@ -90,7 +94,8 @@ def cmd_serve(args) -> int:
     config = ServerConfig(host=args.host, port=args.port, scene=args.scene, fps=args.fps,
                           view_size=tuple(args.view_size), extra_view=args.extra_view,
                           extra_offset=args.extra_offset, bitrate_kbps=args.bitrate_kbps, keyint=args.keyint,
-                          preset=args.preset, projection=args.projection, server_delay_ms=args.server_delay_ms,
+                          preset=args.preset, projection=args.projection, max_edge_deg=args.max_edge_deg,
+                          server_delay_ms=args.server_delay_ms,
                           depth_codec=args.depth_codec, max_sessions=args.max_sessions,
                           edge=EdgeSettings(kbps=args.edge_kbps, temporal=not args.edge_no_temporal,
                                             perceptual=args.edge_perceptual))

@@ -10,9 +10,12 @@ from pibr.protocol.pose import dual_view_offset
 
 from .depth_stream import EdgeSettings
 from .proxies import ProxySettings
-from .renderer import DEFAULT_PROJECTION, PROJECTIONS
+from .renderer import DEFAULT_PROJECTION, MAX_EDGE_ANGLE_DEG, PROJECTIONS
 
 DEFAULT_PORT = 7450
+#: Range of --max-edge-deg: below 1 degree the pre-tessellated room has millions of triangles;
+#: above 30 the straight edges miss the projection's curves by many pixels.
+MIN_EDGE_DEG, MAX_EDGE_DEG = 1.0, 30.0
 
 
 extra_offset_pose = dual_view_offset  # the server's name for it
@@ -35,6 +38,7 @@ class ServerConfig:
     keyint: int = 30
     preset: str = "ultrafast"
     projection: str = DEFAULT_PROJECTION
+    max_edge_deg: float = MAX_EDGE_ANGLE_DEG  # longest edge (view angle) the projection rasterises straight
     server_delay_ms: float = 20.0       # virtual clock: render + encode time model
     depth_codec: str = "h264"
     max_message_size: int = DEFAULT_MAX_MESSAGE_SIZE
@@ -60,6 +64,9 @@ class ServerConfig:
             raise ConfigError(f"keyframe interval must be in 1..10000 frames, got {self.keyint}")
         if self.projection not in PROJECTIONS:
             raise ConfigError(f"projection must be one of {', '.join(PROJECTIONS)}, got {self.projection!r}")
+        if not (MIN_EDGE_DEG <= self.max_edge_deg <= MAX_EDGE_DEG):
+            raise ConfigError(f"max edge angle must be in {MIN_EDGE_DEG:g}..{MAX_EDGE_DEG:g} degrees, "
+                              f"got {self.max_edge_deg}")
         if not (0 <= self.server_delay_ms <= 10000):
             raise ConfigError(f"server delay must be in 0..10000 ms, got {self.server_delay_ms}")
         if self.depth_codec not in ("h264", "edge"):

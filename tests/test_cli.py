@@ -56,6 +56,7 @@ def test_bad_cli_values_are_reported(capsys):
     (["bench", "ibr", "--latency-ms", "nan"], "finite"),
     (["bench", "optimize-offset", "--frames", "0"], "--frames: must be at least 1"),
     (["bench", "lod", "--fraction", "2"], "must be in (0, 1]"),
+    (["bench", "server", "--max-edge-deg", "6,0.5"], "expected angles in 1..30 degrees"),
     (["demo", "--flip-every", "-1"], "--flip-every: must be >= 0"),
 ])
 def test_bad_bench_arguments_are_named(capsys, argv, message):
@@ -71,6 +72,8 @@ def test_bench_schedules_outside_the_trace_are_refused(capsys):
     assert "not a single frame" in capsys.readouterr().err
     assert main(["serve", "--port", "0", "--edge-kbps", "-5"]) == 2
     assert "edge codec bitrate" in capsys.readouterr().err
+    assert main(["serve", "--port", "0", "--max-edge-deg", "0.5"]) == 2
+    assert "max edge angle must be in 1..30 degrees" in capsys.readouterr().err
 
 
 def test_scenes_lists_builtins(capsys):

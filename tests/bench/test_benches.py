@@ -18,11 +18,16 @@ def test_bench_server_and_client(tmp_path, capsys):
     from pibr.bench.pipeline_bench import bench_client, bench_server, print_client_table, print_server_table
 
     server = bench_server(frames=3, view_size=TINY_VIEW, projections=("vertex",), extra_view="both",
-                          out_dir=str(tmp_path))
+                          edge_angles=(6.0, 12.0), out_dir=str(tmp_path))
     rows = server["rows"]
-    assert [r["extra_view"] for r in rows] == [False, True]
+    assert [(r["max_edge_deg"], r["extra_view"]) for r in rows] == [(6.0, False), (6.0, True), (12.0, False),
+                                                                     (12.0, True)]
     assert rows[1]["atlas"][0] > rows[0]["atlas"][0]                    # the extra view widens the atlas
     assert all(_finite(r[k]) and r[k] > 0 for r in rows for k in ("render_ms", "encode_ms", "kbps"))
+    # coarser edges: fewer triangles; each compared with the 2-degree reference
+    assert rows[0]["rasterised_triangles"] > rows[2]["rasterised_triangles"]
+    for r in (rows[0], rows[2]):
+        assert r["psnr_vs_reference_db"] > 20 and 0 <= r["distance_off_fraction"] < 0.05
     client = bench_client(frames=3, view_size=TINY_VIEW, out_size=TINY_OUT, methods=("none", "proxy"),
                           out_dir=str(tmp_path))
     assert set(client["display_ms"]) == {"none", "proxy"}
