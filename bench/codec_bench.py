@@ -17,7 +17,6 @@ atlas with depth inside against the colour-only atlas beside the edge stream.
 """
 from __future__ import annotations
 
-import json
 import math
 import os
 import sys
@@ -25,7 +24,7 @@ import time
 
 import numpy as np
 
-from pibr.protocol.messages import Hello
+from .results import write_result
 
 
 def disparity_error(r_true: np.ndarray, r_test: np.ndarray, near: float) -> dict:
@@ -67,7 +66,7 @@ def run_codec_bench(scene_spec="room", traces=("pred6dof-1", "pred6dof-2"), star
     from pibr.server.edge_extract import extract_edge_samples
     from pibr.server.packer import AtlasPacker
     from pibr.server.pipeline import FrameProducer, ProducerSpec
-    from pibr.server.renderer import RenderTarget, Renderer
+    from pibr.server.renderer import Renderer
     from pibr.server.video import H264Encoder
 
     from pibr.protocol.errors import ConfigError
@@ -210,9 +209,7 @@ def run_codec_bench(scene_spec="room", traces=("pred6dof-1", "pred6dof-2"), star
     if with_end_to_end:
         result["end_to_end"] = end_to_end(scene_spec, traces[0], start_s, duration_s, total_kbps=bitrate_kbps,
                                           view_size=view_size, out_size=out_size, progress=progress)
-    os.makedirs(out_dir, exist_ok=True)
-    with open(os.path.join(out_dir, "codec.json"), "w") as f:
-        json.dump(result, f, indent=2)
+    write_result(out_dir, "codec.json", result)
     from .plots import plot_codec
 
     plot_codec(result, os.path.join(out_dir, "codec.png"))

@@ -20,7 +20,6 @@ that had reached the server.
 """
 from __future__ import annotations
 
-import json
 import math
 import os
 from dataclasses import dataclass
@@ -29,6 +28,7 @@ import numpy as np
 
 from pibr.protocol.pose import Pose
 from pibr.protocol.projection import FORWARD
+from .results import write_result
 
 VARIANTS = ("primary", "peel_no_offset", "offset_no_peel", "offset_peel")
 VARIANT_LABELS = {"primary": "primary only", "peel_no_offset": "extra: peeling, no offset",
@@ -268,9 +268,7 @@ def run_coverage_bench(scene_spec="room", traces=("pred6dof-1", "pred6dof-2"), l
               "output_size": list(out_size), "offset": list(offset_pose.as_array()),
               "tolerance": COVERAGE_TOLERANCE, "means": overall,
               "per_trace": per_trace}
-    os.makedirs(out_dir, exist_ok=True)
-    with open(os.path.join(out_dir, "coverage.json"), "w") as f:
-        json.dump(result, f, indent=2)
+    write_result(out_dir, "coverage.json", result)
     from .plots import plot_coverage
 
     plot_coverage(result, os.path.join(out_dir, "coverage.png"))

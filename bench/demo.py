@@ -8,13 +8,13 @@ each method's recording, ``side_by_side.mp4``, ``metrics.json``, ``metrics_frame
 """
 from __future__ import annotations
 
-import json
 import os
 import sys
 import time
 
 from .evaluate import evaluate_run, summary_table
 from .processes import run_pipeline
+from .results import write_result
 
 DEFAULT_METHODS = ("none", "rotation", "proxy")
 
@@ -54,8 +54,7 @@ def run_demo(out_dir: str = "out", scene: str = "room", trace: str = "pred6dof-1
     metrics["timings_s"] = {"server_start": timings["server_start_s"], "streaming": t_stream - t0,
                             "evaluation": t_end - t_stream, "total": t_end - t0}
     metrics["latency_ms"] = latency_ms
-    with open(os.path.join(out_dir, "metrics.json"), "w") as f:
-        json.dump(metrics, f, indent=2)
+    write_result(out_dir, "metrics.json", metrics)
     return metrics
 
 

@@ -30,6 +30,7 @@ from pibr.protocol.errors import ConfigError
 from pibr.protocol.pose import Pose
 
 from .metrics import error_image, frame_metrics, pixels_per_degree
+from .results import write_result
 
 log = logging.getLogger(__name__)
 
@@ -181,8 +182,7 @@ def evaluate_run(run_dir: str, scene_spec: str | None = None, flip_every: int = 
            "clock": client["clock"], "output": {"width": width, "height": height, "fov_deg": fov,
                                                 "rate_hz": client["rate_hz"], "pixels_per_degree": ppd},
            "flip_every": flip_every, "methods": summary}
-    with open(os.path.join(run_dir, "metrics.json"), "w") as f:
-        json.dump(out, f, indent=2)
+    write_result(run_dir, "metrics.json", out)
     with open(os.path.join(run_dir, "metrics_frames.csv"), "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=list(rows_out[0].keys()))
         w.writeheader()

@@ -13,8 +13,6 @@ ms, triangles drawn and DSSIM for several LoD targets and forced levels.
 """
 from __future__ import annotations
 
-import json
-import os
 import sys
 import time
 
@@ -24,6 +22,7 @@ from pibr.protocol.messages import Frame, Hello, OutputConfig, PayloadKind
 
 from .coverage import LatencyModel, display_samples
 from .metrics import dssim, psnr, ssim
+from .results import write_result
 
 _FLOOR_FS = """
 #version 410
@@ -255,9 +254,7 @@ def run_ibr_bench(scene_spec="room", traces=("pred6dof-1", "pred6dof-2"), latenc
     finally:
         if bar is not None:
             bar.close()
-    os.makedirs(out_dir, exist_ok=True)
-    with open(os.path.join(out_dir, "ibr.json"), "w") as f:
-        json.dump(result, f, indent=2)
+    write_result(out_dir, "ibr.json", result)
     return result
 
 

@@ -8,13 +8,13 @@ and the largest distance of one outside the proxy, measured on the proxy itself.
 """
 from __future__ import annotations
 
-import json
 import os
 import platform
 import time
 from pathlib import Path
 
 from pibr.scenes import data as _scene_data
+from .results import write_result
 
 #: The real asset measured by default: Keenan Crane's "Spot" (CC0), see scenes/data/assets/README.md.
 REAL_ASSET = Path(_scene_data.__file__).resolve().parent / "assets" / "spot_triangulated.obj"
@@ -72,9 +72,7 @@ def run_lod_bench(scene_specs=("room",), assets=None, resolution=128, target_fra
         "totals": _totals(all_rows),
         "wall_seconds": time.perf_counter() - t_all,
     }
-    os.makedirs(out_dir, exist_ok=True)
-    with open(os.path.join(out_dir, "lod.json"), "w") as f:
-        json.dump(result, f, indent=2)
+    write_result(out_dir, "lod.json", result)
     return result
 
 

@@ -16,13 +16,13 @@ returns the exhaustive grid's optimum whenever the surface is smooth at the coar
 from __future__ import annotations
 
 import itertools
-import json
 import os
 import sys
 
 import numpy as np
 
 from .coverage import CoverageProbe, LatencyModel, display_samples
+from .results import write_result
 
 
 def parse_range(text: str) -> list[float]:
@@ -150,9 +150,7 @@ def search_offset(scene_spec="room", traces=("pred6dof-1", "pred6dof-2"), latenc
               "surface": np.where(np.isfinite(surface), surface, None).tolist(), "best": best,
               "view_size": list(view_size), "output_size": list(out_size)}
     if out_dir:
-        os.makedirs(out_dir, exist_ok=True)
-        with open(os.path.join(out_dir, "offset_search.json"), "w") as fh:
-            json.dump(result, fh, indent=2)
+        write_result(out_dir, "offset_search.json", result)
         from .plots import plot_offset_search
 
         plot_offset_search({**result, "surface": surface.tolist()}, os.path.join(out_dir, "offset_search.png"))

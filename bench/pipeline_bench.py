@@ -7,13 +7,12 @@ stream the server pipeline produced. Timings here are noisy: compare within one 
 """
 from __future__ import annotations
 
-import json
-import os
 import time
 
 import numpy as np
 
 from pibr.protocol.messages import Frame, Hello, OutputConfig, PayloadKind
+from .results import write_result
 
 
 def _poses(scene, trace_spec: str, count: int, fps: float, start_s: float = 10.0):
@@ -127,9 +126,7 @@ def bench_server(scene_spec="room", trace="pred6dof-1", frames=40, view_size=(10
     ctx.release()
     result = {"scene": scene.name, "trace": trace, "fps": fps, "bitrate_target_kbps": bitrate_kbps,
               "reference_edge_deg": REFERENCE_EDGE_DEG if reference is not None else None, "rows": rows}
-    os.makedirs(out_dir, exist_ok=True)
-    with open(os.path.join(out_dir, "bench_server.json"), "w") as f:
-        json.dump(result, f, indent=2)
+    write_result(out_dir, "bench_server.json", result)
     return result
 
 
@@ -236,9 +233,7 @@ def bench_client(scene_spec="room", trace="pred6dof-1", frames=40, view_size=(10
               "decode_ms": _median(stages["decode"]), "upload_ms": _median(stages["upload"]),
               "display_ms": {m: _median(v) for m, v in display.items()}, "readback_ms": _median(readback),
               "frames": len(stages["decode"])}
-    os.makedirs(out_dir, exist_ok=True)
-    with open(os.path.join(out_dir, "bench_client.json"), "w") as f:
-        json.dump(result, f, indent=2)
+    write_result(out_dir, "bench_client.json", result)
     return result
 
 

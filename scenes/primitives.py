@@ -289,7 +289,6 @@ def cylinder(radius: float, height: float, segments: int = 32, caps: bool = True
     if top < 0 or not math.isfinite(top):
         raise SceneError(f"top_radius must be >= 0, got {top_radius}")
     phi, d = _ring(segments)
-    cols = segments + 1
     side_n = _unit(d * height + _Y * (radius - top))
     u = phi / (2 * np.pi) if uv_scale is None else phi * radius / uv_scale
     v_top = 1.0 if uv_scale is None else height / uv_scale

@@ -7,8 +7,6 @@ Output rays that leave the primary view's front hemisphere have no source (alpha
 """
 from __future__ import annotations
 
-import numpy as np
-
 from pibr.protocol.pose import Pose
 
 from ..frame_textures import bind_frame_uniforms, frame_glsl, rect_uniform
