@@ -20,6 +20,7 @@ from pibr.protocol.gl import GLThread
 from pibr.protocol.messages import Error, Hello
 
 from .config import ServerConfig
+from .listener import TrackedListener
 from .pipeline import FrameProducer
 from .session import Session
 from .session_plan import plan_session
@@ -28,20 +29,19 @@ from .video import H264Encoder
 log = logging.getLogger(__name__)
 
 
-class Server:
+class Server(TrackedListener):
     name = "pibr-server/0.1"
 
     def __init__(self, config: ServerConfig):
+        super().__init__()
         self.config = config
         self.sessions: dict[int, Session] = {}
-        self._tasks: set[asyncio.Task] = set()
         self._ids = itertools.count(1)
         self._scenes: dict[str, object] = {}
         self._scene_lock = asyncio.Lock()
         self._renderers: dict = {}  # touched only on the GL thread
         self._bundles: dict = {}    # scene id -> ProxyBundle
         self._bundle_lock = asyncio.Lock()
-        self._server = None
         self.gl: GLThread | None = None
         self.encode_pool = concurrent.futures.ThreadPoolExecutor(max_workers=max(2, os.cpu_count() or 2),
                                                                  thread_name_prefix="pibr-encode")
@@ -54,23 +54,12 @@ class Server:
         self.gl = await loop.run_in_executor(None, GLThread, "pibr-server-gl")
         scene = await self.get_scene(self.config.scene)  # load and upload the default scene before accepting
         await self.gl.run(self._renderer, scene)
-        self._server = await asyncio.start_server(self._accept, self.config.host, self.config.port)
-        host, port = self._server.sockets[0].getsockname()[:2]
+        host, port = await self.listen(self.config.host, self.config.port)
         log.info("pibr server listening on %s:%d (default scene %s)", host, port, scene.name)
         return host, port
 
-    async def serve_forever(self) -> None:
-        async with self._server:
-            await self._server.serve_forever()
-
     async def close(self) -> None:
-        if self._server is not None:
-            self._server.close()
-            await self._server.wait_closed()
-        for task in list(self._tasks):
-            task.cancel()
-        if self._tasks:
-            await asyncio.gather(*self._tasks, return_exceptions=True)
+        await super().close()
         if self.gl is not None:
             def release_all(ctx):
                 for r in self._renderers.values():
@@ -81,7 +70,7 @@ class Server:
             self.gl = None
         self.encode_pool.shutdown(wait=False, cancel_futures=True)
 
-    async def _accept(self, reader, writer) -> None:
+    async def handle(self, reader, writer) -> None:
         session_id = next(self._ids)
         if len(self.sessions) >= self.config.max_sessions:
             from pibr.protocol.connection import Connection
@@ -96,15 +85,10 @@ class Server:
             return
         session = Session(self, reader, writer, session_id)
         self.sessions[session_id] = session
-        task = asyncio.current_task()
-        self._tasks.add(task)
         try:
             await session.run()
-        except asyncio.CancelledError:
-            pass  # shutting down while the session was closing; it has released what it could
         finally:
             self.sessions.pop(session_id, None)
-            self._tasks.discard(task)
 
     # ------------------------------------------------------------------ sessions
 

@@ -27,6 +27,8 @@ from pibr.protocol.framing import DEFAULT_MAX_MESSAGE_SIZE, FrameReader, encode_
 from pibr.protocol.link import LinkModel, LinkParams
 from pibr.protocol.messages import Clock, Error, Hello, ProxyChunk, Welcome
 
+from .listener import TrackedListener
+
 log = logging.getLogger(__name__)
 
 QUEUE_FRAMES = 512
@@ -151,45 +153,25 @@ async def _close(writer) -> None:
         pass
 
 
-class Relay:
+class Relay(TrackedListener):
     def __init__(self, config: RelayConfig):
+        super().__init__()
         self.config = config
         self._numbers = itertools.count(1)
-        self._server = None
-        self._tasks: set = set()
 
     async def start(self) -> tuple[str, int]:
-        self._server = await asyncio.start_server(self._accept, *self.config.listen)
-        host, port = self._server.sockets[0].getsockname()[:2]
+        host, port = await self.listen(*self.config.listen)
         c = self.config
         log.info("pibr relay on %s:%d -> %s:%d (up %g ms, down %g ms, jitter %g/%g ms, cap %g/%g kbit/s)",
                  host, port, *c.upstream, c.up.delay_ms, c.down.delay_ms, c.up.jitter_ms, c.down.jitter_ms,
                  c.up.kbps, c.down.kbps)
         return host, port
 
-    async def _accept(self, reader, writer) -> None:
-        task = asyncio.current_task()
-        self._tasks.add(task)
+    async def handle(self, reader, writer) -> None:
         try:
             await _Pair(self, next(self._numbers), reader, writer).run()
-        except asyncio.CancelledError:
-            pass  # the relay is shutting down; the pair closed its sockets on the way out
         except Exception:  # one pair's bug must not stop the relay; log it loudly
             log.exception("relay: connection pair failed")
-        finally:
-            self._tasks.discard(task)
-
-    async def serve_forever(self) -> None:
-        async with self._server:
-            await self._server.serve_forever()
-
-    async def close(self) -> None:
-        if self._server is not None:
-            self._server.close()
-            await self._server.wait_closed()
-        for t in list(self._tasks):
-            t.cancel()
-        await asyncio.gather(*self._tasks, return_exceptions=True)
 
 
 async def run_relay(config: RelayConfig, ready=None) -> None:

@@ -1,0 +1,49 @@
+"""A TCP listener whose connection handlers are tracked, so closing it stops them all.
+
+Both the server and the relay accept connections this way: each connection runs in its own
+task; :meth:`TrackedListener.close` stops accepting, cancels every handler still running
+and waits for them, so nothing outlives a shutdown.
+"""
+from __future__ import annotations
+
+import asyncio
+
+
+class TrackedListener:
+    """Subclasses implement :meth:`handle`; one task per connection."""
+
+    def __init__(self):
+        self._server: asyncio.AbstractServer | None = None
+        self._tasks: set[asyncio.Task] = set()
+
+    async def listen(self, host: str, port: int) -> tuple[str, int]:
+        """Start accepting on ``host:port`` (0: any free port) -> the bound (host, port)."""
+        self._server = await asyncio.start_server(self._run_handler, host, port)
+        return self._server.sockets[0].getsockname()[:2]
+
+    async def handle(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        raise NotImplementedError
+
+    async def _run_handler(self, reader, writer) -> None:
+        task = asyncio.current_task()
+        self._tasks.add(task)
+        try:
+            await self.handle(reader, writer)
+        except asyncio.CancelledError:
+            pass  # shutting down; the handler released what it could on the way out
+        finally:
+            self._tasks.discard(task)
+
+    async def serve_forever(self) -> None:
+        async with self._server:
+            await self._server.serve_forever()
+
+    async def close(self) -> None:
+        """Stop accepting, cancel the running handlers and wait for them."""
+        if self._server is not None:
+            self._server.close()
+            await self._server.wait_closed()
+        for task in list(self._tasks):
+            task.cancel()
+        if self._tasks:
+            await asyncio.gather(*self._tasks, return_exceptions=True)
