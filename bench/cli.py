@@ -6,19 +6,14 @@ import argparse
 
 import math
 
-#: Sizes (pixels) a benchmark accepts; the server and client configurations check more.
-MIN_SIZE, MAX_SIZE = 8, 8192
-
-
 def _size(text: str) -> tuple[int, int]:
+    from pibr.protocol.address import parse_size
+    from pibr.protocol.errors import ConfigError
+
     try:
-        w, _, h = text.lower().partition("x")
-        size = int(w), int(h or w)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT, got {text!r}") from None
-    if not all(MIN_SIZE <= v <= MAX_SIZE for v in size):
-        raise argparse.ArgumentTypeError(f"width and height must be in {MIN_SIZE}..{MAX_SIZE}, got {text!r}")
-    return size
+        return parse_size(text)
+    except ConfigError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def _number(text: str, kind=float) -> float:

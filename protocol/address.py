@@ -1,4 +1,4 @@
-"""``HOST:PORT`` strings of the command line."""
+"""Text forms every process's command line shares: ``HOST:PORT`` addresses and ``WxH`` sizes."""
 from __future__ import annotations
 
 from .errors import ConfigError
@@ -24,3 +24,19 @@ def parse_host_port(text: str, default_host: str = "127.0.0.1") -> tuple[str, in
     if not 0 <= port <= 65535:
         raise ConfigError(f"bad address {text!r}: port must be in 0..65535")
     return host, port
+
+
+#: Largest image side a size may name (pixels).
+MAX_SIZE = 16384
+
+
+def parse_size(text: str) -> tuple[int, int]:
+    """``"WxH"`` (or ``"N"`` for N x N) -> (width, height) in 1..MAX_SIZE. Raises ConfigError."""
+    w, _, h = text.strip().lower().partition("x")
+    try:
+        size = int(w), int(h or w)
+    except ValueError:
+        raise ConfigError(f"expected WIDTHxHEIGHT, got {text!r}") from None
+    if not all(1 <= v <= MAX_SIZE for v in size):
+        raise ConfigError(f"width and height must be in 1..{MAX_SIZE}, got {text!r}")
+    return size

@@ -11,11 +11,13 @@ from .config import DEFAULT_PORT
 
 
 def _size(text: str) -> tuple[int, int]:
+    from pibr.protocol.address import parse_size
+    from pibr.protocol.errors import ConfigError
+
     try:
-        w, _, h = text.lower().partition("x")
-        return int(w), int(h or w)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT, got {text!r}") from None
+        return parse_size(text)
+    except ConfigError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def _offset(text: str) -> tuple[float, float, float]:
