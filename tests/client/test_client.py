@@ -1,8 +1,6 @@
 """The client against an in-process server and relay: recordings, determinism, real clock."""
 import asyncio
-import csv
 import json
-import os
 
 import numpy as np
 import pytest
@@ -10,28 +8,18 @@ import pytest
 from pibr.client.app import ClientConfig, run_client
 from pibr.client.recorder import RECORD_FIELDS, read_records
 from pibr.protocol.errors import ConfigError
-from pibr.protocol.link import LinkParams
 from pibr.server.app import Server
 from pibr.server.config import ServerConfig
-from pibr.server.relay import Relay, RelayConfig
+
+from ..loopback import server_behind_relay
 
 pytestmark = pytest.mark.gl
 
 
 @pytest.fixture
 async def relay_endpoint():
-    srv = Server(ServerConfig(port=0, scene="room", view_size=(192, 192), bitrate_kbps=3000))
-    host, port = await srv.start()
-    stask = asyncio.create_task(srv.serve_forever())
-    relay = Relay(RelayConfig(("127.0.0.1", 0), (host, port), LinkParams(64.0), LinkParams(64.0)))
-    rhost, rport = await relay.start()
-    rtask = asyncio.create_task(relay.serve_forever())
-    yield rhost, rport
-    for t in (rtask, stask):
-        t.cancel()
-    await asyncio.gather(rtask, stask, return_exceptions=True)
-    await relay.close()
-    await srv.close()
+    async with server_behind_relay(ServerConfig(port=0, scene="room", view_size=(192, 192), bitrate_kbps=3000)) as ep:
+        yield ep
 
 
 def _cfg(host, port, out, **kw):

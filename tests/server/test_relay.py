@@ -7,44 +7,28 @@ import pytest
 from pibr.client.connection import ClientConnection
 from pibr.protocol.connection import Connection
 from pibr.protocol.link import LinkParams
-from pibr.protocol.messages import Clock, Error, Frame, Hello, OutputConfig, PoseMsg
-from pibr.server.app import Server
+from pibr.protocol.messages import Error, Hello, OutputConfig
 from pibr.server.config import ServerConfig
 from pibr.server.relay import Relay, RelayConfig
+
+from ..loopback import exchange_virtual, server_behind_relay
 
 pytestmark = pytest.mark.gl
 
 
 @pytest.fixture
 async def chain():
-    srv = Server(ServerConfig(port=0, scene="sphere", view_size=(128, 128), server_delay_ms=20.0, bitrate_kbps=2000))
-    host, port = await srv.start()
-    stask = asyncio.create_task(srv.serve_forever())
-    relay = Relay(RelayConfig(("127.0.0.1", 0), (host, port), LinkParams(64.0), LinkParams(64.0)))
-    rhost, rport = await relay.start()
-    rtask = asyncio.create_task(relay.serve_forever())
-    yield rhost, rport
-    for t in (rtask, stask):
-        t.cancel()
-    await asyncio.gather(rtask, stask, return_exceptions=True)
-    await relay.close()
-    await srv.close()
+    config = ServerConfig(port=0, scene="sphere", view_size=(128, 128), server_delay_ms=20.0, bitrate_kbps=2000)
+    async with server_behind_relay(config) as ep:
+        yield ep
 
 
 async def test_virtual_frames_carry_injected_delay(chain):
     host, port = chain
     c = await ClientConnection.open(host, port)
     cfg = await c.handshake(Hello(clock="virtual", output=OutputConfig(160, 96, 90.0, 30.0)))
-    interval, horizon, frames = 33_333, None, []
-    for tick in range(-6, 15):
-        t = tick * interval
-        await c.send(PoseMsg(tick + 6, t, cfg.viewer_origin), vtime_us=t, flush=False)
-        await c.send(Clock(), vtime_us=t + interval)
-        while horizon is None or horizon <= t:
-            env = await c.recv(timeout=60)
-            horizon = env.vtime_us
-            if isinstance(env.message, Frame):
-                frames.append((env.vtime_us, env.message))
+    interval = 33_333
+    frames = await exchange_virtual(c, cfg.viewer_origin, [tick * interval for tick in range(-6, 15)], interval)
     await c.close()
     assert frames
     for vt, f in frames:

@@ -10,10 +10,12 @@ from pibr.protocol.connection import Connection
 from pibr.protocol.errors import (BadMagic, MalformedMessage, MessageTooLarge, RemoteError, SceneError,
                                   UnexpectedMessage, UnsupportedVersion)
 from pibr.protocol.framing import HEADER, MAGIC, encode_frame
-from pibr.protocol.messages import Clock, Error, Frame, Hello, OutputConfig, PoseMsg
+from pibr.protocol.messages import Clock, Error, Hello, OutputConfig, PoseMsg
 from pibr.protocol.pose import Pose
 from pibr.server.app import Server
 from pibr.server.config import ServerConfig
+
+from ..loopback import exchange_virtual
 
 pytestmark = pytest.mark.gl
 
@@ -49,20 +51,10 @@ async def _raw(host, port, data: bytes, read_timeout=10.0) -> list:
 
 
 async def _virtual_session(host, port, ticks=12, interval_us=33_333):
-    """Minimal virtual-clock client: -> list of (vtime, Frame)."""
+    """Minimal virtual-clock client: -> (Welcome, list of (vtime, Frame))."""
     c = await ClientConnection.open(host, port)
     cfg = await c.handshake(HELLO)
-    frames, horizon = [], None
-    origin = cfg.viewer_origin
-    for tick in range(ticks):
-        t = tick * interval_us
-        await c.send(PoseMsg(tick, t, origin), vtime_us=t, flush=False)
-        await c.send(Clock(), vtime_us=t + interval_us)
-        while horizon is None or horizon <= t:
-            env = await c.recv(timeout=60)
-            horizon = env.vtime_us
-            if isinstance(env.message, Frame):
-                frames.append((env.vtime_us, env.message))
+    frames = await exchange_virtual(c, cfg.viewer_origin, [tick * interval_us for tick in range(ticks)], interval_us)
     await c.close()
     return cfg, frames
 

@@ -1,0 +1,48 @@
+"""In-process server (and relay) on loopback for tests, and a minimal virtual-clock client loop."""
+from __future__ import annotations
+
+import asyncio
+import contextlib
+
+from pibr.protocol.link import LinkParams
+from pibr.protocol.messages import Clock, Frame, PoseMsg
+from pibr.server.app import Server
+from pibr.server.config import ServerConfig
+from pibr.server.relay import Relay, RelayConfig
+
+
+@contextlib.asynccontextmanager
+async def server_behind_relay(config: ServerConfig, up_ms: float = 64.0, down_ms: float = 64.0):
+    """Start a server and a relay in front of it; yields the relay's (host, port)."""
+    srv = Server(config)
+    host, port = await srv.start()
+    stask = asyncio.create_task(srv.serve_forever())
+    relay = Relay(RelayConfig(("127.0.0.1", 0), (host, port), LinkParams(up_ms), LinkParams(down_ms)))
+    try:
+        rhost, rport = await relay.start()
+        rtask = asyncio.create_task(relay.serve_forever())
+        try:
+            yield rhost, rport
+        finally:
+            rtask.cancel()
+            await asyncio.gather(rtask, return_exceptions=True)
+            await relay.close()
+    finally:
+        stask.cancel()
+        await asyncio.gather(stask, return_exceptions=True)
+        await srv.close()
+
+
+async def exchange_virtual(conn, origin, pose_times_us, interval_us: int) -> list:
+    """Send a pose at each virtual time (ids 0, 1, ...) with a clock promise one interval on,
+    read until the server's horizon passes it; -> [(virtual arrival us, Frame)]."""
+    frames, horizon = [], None
+    for i, t in enumerate(pose_times_us):
+        await conn.send(PoseMsg(i, t, origin), vtime_us=t, flush=False)
+        await conn.send(Clock(), vtime_us=t + interval_us)
+        while horizon is None or horizon <= t:
+            env = await conn.recv(timeout=60)
+            horizon = env.vtime_us
+            if isinstance(env.message, Frame):
+                frames.append((env.vtime_us, env.message))
+    return frames
