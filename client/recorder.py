@@ -39,18 +39,16 @@ class MethodRecorder:
         rate = fractions.Fraction(rate_hz).limit_denominator(1000)
         self._containers = []
         self._streams = []
-        mp4 = av.open(os.path.join(out_dir, f"{method}.mp4"), "w")
-        s = mp4.add_stream("libx264", rate=rate)
-        s.width, s.height, s.pix_fmt = width, height, "yuv420p"
-        s.options = {"preset": "ultrafast", "crf": "18"}
-        self._containers.append(mp4)
-        self._streams.append(s)
+        # (file, codec, pixel format, options): for watching, and lossless for the metrics
+        outputs = [(f"{method}.mp4", "libx264", "yuv420p", {"preset": "ultrafast", "crf": "18"})]
         if lossless:
-            mkv = av.open(os.path.join(out_dir, f"{method}.lossless.mkv"), "w")
-            s = mkv.add_stream("libx264rgb", rate=rate)
-            s.width, s.height, s.pix_fmt = width, height, "rgb24"
-            s.options = {"preset": "ultrafast", "qp": "0"}
-            self._containers.append(mkv)
+            outputs.append((f"{method}.lossless.mkv", "libx264rgb", "rgb24", {"preset": "ultrafast", "qp": "0"}))
+        for name, codec, pix_fmt, options in outputs:
+            container = av.open(os.path.join(out_dir, name), "w")
+            s = container.add_stream(codec, rate=rate)
+            s.width, s.height, s.pix_fmt = width, height, pix_fmt
+            s.options = options
+            self._containers.append(container)
             self._streams.append(s)
         self._csv_file = open(os.path.join(out_dir, f"{method}.records.csv"), "w", newline="")
         self._csv = csv.DictWriter(self._csv_file, fieldnames=RECORD_FIELDS)
