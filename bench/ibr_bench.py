@@ -152,6 +152,8 @@ class Simulation:
         return self.gt.read_color().copy()
 
     def close(self):
+        if self.depth_decoder is not None:
+            self.depth_decoder.close()
         self.producer.release()
         self.renderer.release()
         self.textures.release()

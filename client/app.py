@@ -269,6 +269,8 @@ class Client:
             await self.gl.run(self._gl_release)
             self.gl.close()
         self._decode_pool.shutdown(wait=True)
+        if self._depth_decoder is not None:
+            self._depth_decoder.close()
 
     async def _receive_proxies(self, t_welcome: float) -> None:
         """The proxy bundle follows the Welcome: collect, decompress and parse it (off the loop)."""

@@ -46,6 +46,15 @@ class EdgeDepthDecoder:
             self.streams["extra"] = (EdgeDepthStreamDecoder(session.extra.width, session.extra.height, q, edge_aware),
                                      PayloadKind.EDGE_DEPTH_EXTRA)
         self.motion = None
+        # The views' streams are independent and their kernels release the GIL: the extra
+        # view decodes on this helper thread while the caller's decodes the primary.
+        self._helper = (concurrent.futures.ThreadPoolExecutor(max_workers=1, thread_name_prefix="pibr-depth")
+                        if "extra" in self.streams else None)
+
+    def close(self) -> None:
+        if self._helper is not None:
+            self._helper.shutdown(wait=True)
+            self._helper = None
 
     def decode(self, frame: Frame) -> dict:
         poses = {"primary": frame.primary_pose, "extra": frame.extra_pose}
@@ -55,19 +64,14 @@ class EdgeDepthDecoder:
             if payload is None or poses[name] is None:
                 raise CodecError(f"frame {frame.frame_id} lacks the {name} view's edge-coded depth")
             jobs[name] = (stream, payload, poses[name])
-        # The views' streams are independent and their kernels release the GIL: decode the
-        # extra view on a helper thread while this one decodes the primary.
-        helper = None
-        if "extra" in jobs:
-            helper = concurrent.futures.ThreadPoolExecutor(max_workers=1, thread_name_prefix="pibr-depth")
+        extra = self._helper.submit(jobs["extra"][0].decode, *jobs["extra"][1:]) if "extra" in jobs else None
+        out = {}
         try:
-            extra = helper.submit(jobs["extra"][0].decode, *jobs["extra"][1:]) if helper else None
-            out = {}
             out["primary"], samples = jobs["primary"][0].decode(*jobs["primary"][1:])
             self.motion = samples.motion
+        finally:  # never leave the extra stream's decode running into the next frame's
             if extra is not None:
-                out["extra"], _ = extra.result()
-        finally:
-            if helper is not None:
-                helper.shutdown(wait=True)
+                concurrent.futures.wait([extra])
+        if extra is not None:
+            out["extra"] = extra.result()[0]
         return out
