@@ -76,8 +76,7 @@ def run_codec_bench(scene_spec="room", traces=("pred6dof-1", "pred6dof-2"), star
         raise ConfigError(f"{duration_s} s at {fps:g} fps is not a single frame")
     scene = load_scene(scene_spec)
     for tr in traces:
-        if not 0 <= start_s < load_trace(tr).duration:
-            raise ConfigError(f"start {start_s} s is outside trace {tr!r} (0..{load_trace(tr).duration:.2f} s)")
+        load_trace(tr).window(start_s, duration_s)  # a start outside a trace is refused before any work
     w, h = view_size
     q8 = h264_quantizer(scene.near, scene.far)
     q12 = edge_quantizer(scene.near, scene.far, EDGE_BITS)

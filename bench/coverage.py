@@ -172,12 +172,8 @@ def display_samples(scene, trace_spec: str, start_s: float, duration_s: float | 
     """[(display time s, display pose, render time s, render pose)] along a trace."""
     from pibr.protocol.trace import load_trace
 
-    from pibr.protocol.errors import ConfigError
-
     trace = load_trace(trace_spec)
-    if not 0 <= start_s < trace.duration:
-        raise ConfigError(f"start {start_s} s is outside trace {trace_spec!r} (0..{trace.duration:.2f} s)")
-    end = trace.duration if duration_s is None else min(trace.duration, start_s + duration_s)
+    _, end = trace.window(start_s, duration_s)
     n = max(1, int(math.floor((end - start_s) * rate_hz + 1e-9)))
     tick_us = int(round(1e6 / rate_hz))
     origin = scene.viewer_origin

@@ -75,6 +75,7 @@ class Simulation:
         from pibr.client.video import H264Decoder
         from pibr.protocol.gl import create_context
         from pibr.server.config import ServerConfig
+        from pibr.server.depth_stream import EdgeSettings
         from pibr.server.pipeline import FrameProducer
         from pibr.server.renderer import Renderer, RenderTarget
         from pibr.server.session_plan import plan_session
@@ -82,8 +83,6 @@ class Simulation:
 
         self.ctx = ctx or create_context()
         self.scene, self.fps = scene, fps
-        from pibr.server.depth_stream import EdgeSettings
-
         cfg = ServerConfig(view_size=tuple(view_size), extra_view=extra_view, fps=fps, bitrate_kbps=bitrate_kbps,
                            depth_codec=depth_codec, edge=EdgeSettings(kbps=edge_kbps))
         info = {"objects": len(proxies)} if proxies else None

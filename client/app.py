@@ -161,11 +161,10 @@ class Client:
         from pibr.protocol.trace import load_trace
 
         trace = load_trace(self.cfg.trace)
-        if self.cfg.start_s >= trace.duration:
-            raise ConfigError(f"--start {self.cfg.start_s} s is past the end of the trace ({trace.duration:.2f} s)")
-        available = trace.duration - self.cfg.start_s
-        duration = available if self.cfg.duration_s is None else min(self.cfg.duration_s, available)
-        return trace, duration
+        start, end = trace.window(self.cfg.start_s, self.cfg.duration_s)
+        if end <= start:
+            raise ConfigError(f"--start {start} s leaves nothing of trace {trace.name!r} ({trace.duration:.2f} s)")
+        return trace, end - start
 
     def _pose_at(self, trace, t_s: float) -> Pose:
         local = trace.pose_at(self.cfg.start_s + min(max(t_s, 0.0), self._duration))

@@ -164,7 +164,7 @@ class HeadTrace:
         rate_hz = float(rate_hz)
         if not (math.isfinite(rate_hz) and rate_hz > 0):
             raise TraceError(f"resample rate must be a positive number of Hz, got {rate_hz!r}")
-        start, end = self._window(start, duration)
+        start, end = self.window(start, duration)
         # A hair of slack so that an end falling exactly on a tick is not lost to rounding.
         count = int(math.floor((end - start) * rate_hz + 1e-9)) + 1
         rel = np.arange(count, dtype=np.float64) / rate_hz
@@ -174,7 +174,7 @@ class HeadTrace:
     def slice(self, start: float, duration: float | None = None) -> "HeadTrace":
         """The part in [start, start + duration], re-based to 0; the original samples inside,
         plus interpolated samples exactly at both ends of the window."""
-        start, end = self._window(start, duration)
+        start, end = self.window(start, duration)
         inside = (self.t > start) & (self.t < end)
         times = np.concatenate([[start], self.t[inside], [end]]) if end > start else np.array([start])
         # Drop interpolated ends that fall (within rounding) on an original sample.
@@ -183,10 +183,12 @@ class HeadTrace:
         pos, rot = self.sample(times)
         return HeadTrace(times - start, pos, rot, self.name, self.warnings)
 
-    def _window(self, start: float, duration: float | None) -> tuple[float, float]:
+    def window(self, start: float, duration: float | None) -> tuple[float, float]:
+        """(start, end) seconds of the part from ``start`` lasting ``duration`` (default and at
+        most: to the end). Raises TraceError for a start outside the trace or a bad duration."""
         start = float(start)
         if not (math.isfinite(start) and 0.0 <= start <= self.duration):
-            raise TraceError(f"start {start!r} s is outside the trace (0 .. {self.duration:.6g} s)")
+            raise TraceError(f"start {start!r} s is outside trace {self.name!r} (0 .. {self.duration:.6g} s)")
         if duration is None:
             return start, self.duration
         duration = float(duration)
