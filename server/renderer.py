@@ -324,11 +324,19 @@ def perspective_matrix(fov_x_deg: float, aspect: float, near: float, far: float)
     return m
 
 
+#: Interleaved vertex record matching _VERTEX_FORMAT. Built once here, from shapes rather than
+#: a "3f4" string: numpy parses such strings with ast.literal_eval, and on CPython 3.11 parsing
+#: while another thread compiles can fail with "AST constructor recursion depth mismatch"
+#: (renderers are built on the GL thread while other threads work).
+_VERTEX_DTYPE = np.dtype([("p", np.float32, (3,)), ("n", np.float32, (3,)), ("uv", np.float32, (2,)),
+                          ("c", np.uint8, (4,))])
+
+
 def _interleave(mesh) -> np.ndarray:
     n = len(mesh.vertices)
     uv = mesh.uvs if mesh.uvs is not None else np.zeros((n, 2), np.float32)
     col = mesh.colors if mesh.colors is not None else np.full((n, 4), 255, np.uint8)
-    rec = np.empty(n, dtype=[("p", "3f4"), ("n", "3f4"), ("uv", "2f4"), ("c", "4u1")])
+    rec = np.empty(n, dtype=_VERTEX_DTYPE)
     rec["p"], rec["n"], rec["uv"], rec["c"] = mesh.vertices, mesh.normals, uv, col
     return rec
 
