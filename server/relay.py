@@ -72,12 +72,14 @@ class _Pair:
             # One side finished: let the other deliver what it already holds, briefly.
             if pending:
                 await asyncio.wait(pending, timeout=2.0 + max(cfg.up.delay_ms, cfg.down.delay_ms) / 1000)
-            for t in pending:
-                t.cancel()
             for t in (up, down):
                 if t.done() and not t.cancelled() and t.exception() is not None:
                     log.warning("relay %d: %s", self.number, t.exception())
         finally:
+            # Also when the relay shuts down mid-way: no pump outlives its pair or dies unseen.
+            for t in (up, down):
+                t.cancel()
+            await asyncio.gather(up, down, return_exceptions=True)
             await _close(s_writer)
             await _close(self.c_writer)
             log.info("relay %d: closed (up %d msgs / %d B, down %d msgs / %d B)", self.number,
