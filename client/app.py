@@ -320,19 +320,24 @@ class Client:
             rec = self.recorders.get(name)
             if rec is None:
                 continue
-            f = decoded.frame if decoded is not None else None
-            record = {
-                "tick": tick, "t": t_us / 1e6, "scene_t": (t_us + offset) / 1e6,
-                **dict(zip(("px", "py", "pz", "qw", "qx", "qy", "qz"), pose.as_array())),
-                "frame_id": -1 if f is None else f.frame_id,
-                "frame_render_t": float("nan") if f is None else (f.render_t_us - offset) / 1e6,
-                "frame_pose_t": float("nan") if f is None else f.pose_t_us / 1e6,
-                "frame_arrival_t": float("nan") if f is None else decoded.arrival_us / 1e6,
-                "age_ms": float("nan") if f is None else (t_us - f.pose_t_us) / 1e3,
-                "client_ms": ms, "hole_fraction": hole, "missed": 0,
-            }
+            record = self._record(tick, t_us, pose, decoded, ms, hole, missed=0)
             rec.submit(rgb, record)
             self._last_shown[name] = (rgb, record)
+
+    def _record(self, tick: int, t_us: int, pose: Pose, decoded, client_ms: float, hole: float, missed: int) -> dict:
+        """One row of ``<method>.records.csv``: the tick, its pose, and the frame shown (if any)."""
+        offset = self._server_offset_us
+        f = decoded.frame if decoded is not None else None
+        return {
+            "tick": tick, "t": t_us / 1e6, "scene_t": (t_us + offset) / 1e6,
+            **dict(zip(("px", "py", "pz", "qw", "qx", "qy", "qz"), pose.as_array())),
+            "frame_id": -1 if f is None else f.frame_id,
+            "frame_render_t": float("nan") if f is None else (f.render_t_us - offset) / 1e6,
+            "frame_pose_t": float("nan") if f is None else f.pose_t_us / 1e6,
+            "frame_arrival_t": float("nan") if f is None else decoded.arrival_us / 1e6,
+            "age_ms": float("nan") if f is None else (t_us - f.pose_t_us) / 1e3,
+            "client_ms": client_ms, "hole_fraction": hole, "missed": missed,
+        }
 
     async def _run_virtual(self, trace, interval_us, n_ticks, preroll, progress) -> None:
         horizon = None
@@ -383,14 +388,13 @@ class Client:
                 if tick >= 0:
                     await self._display(tick, t_us, pose)
                     progress.step()
-                # Ticks whose deadline passed while we worked are not displayed afresh.
+                # Ticks whose deadline passed while we worked (the pre-roll's too, which may
+                # run into the first displayed ticks) are not displayed afresh.
                 next_tick = max(tick + 1, math.floor((loop.time() - zero) * 1e6 / interval_us) + 1)
-                skipped = min(next_tick, n_ticks) - tick - 1
-                if tick >= 0 and skipped > 0:
-                    self.missed += skipped
-                    for s in range(1, skipped + 1):
-                        self._repeat_last(tick + s, (tick + s) * interval_us, trace)
-                        progress.step()
+                for missed_tick in range(max(tick + 1, 0), min(next_tick, n_ticks)):
+                    self.missed += 1
+                    self._repeat_last(missed_tick, missed_tick * interval_us, trace)
+                    progress.step()
                 tick = next_tick
         finally:
             receiver.cancel()
@@ -403,7 +407,9 @@ class Client:
         """Record a missed tick: the display kept showing the previous image."""
         pose = self._pose_at(trace, t_us / 1e6)
         for name, rec in self.recorders.items():
-            if name not in self._last_shown:
+            if name not in self._last_shown:  # nothing displayed yet: the screen stays blank
+                rec.submit(np.zeros((rec.height, rec.width, 3), np.uint8),
+                           self._record(tick, t_us, pose, None, 0.0, 1.0, missed=1))
                 continue
             rgb, record = self._last_shown[name]
             age = record["age_ms"] + (t_us / 1e6 - record["t"]) * 1e3  # NaN stays NaN: no frame yet

@@ -85,6 +85,18 @@ async def test_real_clock_counts_missed_deadlines(relay_endpoint, tmp_path):
     assert all(r["age_ms"] >= 128 for r in used)   # at least the injected round trip
 
 
+async def test_real_clock_records_every_tick_even_when_the_preroll_overruns(relay_endpoint, tmp_path):
+    # At 1000 Hz nearly every deadline passes while the client works, the pre-roll's too:
+    # ticks it skips are still recorded (blank before anything was shown), one row per tick.
+    host, port = relay_endpoint
+    result = await run_client(_cfg(host, port, tmp_path, clock="real", duration_s=0.05, rate_hz=1000.0,
+                                   preroll_s=0.002, methods=("rotation",)))
+    rows = read_records(tmp_path / "rotation.records.csv")
+    assert [r["tick"] for r in rows] == list(range(result.ticks)) and result.ticks == 50
+    assert sum(r["missed"] for r in rows) == result.missed_deadlines > 0
+    assert len(_frames(tmp_path / "rotation.lossless.mkv")) == result.ticks
+
+
 def test_config_errors_name_the_problem():
     with pytest.raises(ConfigError, match="unknown method 'warp'"):
         ClientConfig(methods=("warp",))
