@@ -63,11 +63,20 @@ class PibrProcess:
         return "\n".join(self._tail)
 
     def wait_listening(self, timeout: float = 120.0) -> tuple[str, int]:
-        if not self._listening.wait(timeout) or self.endpoint is None:
-            code = self.proc.poll()
-            raise ProcessFailed(f"{self.name} did not start listening within {timeout:.0f} s "
-                                f"(exit code {code}); its last output:\n{self.tail()}")
-        return self.endpoint
+        """-> the (host, port) the child announced. Raises at once when the child exits before
+        announcing one (its output ends), with its exit code and last output."""
+        if not self._listening.wait(timeout):
+            raise ProcessFailed(f"{self.name} did not announce a port within {timeout:.0f} s; "
+                                f"its last output:\n{self.tail()}")
+        if self.endpoint is not None:
+            return self.endpoint
+        try:                             # its output ended: it has exited or is about to
+            code = self.proc.wait(5)
+        except subprocess.TimeoutExpired:
+            raise ProcessFailed(f"{self.name} closed its output without announcing a port; "
+                                f"its last output:\n{self.tail()}") from None
+        raise ProcessFailed(f"{self.name} exited with code {code} before it announced a port; "
+                            f"its last output:\n{self.tail()}")
 
     def wait(self, timeout: float | None = None) -> int:
         try:
