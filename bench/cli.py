@@ -2,9 +2,10 @@
 from __future__ import annotations
 
 import argparse
-
-
 import math
+
+from pibr.client.cli import parse_methods
+
 
 def _size(text: str) -> tuple[int, int]:
     from pibr.protocol.address import parse_size
@@ -108,7 +109,8 @@ def register(sub) -> None:
     d.add_argument("--rate", type=_positive, default=30.0, help="output rate Hz (default 30)")
     d.add_argument("--size", type=_size, default=(960, 540), metavar="WxH")
     d.add_argument("--latency-ms", type=_non_negative, default=128.0, help="round trip, split evenly (default 128)")
-    d.add_argument("--method", type=_names, default=("none", "rotation", "proxy"), help="methods to compare")
+    d.add_argument("--method", type=parse_methods, default=("none", "rotation", "proxy"),
+                   help="methods to compare, comma-separated (default none,rotation,proxy)")
     d.add_argument("--depth-codec", choices=("h264", "edge"), default="h264", help="depth transport")
     d.add_argument("--clock", choices=("virtual", "real"), default="virtual")
     d.add_argument("--flip-every", type=_non_negative_int, default=4, help="FLIP on every Nth frame, 0: never (default 4)")
@@ -147,7 +149,7 @@ def register(sub) -> None:
     c.add_argument("--frames", type=_positive_int, default=40)
     c.add_argument("--view-size", type=_size, default=(1024, 1024), metavar="WxH")
     c.add_argument("--size", type=_size, default=(960, 540), metavar="WxH", help="client output size")
-    c.add_argument("--method", type=_names, default=("none", "rotation", "proxy"))
+    c.add_argument("--method", type=parse_methods, default=("none", "rotation", "proxy"))
     c.add_argument("--out", default="out/bench")
     c.set_defaults(func=cmd_bench_client)
 

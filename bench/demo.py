@@ -19,12 +19,25 @@ from .results import write_result
 DEFAULT_METHODS = ("none", "rotation", "proxy")
 
 
+def check_inputs(scene: str, trace: str, start_s: float, duration_s: float) -> None:
+    """Fail in one line, before any process starts, on what the children would refuse: an unknown
+    scene or trace, a window outside the trace, no OpenGL on this machine."""
+    from pibr.protocol.gl import create_context
+    from pibr.protocol.trace import load_trace
+    from pibr.scenes.registry import check_scene_spec
+
+    check_scene_spec(scene)
+    load_trace(trace).window(start_s, duration_s)
+    create_context().release()
+
+
 def run_demo(out_dir: str = "out", scene: str = "room", trace: str = "pred6dof-1", start_s: float = 10.0,
              duration_s: float = 6.0, rate_hz: float = 30.0, size=(960, 540), latency_ms: float = 128.0,
              methods=DEFAULT_METHODS, clock: str = "virtual", flip_every: int = 4, server_args=(),
              progress: bool = True) -> dict:
     from tqdm import tqdm
 
+    check_inputs(scene, trace, start_s, duration_s)
     os.makedirs(out_dir, exist_ok=True)
     t0 = time.perf_counter()
     bar = tqdm(total=None, unit="tick", desc="streaming (server -> relay -> client)", file=sys.stderr,

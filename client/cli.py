@@ -18,7 +18,8 @@ def _size(text: str) -> tuple[int, int]:
         raise argparse.ArgumentTypeError(str(exc)) from None
 
 
-def _methods(text: str) -> tuple:
+def parse_methods(text: str) -> tuple:
+    """argparse type: comma-separated method names, each one the client knows."""
     from .methods import method_names
 
     names = tuple(m.strip() for m in text.split(",") if m.strip())
@@ -39,7 +40,7 @@ def register(sub) -> None:
     p.add_argument("--rate", type=float, default=60.0, help="output rate in Hz (default 60)")
     p.add_argument("--clock", choices=("virtual", "real"), default="virtual",
                    help="virtual: simulated, deterministic time; real: the wall clock (default virtual)")
-    p.add_argument("--method", type=_methods, default=("rotation",),
+    p.add_argument("--method", type=parse_methods, default=("rotation",),
                    help="re-rendering method(s), comma-separated: none, rotation, ... (default rotation)")
     p.add_argument("--out", default="out", help="output directory (default out)")
     p.add_argument("--size", type=_size, default=(960, 540), metavar="WxH", help="output size (default 960x540)")

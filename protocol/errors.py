@@ -15,7 +15,9 @@
     ├── TraceError               a head-trace file or its columns do not parse (names the line)
     ├── SceneError               unknown scene, unreadable asset, bad scene description
     ├── CodecError               a video or edge-codec payload does not decode
-    └── ConfigError              a command-line or configuration value is out of range
+    ├── ConfigError              a command-line or configuration value is out of range
+    ├── ListenError              a server or relay cannot listen on its address (port in use, ...)
+    └── GLUnavailable            no headless OpenGL context on this machine (EGL missing)
 
 Every :class:`ProtocolError` carries a numeric ``code`` that goes on the wire in an
 ``Error`` message, so the peer learns what was wrong before the connection closes.
@@ -77,6 +79,14 @@ class CodecError(PibrError):
 
 class ConfigError(PibrError, ValueError):
     code = 12
+
+
+class ListenError(PibrError, OSError):
+    """A server or relay cannot bind its address; the message says which and what to do."""
+
+
+class GLUnavailable(PibrError, RuntimeError):
+    """No OpenGL context could be created; the message names the backend and how to install it."""
 
 
 #: Wire code -> exception class, for turning a received ``Error`` back into an exception.

@@ -16,6 +16,8 @@ import logging
 import os
 import threading
 
+from .errors import GLUnavailable
+
 log = logging.getLogger(__name__)
 
 #: Minimum GL version: 4.0 for tessellation shaders, 3.3 would do without them.
@@ -33,10 +35,10 @@ def create_context(require: int = REQUIRED_GL):
     try:
         ctx = moderngl.create_standalone_context(require=require, backend=backend)
     except Exception as exc:  # glcontext raises plain Exceptions with the driver's words
-        raise RuntimeError(
-            f"could not create a headless OpenGL {require // 100}.{require % 100 // 10} context with the "
-            f"{backend!r} backend ({exc}). On Debian/Ubuntu install Mesa's EGL: "
-            "apt-get install libegl1 libgl1-mesa-dri") from exc
+        raise GLUnavailable(
+            f"no headless OpenGL {require // 100}.{require % 100 // 10} context with the {backend!r} backend "
+            f"({exc}); install Mesa's EGL (Debian/Ubuntu: apt-get install libegl1 libegl-mesa0 libgl1-mesa-dri)"
+        ) from exc
     log.debug("GL context: %s, %s", ctx.info.get("GL_RENDERER"), ctx.info.get("GL_VERSION"))
     return ctx
 

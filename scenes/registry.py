@@ -31,10 +31,8 @@ def available_scenes() -> dict[str, str]:
     return {name: description for name, (description, _builder) in _builtins().items()}
 
 
-def load_scene(spec) -> Scene:
-    """The scene named by ``spec``: a built-in name (see :func:`available_scenes`), a scene
-    description (``.toml`` / ``.json``, see :mod:`pibr.scenes.description`) or an asset file
-    (``.obj``, ``.glb``, ``.gltf``, ``.ply``, ... see :mod:`pibr.scenes.loaders`)."""
+def _find(spec):
+    """-> (cache key, builder) for ``spec``; SceneError for an unknown name or a missing file."""
     from .description import is_description_path, load_description
     from .loaders import load_asset_scene
 
@@ -43,23 +41,30 @@ def load_scene(spec) -> Scene:
         raise SceneError(f"a scene spec must be a non-empty string, got {spec!r}")
     builtins = _builtins()
     if spec in builtins:
-        key = (spec, None)
-        build = builtins[spec][1]
-    else:
-        path = Path(spec).expanduser()
-        if not path.is_file():
-            if path.suffix or os.sep in spec or "/" in spec:
-                raise SceneError(f"scene file {spec!r} does not exist")
-            raise SceneError(f"unknown scene {spec!r}; built-in scenes: {', '.join(sorted(builtins))} "
-                             "(or give a .toml/.json scene description or an asset file)")
-        resolved = path.resolve()
-        key = (str(resolved), resolved.stat().st_mtime_ns)
-        if is_description_path(resolved):
-            def build():
-                return load_description(path)
-        else:
-            def build():
-                return load_asset_scene(path)
+        return (spec, None), builtins[spec][1]
+    path = Path(spec).expanduser()
+    if not path.is_file():
+        if path.suffix or os.sep in spec or "/" in spec:
+            raise SceneError(f"scene file {spec!r} does not exist")
+        raise SceneError(f"unknown scene {spec!r}; built-in scenes: {', '.join(sorted(builtins))} "
+                         "(or give a .toml/.json scene description or an asset file)")
+    resolved = path.resolve()
+    key = (str(resolved), resolved.stat().st_mtime_ns)
+    if is_description_path(resolved):
+        return key, lambda: load_description(path)
+    return key, lambda: load_asset_scene(path)
+
+
+def check_scene_spec(spec) -> None:
+    """Raise SceneError if ``spec`` names no built-in scene and no existing file (nothing is loaded)."""
+    _find(spec)
+
+
+def load_scene(spec) -> Scene:
+    """The scene named by ``spec``: a built-in name (see :func:`available_scenes`), a scene
+    description (``.toml`` / ``.json``, see :mod:`pibr.scenes.description`) or an asset file
+    (``.obj``, ``.glb``, ``.gltf``, ``.ply``, ... see :mod:`pibr.scenes.loaders`)."""
+    key, build = _find(spec)
     with _cache_lock:
         cached = _cache.get(key)
     if cached is not None:

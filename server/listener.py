@@ -7,6 +7,11 @@ and waits for them, so nothing outlives a shutdown.
 from __future__ import annotations
 
 import asyncio
+import errno
+import os
+import socket
+
+from pibr.protocol.errors import ListenError
 
 
 class TrackedListener:
@@ -17,8 +22,21 @@ class TrackedListener:
         self._tasks: set[asyncio.Task] = set()
 
     async def listen(self, host: str, port: int) -> tuple[str, int]:
-        """Start accepting on ``host:port`` (0: any free port) -> the bound (host, port)."""
-        self._server = await asyncio.start_server(self._run_handler, host, port)
+        """Start accepting on ``host:port`` (0: any free port) -> the bound (host, port).
+
+        Raises :class:`ListenError` naming the address when it cannot be bound."""
+        try:
+            self._server = await asyncio.start_server(self._run_handler, host, port)
+        except OSError as exc:
+            hint = {errno.EADDRINUSE: "another process is listening there: stop it or choose another port, "
+                                      "0 for any free one",
+                    errno.EACCES: "ports below 1024 need privileges; choose a port above 1024",
+                    errno.EADDRNOTAVAIL: "this machine has no such address; use 127.0.0.1 or 0.0.0.0"
+                    }.get(exc.errno, "check the host and port")
+            # asyncio wraps bind errors in a long message of its own; the errno's text is enough
+            plain = exc.errno and exc.errno > 0 and not isinstance(exc, socket.gaierror)
+            reason = os.strerror(exc.errno) if plain else (exc.strerror or str(exc))
+            raise ListenError(f"cannot listen on {host}:{port}: {reason}; {hint}") from None
         return self._server.sockets[0].getsockname()[:2]
 
     async def handle(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:

@@ -6,11 +6,12 @@ import pytest
 
 @pytest.fixture(scope="session")
 def gl_ctx():
+    from pibr.protocol.errors import GLUnavailable
     from pibr.protocol.gl import create_context
 
     try:
         ctx = create_context()
-    except RuntimeError as exc:  # no EGL driver on this machine
+    except GLUnavailable as exc:  # no EGL driver on this machine
         pytest.skip(f"no OpenGL: {exc}")
     yield ctx
     ctx.release()

@@ -1,6 +1,8 @@
 """The command line: every documented invocation parses, errors are clear, docker-compose is valid."""
 import os
 import shlex
+import subprocess
+import sys
 
 import pytest
 import yaml
@@ -26,6 +28,23 @@ def test_docker_compose_commands_are_valid_pibr_invocations():
         assert args.command in ("serve", "relay", "client")
     relay = parser.parse_args(services["relay"]["command"])
     assert relay.up_ms + relay.down_ms == 128
+    client = parser.parse_args(services["client"]["command"])
+    assert client.method == ("none", "rotation", "proxy")     # the project's main method, beside its baselines
+
+
+def test_docker_image_installs_the_whole_project():
+    """The image copies the build context whole and installs it regularly; .dockerignore keeps
+    out nothing the build needs (every package folder, setup.py, pyproject.toml, README.md)."""
+    with open(os.path.join(ROOT, "Dockerfile")) as f:
+        lines = [ln.split() for ln in f if ln.strip() and not ln.lstrip().startswith("#")]
+    assert ["COPY", ".", "."] in lines
+    assert any(ln[:1] == ["RUN"] and "pip install --no-cache-dir ." in " ".join(ln) and "-e" not in ln
+               for ln in lines)
+    with open(os.path.join(ROOT, ".dockerignore")) as f:
+        ignored = {ln.strip().strip("/") for ln in f if ln.strip() and not ln.startswith("#")}
+    needed = {"setup.py", "pyproject.toml", "README.md"} | {
+        d for d in os.listdir(ROOT) if d != "tests" and os.path.isfile(os.path.join(ROOT, d, "__init__.py"))}
+    assert len(needed) >= 9 and not needed & ignored
 
 
 @pytest.mark.parametrize("argv", [
@@ -80,3 +99,51 @@ def test_scenes_lists_builtins(capsys):
     assert main(["scenes"]) == 0
     out = capsys.readouterr().out
     assert "room" in out and "sphere" in out
+
+
+@pytest.mark.parametrize("command", ["serve", "relay"])
+def test_a_port_in_use_is_one_line_naming_it(capsys, command):
+    import socket
+
+    with socket.socket() as held:
+        held.bind(("127.0.0.1", 0))
+        held.listen()
+        port = held.getsockname()[1]
+        argv = ["serve", "--port", str(port)] if command == "serve" else ["relay", "--listen", f"127.0.0.1:{port}"]
+        assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "Traceback" not in err
+    assert f"cannot listen on 127.0.0.1:{port}: Address already in use" in err
+    assert "choose another port" in err
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["demo", "--scene", "no-such-scene"], "unknown scene 'no-such-scene'; built-in scenes:"),
+    (["demo", "--scene", "missing/scene.toml"], "scene file 'missing/scene.toml' does not exist"),
+    (["demo", "--trace", "no-such-trace"], "'no-such-trace' is neither a trace file nor a built-in trace"),
+    (["demo", "--start", "9999"], "start 9999.0 s is outside trace 'pred6dof-1'"),
+])
+def test_demo_refuses_bad_names_before_starting_anything(capsys, tmp_path, argv, message):
+    out = tmp_path / "out"
+    assert main([*argv, "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert message in err and err.count("\n") == 1
+    assert not out.exists()        # refused before any process started or anything was written
+
+
+@pytest.mark.parametrize("argv", [["serve", "--port", "0"], ["demo", "--duration", "1"]])
+def test_missing_egl_is_one_line_naming_the_fix(tmp_path, argv):
+    """A libEGL that cannot be loaded (an empty file first on the library path, as on a machine
+    without Mesa's EGL): one line naming the problem and the package to install, exit code 2."""
+    fake = tmp_path / "lib"
+    fake.mkdir()
+    for name in ("libEGL.so", "libEGL.so.1"):
+        (fake / name).write_bytes(b"")
+    env = dict(os.environ, LD_LIBRARY_PATH=str(fake), PIBR_GL_BACKEND="egl")
+    res = subprocess.run([sys.executable, "-m", "pibr", *argv, *(["--out", str(tmp_path / "out")]
+                                                                 if argv[0] == "demo" else [])],
+                         cwd=ROOT, env=env, capture_output=True, text=True, timeout=120)
+    assert res.returncode == 2, res.stderr
+    assert "Traceback" not in res.stderr and res.stderr.count("\n") == 1, res.stderr
+    assert "no headless OpenGL" in res.stderr and "apt-get install libegl1" in res.stderr
+    assert "listening on" not in res.stdout
