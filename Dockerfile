@@ -6,15 +6,11 @@ RUN apt-get update \
  && apt-get install -y --no-install-recommends libegl1 libegl-mesa0 libgl1 libgl1-mesa-dri libgbm1 \
  && rm -rf /var/lib/apt/lists/*
 
+# The whole build context (.dockerignore leaves out tests, docs, outputs and caches): a regular,
+# non-editable install that finds its packages and data itself, as a newcomer's `pip install .`.
 WORKDIR /opt/pibr
-COPY pyproject.toml README.md ./
-COPY pibr ./pibr
-COPY protocol ./protocol
-COPY scenes ./scenes
-COPY server ./server
-COPY client ./client
-COPY bench ./bench
-RUN pip install --no-cache-dir .
+COPY . .
+RUN pip install --no-cache-dir . && pibr --version
 
 # LoD proxies and other caches survive container restarts when /cache is a volume.
 ENV PIBR_CACHE_DIR=/cache
