@@ -95,7 +95,6 @@ uniform vec4 u_primary_color;
 uniform vec4 u_extra_color;
 uniform bool u_has_extra;
 uniform float u_tau;
-uniform float u_slack_codes;   // codes of transport error to forgive (quantization, coding noise)
 in vec3 v_p;
 in vec3 v_e;
 out vec4 f_ref;   // (u, v, view: 0 primary / 1 extra / 2 none, accepted)
@@ -112,8 +111,7 @@ float view_error(vec3 c, bool extra, out vec2 uv, out bool sky) {
     if (d <= 0.0) { sky = true; return NO_MATCH; }
     // The transport knows a distance only to within its code step, which grows as f^2
     // (disparity coding): forgive that much before comparing with tau.
-    float step = f * f / (u_depth_near * (u_depth_max_code - u_depth_min_code));
-    return max(abs(d - f) - u_slack_codes * step, 0.0) / f;
+    return max(abs(d - f) - u_slack_codes * depth_code_step(f), 0.0) / f;
 }
 void main() {
     vec2 uv_p, uv_e;
@@ -180,10 +178,6 @@ class ProxyIBR(Method):
                 self.resolve[k].value = rect_uniform(config, rect)
         self.prog["u_has_extra"].value = has_extra_depth(config)
         self.prog["u_tau"].value = float(tau)
-        # H.264 moves 8-bit codes by a few levels; the edge codec's diffused 12-bit codes by one
-        # or two. Measured (room, trace 1, 128 ms): edge slack 1 -> DSSIM 0.0417, holes 0.85 %;
-        # 2 -> 0.0402, 0.68 %; 4 -> 0.0401, 0.66 %; h264 2.5 -> 0.0443; 4 -> 0.0439.
-        self.prog["u_slack_codes"].value = 2.0 if config.depth_codec == "edge" else 2.5
         self.resolve_vbo, self.resolve_vao = fullscreen_quad(ctx, self.resolve)
         self.near, self.far = config.near, config.far
         self.projection = _perspective(output, self.near, self.far)
