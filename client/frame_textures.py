@@ -136,15 +136,40 @@ class FrameTextures:
                 t.write(np.zeros(size[::-1], np.float32).tobytes())
                 self.distances[name] = t
         self.frame_id = None
+        self.config = config
+        self._image: YUVImage | None = None
+        self._cpu_distances: dict = {}
 
     def upload(self, image: YUVImage, frame_id: int, distances: dict | None = None) -> None:
         """image: the atlas planes; distances: view name -> (h, w) float32 (edge codec)."""
+        self._image = image
+        self._cpu_distances = dict(distances or {})
         self.y.write(np.ascontiguousarray(image.y), alignment=1)
         self.u.write(np.ascontiguousarray(image.u), alignment=1)
         self.v.write(np.ascontiguousarray(image.v), alignment=1)
         for name, d in (distances or {}).items():
             self.distances[name].write(np.ascontiguousarray(d, np.float32).tobytes())
         self.frame_id = frame_id
+
+    def view_distances(self, name: str) -> np.ndarray | None:
+        """The newest frame's radial distance of view ``name`` ("primary" or "extra") on the CPU,
+        (h, w) float32, row 0 on top, 0 = sky or nothing; None if the session has no depth for it.
+
+        What the shaders' ``primary_distance`` / ``extra_distance`` read: the edge codec's
+        reconstruction, or the atlas's 8-bit disparity dequantized (computed once per frame)."""
+        if name in self._cpu_distances:
+            return self._cpu_distances[name]
+        rect = self.config.atlas.rect(f"{name}.depth")
+        if self.config.depth_codec != "h264" or rect is None or self._image is None:
+            return None
+        from pibr.protocol.depth import DepthQuantizer
+
+        x, y, w, h = rect
+        quantizer = DepthQuantizer(self.config.near, self.config.far, self.config.depth_bits,
+                                   self.config.depth_min_code)
+        d = quantizer.dequantize(self._image.y[y:y + h, x:x + w]).astype(np.float32)
+        self._cpu_distances[name] = d
+        return d
 
     def use(self) -> None:
         self.y.use(UNIT_Y)
