@@ -27,6 +27,21 @@ def _number(text: str, kind=float) -> float:
     return v
 
 
+def _sizes(text: str) -> tuple:
+    return tuple(_size(part) for part in text.split(",") if part.strip())
+
+
+def _windows(text: str) -> tuple:
+    from pibr.protocol.errors import ConfigError
+
+    from .windows import parse_windows
+
+    try:
+        return parse_windows(text)
+    except ConfigError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
 def _positive(text: str) -> float:
     v = _number(text)
     if v <= 0:
@@ -200,6 +215,30 @@ def register(sub) -> None:
     cd.add_argument("--out", default="out/bench")
     cd.set_defaults(func=cmd_bench_codec)
 
+    pa = bs.add_parser("pareto", help="every method and knob: client ms against DSSIM (Reinert et al.'s Figure 9)",
+                       description="Runs every client method with each of its knobs (and a zero-latency oracle) on "
+                                   "the scenes and head-trace windows, scores each against ground truth (DSSIM, "
+                                   "PSNR, FLIP, geometric and own holes) and times it at each output size. Writes "
+                                   "pareto.json and pareto.png.")
+    pa.add_argument("--scene", type=_names, default=("room",),
+                    help="comma-separated scenes (default room; the sphere scene's frames are mostly sky on the "
+                         "shared traces)")
+    pa.add_argument("--method", type=parse_methods, default=None, help="only these methods (default: all)")
+    pa.add_argument("--windows", type=_windows, default="evaluation",
+                    help="'evaluation' (default: disjoint from tuning), 'tuning', or TRACE@START+DURATION,...")
+    pa.add_argument("--latency-ms", type=_non_negative, default=128.0)
+    pa.add_argument("--rate", type=_positive, default=30.0, help="display rate Hz (default 30)")
+    pa.add_argument("--stride", type=_positive_int, default=8, help="score every Nth displayed tick (default 8)")
+    pa.add_argument("--view-size", type=_size, default=(1024, 1024), metavar="WxH")
+    pa.add_argument("--size", type=_size, default=(960, 540), metavar="WxH", help="output size scored (default 960x540)")
+    pa.add_argument("--speed-sizes", type=_sizes, default=((960, 540), (1280, 720)), metavar="WxH,...",
+                    help="output sizes timed (default 960x540,1280x720)")
+    pa.add_argument("--speed-frames", type=_positive_int, default=12, help="frames timed per size and scene (default 12)")
+    pa.add_argument("--flip-every", type=_non_negative_int, default=4, help="FLIP on every Nth scored frame, 0: never")
+    pa.add_argument("--depth-codec", choices=("h264", "edge"), default="h264")
+    pa.add_argument("--out", default="out/bench")
+    pa.set_defaults(func=cmd_bench_pareto)
+
     lo = bs.add_parser("lod", help="encaging level-of-detail proxies: triangles, enclosure, time per object",
                        description="Generate (or read from the cache) every object's encaging proxy and report the "
                                    "triangle counts, the fraction of original vertices enclosed and the time taken.")
@@ -229,6 +268,19 @@ def register(sub) -> None:
     o.add_argument("--size", type=_size, default=(192, 108), metavar="WxH")
     o.add_argument("--out", default="out/bench")
     o.set_defaults(func=cmd_bench_offset)
+
+
+def cmd_bench_pareto(args) -> int:
+    from .pareto import print_pareto_table, run_pareto_bench
+
+    result = run_pareto_bench(scenes=args.scene, methods=args.method, windows=args.windows,
+                              latency_ms=args.latency_ms, rate_hz=args.rate, stride=args.stride,
+                              view_size=args.view_size, out_size=args.size, speed_sizes=args.speed_sizes,
+                              speed_frames=args.speed_frames, flip_every=args.flip_every,
+                              depth_codec=args.depth_codec, out_dir=args.out)
+    print_pareto_table(result)
+    print(f"written: {args.out}/pareto.json, pareto.png")
+    return 0
 
 
 def cmd_demo(args) -> int:

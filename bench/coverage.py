@@ -89,6 +89,43 @@ def sky_in_view(directions: np.ndarray, view_pose: Pose, distance: np.ndarray) -
     return (local[:, 2] <= 0.0) & (distance[y, x] == 0)
 
 
+def camera_rays(width: int, height: int, fov_deg: float) -> np.ndarray:
+    """Unit directions (width * height, 3) of a perspective camera's pixel centres, row 0 on top,
+    in camera space (looking along -Z); ``fov_deg`` is horizontal."""
+    tan_x = math.tan(math.radians(fov_deg) / 2)
+    tan_y = tan_x * height / width
+    xs = ((np.arange(width) + 0.5) / width * 2 - 1) * tan_x
+    ys = (1 - (np.arange(height) + 0.5) / height * 2) * tan_y
+    gx, gy = np.meshgrid(xs, ys)
+    d = np.stack([gx, gy, -np.ones_like(gx)], axis=-1).reshape(-1, 3)
+    return d / np.linalg.norm(d, axis=1, keepdims=True)
+
+
+def displayed_points(rays: np.ndarray, pose: Pose, distance: np.ndarray):
+    """What a perspective view at ``pose`` shows: world points (n, 3), sky (n,), world directions
+    (n, 3), from its camera rays (n, 3) and ground-truth radial distance (h, w), 0 = sky."""
+    r = distance.reshape(-1).astype(np.float64)
+    dirs = rays @ pose.rotation().T
+    return pose.p + dirs * r[:, None], r == 0, dirs
+
+
+def uncovered(points, sky, dirs, views, tolerance: float = COVERAGE_TOLERANCE) -> np.ndarray:
+    """(n,) True where no transmitted view saw what the displayed pixel shows: the one
+    geometric definition of a hole, the same for every method.
+
+    points, dirs : (n, 3) world points and directions of the displayed pixels (ground truth);
+    sky : (n,) the pixel shows sky; views : [(pose, distance map (h, w), peeled)]."""
+    covered = np.zeros(len(points), bool)
+    geo = ~sky
+    for pose, dist, peeled in views:
+        todo = geo & ~covered
+        covered[todo] = matches_view(points[todo], pose, dist, tolerance)
+        if not peeled:
+            s = sky & ~covered
+            covered[s] = sky_in_view(dirs[s], pose, dist)
+    return ~covered
+
+
 class CoverageProbe:
     """Renders ground truth and wide-angle views of one scene at small sizes, on this thread."""
 
@@ -105,14 +142,7 @@ class CoverageProbe:
         self.primary = RenderTarget(self.ctx, *view_size)
         self.extra = RenderTarget(self.ctx, view_size[0] // 2, view_size[1] // 2)
         self.gt = RenderTarget(self.ctx, *out_size)
-        w, h = out_size
-        tan_x = math.tan(math.radians(fov_deg) / 2)
-        tan_y = tan_x * h / w
-        xs = ((np.arange(w) + 0.5) / w * 2 - 1) * tan_x
-        ys = (1 - (np.arange(h) + 0.5) / h * 2) * tan_y
-        gx, gy = np.meshgrid(xs, ys)
-        d = np.stack([gx, gy, -np.ones_like(gx)], axis=-1).reshape(-1, 3)
-        self._dirs = d / np.linalg.norm(d, axis=1, keepdims=True)
+        self._dirs = camera_rays(*out_size, fov_deg)
 
     # Every GL entry point makes this probe's context current first (``with self.ctx``):
     # another context created on the same thread since would otherwise receive the calls.
@@ -121,9 +151,8 @@ class CoverageProbe:
         """Ground truth at the displayed pose: world points (n, 3), sky mask (n,), world directions (n, 3)."""
         with self.ctx:
             self.renderer.render_perspective(self.gt, pose, t, self.fov_deg)
-            r = self.gt.read_distance().reshape(-1).astype(np.float64)
-        dirs = self._dirs @ pose.rotation().T
-        return pose.p + dirs * r[:, None], r == 0, dirs
+            distance = self.gt.read_distance()
+        return displayed_points(self._dirs, pose, distance)
 
     def render_primary(self, pose: Pose, t: float) -> np.ndarray:
         with self.ctx:
@@ -146,17 +175,11 @@ class CoverageProbe:
         """(fraction of all pixels, fraction of pixels showing geometry) no view covers.
 
         views: [(pose, distance map, peeled)]."""
-        covered = np.zeros(len(points), bool)
+        holes = uncovered(points, sky, dirs, views, self.tolerance)
         geo = ~sky
-        for pose, dist, peeled in views:
-            todo = geo & ~covered
-            covered[todo] = matches_view(points[todo], pose, dist, self.tolerance)
-            if not peeled:
-                s = sky & ~covered
-                covered[s] = sky_in_view(dirs[s], pose, dist)
         n_geo = int(geo.sum())
-        geo_missing = float((geo & ~covered).sum() / n_geo) if n_geo else 0.0
-        return float(1.0 - covered.mean()), geo_missing
+        geo_missing = float((geo & holes).sum() / n_geo) if n_geo else 0.0
+        return float(holes.mean()), geo_missing
 
     def close(self) -> None:
         with self.ctx:

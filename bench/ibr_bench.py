@@ -13,6 +13,7 @@ ms, triangles drawn and DSSIM for several LoD targets and forced levels.
 """
 from __future__ import annotations
 
+import dataclasses
 import sys
 import time
 
@@ -69,7 +70,7 @@ class Simulation:
 
     def __init__(self, scene, view_size=(1024, 1024), out_size=(960, 540), fov_deg=90.0, fps=10.0,
                  bitrate_kbps=16000.0, extra_view="auto", proxies=None, ctx=None, depth_codec="h264",
-                 edge_kbps=0.0):
+                 edge_kbps=0.0, keep_distances=False):
         from pibr.client.frame_textures import FrameTextures
         from pibr.client.output_target import OutputTarget
         from pibr.client.video import H264Decoder
@@ -87,6 +88,9 @@ class Simulation:
                            depth_codec=depth_codec, edge=EdgeSettings(kbps=edge_kbps))
         info = {"objects": len(proxies)} if proxies else None
         self.session, spec = plan_session(cfg, scene, Hello(want_proxies=bool(proxies)), info)
+        if keep_distances:   # the views' true distances, for geometric holes
+            spec = dataclasses.replace(spec, keep_distance=True)
+        self.spec, self.bitrate_kbps, self.keyint = spec, bitrate_kbps, cfg.keyint
         self.depth_encoder = self.depth_decoder = None
         if depth_codec == "edge":
             from pibr.client.depth_stream import EdgeDepthDecoder
@@ -103,8 +107,9 @@ class Simulation:
         self.target = OutputTarget(self.ctx, *out_size)
         self.gt = RenderTarget(self.ctx, *out_size)
         self.proxies = proxies
-        self._frames = {}  # render time -> Frame (decoded and uploaded in order)
         self._last_render = None
+        self.distances = {}    # the newest frame's true distance maps (keep_distances)
+        self._oracle = None    # (encoder, decoder, textures) of the zero-latency stream
         self.bytes = []        # H.264 bytes per frame
         self.depth_bytes = []  # edge-codec bytes per frame
 
@@ -114,6 +119,7 @@ class Simulation:
         if self._last_render is not None and cache_key == self._last_render[0]:
             return self._last_render[1]
         p = self.producer.produce(pose, t_render)
+        self.distances = p.distances
         data, key = self.encoder.encode(p.yuv)
         self.bytes.append(len(data))
         payloads = [(PayloadKind.H264_ATLAS, data)]
@@ -129,6 +135,28 @@ class Simulation:
         self._last_render = (cache_key, frame)
         return frame
 
+    def oracle_frame(self, t: float, pose, rate_hz: float):
+        """The zero-latency oracle: the server's frame rendered at the display pose itself, through
+        the same colour codec (its own H.264 stream of frames ``rate_hz`` apart, at the bits per
+        frame of the session's stream). -> (Frame, its textures); show it with ``none``."""
+        from pibr.client.frame_textures import FrameTextures
+        from pibr.client.video import H264Decoder
+        from pibr.server.video import H264Encoder
+
+        if self._oracle is None:
+            w, h = self.spec.layout.width, self.spec.layout.height
+            kbps = self.bitrate_kbps * rate_hz / self.fps
+            self._oracle = (H264Encoder(w, h, rate_hz, kbps, self.keyint, deterministic=True), H264Decoder(w, h),
+                            FrameTextures(self.ctx, self.session))
+        encoder, decoder, textures = self._oracle
+        p = self.producer.produce(pose, t)
+        data, key = encoder.encode(p.yuv)
+        us = int(round(t * 1e6))
+        frame = Frame(decoder.frames, us, us, 0, us, p.primary_pose, p.extra_pose, self.scene.near, self.scene.far,
+                      payloads=((PayloadKind.H264_ATLAS, data),), keyframe=key)
+        textures.upload(decoder.decode(data), frame.frame_id)
+        return frame, textures
+
     def make_method(self, name, **options):
         from pibr.client.methods import make_method
 
@@ -136,11 +164,11 @@ class Simulation:
             return FloorPass(self.ctx, self.output, self.session)
         return make_method(name, self.ctx, self.output, self.session, proxies=self.proxies, **options)
 
-    def display(self, method, pose, frame, scene_t):
+    def display(self, method, pose, frame, scene_t, textures=None):
         """-> (rgb (h, w, 3), hole fraction, ms of the display pass)."""
         self.target.begin()
         t0 = time.perf_counter()
-        method.render(pose, frame, self.textures, scene_t)
+        method.render(pose, frame, textures or self.textures, scene_t)
         self.ctx.finish()
         ms = (time.perf_counter() - t0) * 1e3
         rgba = self.target.read()
@@ -150,9 +178,15 @@ class Simulation:
         self.renderer.render_perspective(self.gt, pose, t, self.output.fov_deg)
         return self.gt.read_color().copy()
 
+    def ground_truth_distance(self) -> np.ndarray:
+        """(h, w) float32 radial distance of the last ground truth rendered (0 = sky)."""
+        return self.gt.read_distance().copy()
+
     def close(self):
         if self.depth_decoder is not None:
             self.depth_decoder.close()
+        if self._oracle is not None:
+            self._oracle[2].release()
         self.producer.release()
         self.renderer.release()
         self.textures.release()
@@ -182,7 +216,7 @@ def evaluate_methods(sim: Simulation, samples, variants: dict, with_quality=True
                 r = out[label]
                 r["ms"].append(ms)
                 r["holes"].append(holes)
-                r["triangles"].append(getattr(m, "last_triangles", 0))
+                r["triangles"].append(getattr(m, "last_primitives", 0))
                 if gt is not None:
                     s = ssim(gt, rgb)
                     r["psnr"].append(psnr(gt, rgb))

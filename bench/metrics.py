@@ -72,3 +72,13 @@ def error_image(ref: np.ndarray, test: np.ndarray, gain: float = 4.0) -> np.ndar
     diff = np.abs(ref.astype(np.int16) - test.astype(np.int16)).mean(axis=2) / 255.0
     lut = (colormaps["magma"](np.linspace(0, 1, 256))[:, :3] * 255).astype(np.uint8)
     return lut[np.clip(diff * gain * 255, 0, 255).astype(np.uint8)]
+
+
+def nearly_uniform(image: np.ndarray, fraction: float = 0.95, tolerance: int = 2) -> bool:
+    """True when more than ``fraction`` of an (H, W, 3) uint8 image is one colour (within
+    ``tolerance`` levels per channel): all sky, or a wall filling the view. Every method scores
+    near-perfectly on such a frame, so a score over many of them says little."""
+    flat = image.reshape(-1, 3).astype(np.int16)
+    mode = np.median(flat[:: max(1, len(flat) // 4096)], axis=0)
+    same = np.all(np.abs(flat - mode) <= tolerance, axis=1)
+    return bool(same.mean() > fraction)

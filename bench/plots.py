@@ -123,3 +123,49 @@ def plot_codec(result: dict, path: str) -> None:
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
+
+
+def plot_pareto(result: dict, path: str) -> None:
+    """Reinert et al.'s Figure 9 per scene and output size: client ms per frame (log) against
+    DSSIM, one marker per method and knob, the Pareto front drawn, the zero-latency oracle as a
+    horizontal line."""
+    from .pareto import ORACLE, pareto_front
+
+    plt = _pyplot()
+    scenes = list(result["scenes"])
+    sizes = list(next(iter(result["scenes"][scenes[0]]["variants"].values()))["speed"])
+    fig, axes = plt.subplots(len(scenes), max(1, len(sizes)), figsize=(7 * max(1, len(sizes)), 5.5 * len(scenes)),
+                             squeeze=False)
+    methods = sorted({v["method"] for s in result["scenes"].values() for v in s["variants"].values()})
+    markers = dict(zip(methods, "os^vD<>phH*Xd8P"))
+    colours = dict(zip(methods, plt.get_cmap("tab20").colors))
+    for row, scene in enumerate(scenes):
+        variants = result["scenes"][scene]["variants"]
+        for col, size in enumerate(sizes):
+            ax = axes[row][col]
+            points = {}
+            for label, v in variants.items():
+                if label == ORACLE or size not in v["speed"]:
+                    continue
+                ms, dssim = v["speed"][size]["ms_median"], v["quality"]["dssim_mean"]
+                points[label] = (ms, dssim)
+                ax.scatter(ms, dssim, marker=markers[v["method"]], color=colours[v["method"]], s=46,
+                           label=v["method"], zorder=3)
+                ax.annotate(label, (ms, dssim), fontsize=7, xytext=(4, 3), textcoords="offset points")
+            front = pareto_front(points)
+            ax.plot([points[k][0] for k in front], [points[k][1] for k in front], "k--", lw=1, alpha=0.6,
+                    label="Pareto front", zorder=2)
+            if ORACLE in variants:
+                ax.axhline(variants[ORACLE]["quality"]["dssim_mean"], color="grey", lw=1, ls=":",
+                           label="zero-latency oracle (coding loss)")
+            ax.set_xscale("log")
+            ax.set_xlabel(f"client ms per frame at {size} (median, log scale)")
+            ax.set_ylabel("DSSIM to ground truth (lower is better)")
+            ax.set_title(f"{scene}: {result['latency_ms']:g} ms latency, 10 fps stream")
+            ax.grid(alpha=0.3, which="both")
+            handles, labels = ax.get_legend_handles_labels()
+            unique = dict(zip(labels, handles))
+            ax.legend(unique.values(), unique.keys(), fontsize=7, loc="upper right")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)

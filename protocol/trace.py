@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 import os
+import re
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
@@ -381,8 +382,15 @@ def detect_format(path) -> str:
         "the columns: pibr trace convert IN OUT --format csv --columns t=...,px=...")
 
 
+#: ``synth-KIND`` or ``synth-KIND-seedN``: a synthetic trace (protocol/trace_synth.py) by name.
+_SYNTHETIC_NAME = re.compile(r"synth-(walk|look|turns|mixed)(?:-seed(\d{1,9}))?")
+SYNTHETIC_DURATION_S = 60.0
+
+
 def load_trace(spec, format: str = "auto") -> HeadTrace:
-    """A head trace from a file path or a built-in name (see :func:`builtin_traces`).
+    """A head trace from a file path, a built-in name (see :func:`builtin_traces`) or a synthetic
+    one by name: ``synth-walk``, ``synth-look``, ``synth-turns``, ``synth-mixed``, optionally
+    with ``-seedN`` (60 s at 120 Hz, the same trace every time).
 
     format : 'auto' (from the header line), 'canonical' or 'pred6dof'
     """
@@ -393,9 +401,17 @@ def load_trace(spec, format: str = "auto") -> HeadTrace:
     path = Path(os.fspath(spec))
     if not path.is_file():
         key = str(spec)
+        synthetic = _SYNTHETIC_NAME.fullmatch(key)
+        if synthetic:
+            from .trace_synth import synthesize
+
+            trace = synthesize(synthetic.group(1), SYNTHETIC_DURATION_S, seed=int(synthetic.group(2) or 0))
+            trace.name = key
+            return trace
         if key not in _BUILTINS:
             raise TraceError(f"{key!r} is neither a trace file nor a built-in trace "
-                             f"(built-in: {', '.join(_BUILTINS)})")
+                             f"(built-in: {', '.join(_BUILTINS)}; synthetic: synth-KIND[-seedN], KIND one of "
+                             "walk, look, turns, mixed)")
         filename = _BUILTINS[key][0]
         ref = resources.files("pibr.protocol.data").joinpath(_BUILTIN_DIR, filename)
         with resources.as_file(ref) as builtin_path:

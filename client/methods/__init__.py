@@ -5,12 +5,13 @@ import inspect
 
 from .base import Method
 from .direction_warp import NoCompensation, RotationWarp
+from .homography import HomographyWarp
 from .mesh_warp import CoarseMeshWarp, MeshWarp
 from .proxy import ProxyIBR
 from .splat import PointSplat
 
-METHODS: dict[str, type[Method]] = {m.name: m for m in (NoCompensation, RotationWarp, PointSplat, MeshWarp,
-                                                        CoarseMeshWarp, ProxyIBR)}
+METHODS: dict[str, type[Method]] = {m.name: m for m in (NoCompensation, RotationWarp, HomographyWarp, PointSplat,
+                                                        MeshWarp, CoarseMeshWarp, ProxyIBR)}
 
 
 def method_names() -> list[str]:

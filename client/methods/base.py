@@ -31,6 +31,12 @@ class Method:
 
     name = "?"
     needs_proxies = False
+    #: Draws from the extra view as well as the primary (instances may say otherwise: it also
+    #: depends on whether the session has one). Benchmarks count geometric holes against the
+    #: views a method uses.
+    uses_extra_view = False
+    #: Points, triangles or quads drawn in the last render (0 for full-screen passes).
+    last_primitives = 0
 
     def __init__(self, ctx, output: OutputConfig, config: SessionConfig):
         self.ctx, self.output, self.config = ctx, output, config

@@ -164,6 +164,7 @@ class _GridWarp(Method):
         super().__init__(ctx, output, config)
         self.program = MeshWarpProgram(ctx, config, self.split, grid=True)
         self.views = source_views(config, primary_only=self.primary_only)
+        self.uses_extra_view = len(self.views) > 1
         self.grids = []     # per view: (vao, index buffer, vertices per row, quads)
         for view in self.views:
             indices, grid_width, quads = grid_indices(view.width, view.height, self.step)

@@ -152,7 +152,7 @@ class ProxyIBR(Method):
     needs_proxies = True
 
     def __init__(self, ctx, output, config, proxies=None, tau: float = DEFAULT_TAU,
-                 lod_target_px: float = DEFAULT_TARGET_PX, lod_level: str | None = None):
+                 lod_target_px: float = DEFAULT_TARGET_PX, lod_level: str | None = None, extra_view: bool = True):
         super().__init__(ctx, output, config)
         if not proxies:
             from pibr.protocol.errors import ConfigError
@@ -176,7 +176,9 @@ class ProxyIBR(Method):
         for k, rect in (("u_primary_color", "primary.color"), ("u_extra_color", "extra.color")):
             if k in self.resolve:
                 self.resolve[k].value = rect_uniform(config, rect)
-        self.prog["u_has_extra"].value = has_extra_depth(config)
+        # extra_view=False ignores a transmitted extra view: what proxy IBR does without one.
+        self.uses_extra_view = bool(extra_view) and has_extra_depth(config)
+        self.prog["u_has_extra"].value = self.uses_extra_view
         self.prog["u_tau"].value = float(tau)
         self.resolve_vbo, self.resolve_vao = fullscreen_quad(ctx, self.resolve)
         self.near, self.far = config.near, config.far
@@ -196,7 +198,7 @@ class ProxyIBR(Method):
                 self._buffers += [vbo, ibo]
                 levels[level] = (vao, len(f))
             self.vaos.append(levels)
-        self.last_triangles = 0
+        self.last_primitives = 0
 
     def render(self, out_pose: Pose, frame, textures, scene_t: float = 0.0) -> None:
         ctx = self.ctx
@@ -228,7 +230,7 @@ class ProxyIBR(Method):
             vao, n = levels[level]
             vao.render(ctx.TRIANGLES)
             tris += n
-        self.last_triangles = tris
+        self.last_primitives = tris
         ctx.disable(ctx.DEPTH_TEST)
         output_fbo.use()
         self.refs.use(5)

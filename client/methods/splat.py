@@ -53,6 +53,7 @@ class PointSplat(Method):
         bind_frame_uniforms(self.prog, config)
         self.vao = ctx.vertex_array(self.prog, [])
         self.views = source_views(config)
+        self.uses_extra_view = len(self.views) > 1
         self.point_size = float(point_size)
         self.projection = output_projection(output, config.near, config.far)
         self.sky_distance = SKY_FRACTION * config.far

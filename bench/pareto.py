@@ -1,0 +1,322 @@
+"""``pibr bench pareto``: every client method and knob on one speed/quality chart.
+
+The trade Reinert et al. 2016 measured in Section 6.2 (Figure 9): client milliseconds per
+output frame against DSSIM to ground truth, 128 ms of latency, a 10 fps server stream, every
+method fed the same transmitted views. Here every registered method runs with each of its
+knobs (:func:`default_variants`) on the built-in scenes and on the evaluation windows of
+bench/windows.py (disjoint from every window a default was fitted on), beside:
+
+* a **zero-latency oracle**: the server's frame rendered at the display pose itself and passed
+  through the same colour codec, shown as it is: the loss due to coding and resampling alone;
+* **geometric holes**, one definition for every method: the displayed pixels whose surface
+  no transmitted view the method draws from saw (``coverage.uncovered``: the primary view for
+  methods that use only it, both views otherwise), reported beside each method's own count of
+  pixels it left unfilled (alpha 0).
+
+Quality runs the real pipeline in one process (``ibr_bench.Simulation``) at the display rate
+divided by ``stride``; metrics are computed in a worker process while the next frame renders.
+Speed is measured afterwards in a separate pass with nothing else running, every variant on
+the same frames in turn, at each output size (960x540 and 1280x720 by default): median and
+mean wall-clock ms of the display pass (GPU work finished) and the process's CPU ms.
+"""
+from __future__ import annotations
+
+import concurrent.futures
+import multiprocessing
+import os
+import sys
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .coverage import LatencyModel, camera_rays, display_samples, displayed_points, uncovered
+from .metrics import frame_metrics, nearly_uniform, pixels_per_degree
+from .results import write_result
+from .windows import EVALUATION_WINDOWS, windows_json
+
+ORACLE = "oracle (zero latency)"
+
+
+@dataclass(frozen=True)
+class Variant:
+    """One point of the chart: a method with its knobs."""
+
+    label: str
+    method: str
+    options: dict = field(default_factory=dict)
+
+    def to_json(self) -> dict:
+        return {"method": self.method, "options": self.options}
+
+
+def default_variants(methods=None) -> list[Variant]:
+    """Every registered method with each of its knobs (the proxy's LoD target and tau, with and
+    without the extra view included); ``methods`` restricts to those names."""
+    from pibr.client.methods import method_names
+
+    table = [
+        Variant("none", "none"), Variant("rotation", "rotation"),
+        *(Variant(f"homography {d:g} m", "homography", {"plane_distance": d}) for d in (1.0, 2.0, 4.0, 8.0)),
+        Variant("splat", "splat"), Variant("splat 3 px", "splat", {"point_size": 3.0}),
+        Variant("meshwarp", "meshwarp"),
+        *(Variant(f"coarse-meshwarp s={s}", "coarse-meshwarp", {"step": s}) for s in (2, 4, 8, 16)),
+        *(Variant(f"quadtree {t:g}", "quadtree", {"threshold": t}) for t in (0.01, 0.05)),
+        Variant("iterative", "iterative"),
+        Variant("gridwarp", "gridwarp"), Variant("gridwarp, no fill", "gridwarp", {"fill": False}),
+        Variant("proxy", "proxy"),
+        *(Variant(f"proxy lod {p:g}px", "proxy", {"lod_target_px": p}) for p in (2.0, 16.0)),
+        *(Variant(f"proxy tau {t:g}", "proxy", {"tau": t}) for t in (0.05, 0.2)),
+        Variant("proxy, no extra view", "proxy", {"extra_view": False}),
+    ]
+    known = set(method_names())
+    wanted = known if methods is None else set(methods)
+    unknown = wanted - known
+    if unknown:
+        from pibr.protocol.errors import ConfigError
+
+        raise ConfigError(f"unknown method(s) {', '.join(sorted(unknown))}; choose from {', '.join(sorted(known))}")
+    return [v for v in table if v.method in wanted]
+
+
+def _metrics_job(gt, rgb, ppd, with_flip):
+    return frame_metrics(gt, rgb, ppd, with_flip)
+
+
+def pareto_front(points: dict) -> list[str]:
+    """Labels of the points (label -> (ms, dssim)) no other point beats on both, fastest first."""
+    order = sorted(points, key=lambda k: (points[k][0], points[k][1]))
+    front, best = [], float("inf")
+    for k in order:
+        if points[k][1] < best:
+            front.append(k)
+            best = points[k][1]
+    return front
+
+
+class _Quality:
+    """Per-variant series of one scene."""
+
+    KEYS = ("psnr", "ssim", "dssim", "flip", "geometric_holes", "own_holes", "primitives", "ms")
+
+    def __init__(self):
+        self.series: dict = {}
+
+    def add(self, label, window, **values):
+        s = self.series.setdefault(label, {})
+        for k, v in values.items():
+            s.setdefault(k, []).append(v)
+            s.setdefault(f"{window}|{k}", []).append(v)
+
+    def summary(self, label, windows) -> dict:
+        s = self.series[label]
+
+        def mean(key):
+            vals = [v for v in s.get(key, []) if v is not None and not np.isnan(v)]
+            return float(np.mean(vals)) if vals else None
+
+        out = {f"{k}_mean": mean(k) for k in self.KEYS if k != "ms"}
+        out["frames"] = len(s.get("dssim", []))
+        out["flip_frames"] = sum(1 for v in s.get("flip", []) if v is not None and not np.isnan(v))
+        out["per_window"] = {w: {"dssim_mean": mean(f"{w}|dssim"), "psnr_mean": mean(f"{w}|psnr"),
+                                 "geometric_holes_mean": mean(f"{w}|geometric_holes")} for w in windows}
+        return out
+
+
+def _geometric_holes(rays, pose, gt_distance, frame, distances) -> dict:
+    """Geometric hole fraction of the displayed view for the primary view alone and for both."""
+    points, sky, dirs = displayed_points(rays, pose, gt_distance)
+    views = [(frame.primary_pose, distances["primary"], False)]
+    out = {"primary": float(uncovered(points, sky, dirs, views).mean())}
+    if "extra" in distances and frame.extra_pose is not None:
+        views.append((frame.extra_pose, distances["extra"], True))
+        out["both"] = float(uncovered(points, sky, dirs, views).mean())
+    else:
+        out["both"] = out["primary"]
+    return out
+
+
+def _display_timed(sim, method, pose, frame, t, textures=None):
+    c0 = time.process_time()
+    rgb, own, ms = sim.display(method, pose, frame, t, textures)
+    return rgb, own, ms, (time.process_time() - c0) * 1e3
+
+
+def measure_scene(scene, variants, windows, latency_ms=128.0, rate_hz=30.0, stride=8, view_size=(1024, 1024),
+                  out_size=(960, 540), speed_sizes=((960, 540), (1280, 720)), speed_frames=12, flip_every=4,
+                  depth_codec="h264", workers=1, bar=None) -> dict:
+    """Quality and speed of every variant on one scene; see the module docstring."""
+    from .ibr_bench import Simulation, load_proxies
+
+    proxies, bundle = load_proxies(scene, progress=False) if any(v.method == "proxy" for v in variants) else (None, None)
+    latency = LatencyModel(rate_hz=rate_hz, up_ms=latency_ms / 2, down_ms=latency_ms / 2)
+    samples = {w.label: display_samples(scene, w.trace, w.start_s, w.duration_s, rate_hz, latency)[::stride]
+               for w in windows}
+    oracle_rate = rate_hz / stride
+    quality = _Quality()
+    uses_extra = {}
+    uniform = {w: 0 for w in samples}
+    ppd = pixels_per_degree(out_size[0], 90.0)
+    pool = (concurrent.futures.ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"))
+            if workers > 0 else None)
+    pending = []
+    sim = Simulation(scene, view_size, out_size, proxies=proxies, depth_codec=depth_codec, keep_distances=True)
+    rays = camera_rays(*out_size, sim.output.fov_deg)
+    try:
+        methods = {v.label: sim.make_method(v.method, **v.options) for v in variants}
+        oracle_method = sim.make_method("none")
+        uses_extra = {label: bool(m.uses_extra_view) for label, m in methods.items()}
+        for window, window_samples in samples.items():
+            for i, (t_disp, display, t_render, rendered) in enumerate(window_samples):
+                frame = sim.frame_at(t_render, rendered)
+                gt = sim.ground_truth(display, t_disp)
+                uniform[window] += nearly_uniform(gt)
+                geo = _geometric_holes(rays, display, sim.ground_truth_distance(), frame, sim.distances)
+                with_flip = flip_every > 0 and i % flip_every == 0
+                shown = []
+                for label, m in methods.items():
+                    rgb, own, ms, _ = _display_timed(sim, m, display, frame, t_disp)
+                    shown.append((label, rgb, own, ms, m.last_primitives,
+                                  geo["both" if uses_extra[label] else "primary"]))
+                oframe, otextures = sim.oracle_frame(t_disp, display, oracle_rate)
+                rgb, own, ms, _ = _display_timed(sim, oracle_method, display, oframe, t_disp, otextures)
+                shown.append((ORACLE, rgb, own, ms, 0, 0.0))
+                for label, rgb, own, ms, prims, holes in shown:
+                    job = (pool.submit(_metrics_job, gt, rgb, ppd, with_flip) if pool is not None
+                           else _metrics_job(gt, rgb, ppd, with_flip))
+                    pending.append((label, window, job, dict(own_holes=own, ms=ms, primitives=prims,
+                                                             geometric_holes=holes)))
+                while len(pending) > 8 * len(shown):
+                    _settle(pending.pop(0), quality, pool)
+                if bar is not None:
+                    bar.update(1)
+        while pending:
+            _settle(pending.pop(0), quality, pool)
+        for m in [*methods.values(), oracle_method]:
+            m.release()
+    finally:
+        if pool is not None:
+            pool.shutdown(cancel_futures=True)
+        sim.close()
+        sim.ctx.release()
+
+    speed = _measure_speed(scene, variants, samples, proxies, view_size, speed_sizes, speed_frames, depth_codec, bar)
+    views_px = view_size[0] * view_size[1]
+    result = {"scene": scene.name, "view_size": list(view_size), "output": list(out_size), "stride": stride,
+              "oracle_rate_hz": oracle_rate, "frames": {w: len(s) for w, s in samples.items()},
+              "nearly_uniform_frames": uniform, "variants": {}}
+    if bundle is not None:
+        result["proxies"] = bundle.info(1 << 20)
+    for v in [*variants, Variant(ORACLE, "none")]:
+        q = quality.summary(v.label, list(samples))
+        q["primitives_per_view_pixel"] = (q["primitives_mean"] or 0.0) / views_px
+        result["variants"][v.label] = {**v.to_json(), "uses_extra_view": uses_extra.get(v.label, False),
+                                       "quality": q, "speed": speed.get(v.label, {})}
+    return result
+
+
+def _settle(item, quality, pool):
+    label, window, job, extra = item
+    m = job.result() if pool is not None else job
+    quality.add(label, window, psnr=m["psnr"], ssim=m["ssim"], dssim=m["dssim"], flip=m["flip"], **extra)
+
+
+def _measure_speed(scene, variants, samples, proxies, view_size, sizes, frames, depth_codec, bar) -> dict:
+    """label -> size -> {ms_median, ms_mean, cpu_ms_median}; every variant on the same frames in turn."""
+    from .ibr_bench import Simulation
+
+    per_window = max(1, -(-frames // len(samples)))
+    chosen = [s for ws in samples.values() for s in ws[:per_window]][:frames]
+    out: dict = {}
+    for size in sizes:
+        key = f"{size[0]}x{size[1]}"
+        sim = Simulation(scene, view_size, size, proxies=proxies, depth_codec=depth_codec)
+        try:
+            methods = {v.label: sim.make_method(v.method, **v.options) for v in variants}
+            methods[ORACLE] = sim.make_method("none")
+            times = {label: ([], []) for label in methods}
+            for t_disp, display, t_render, rendered in chosen:
+                frame = sim.frame_at(t_render, rendered)
+                for _ in range(2):      # the first display of a frame pays its per-frame work
+                    for label, m in methods.items():
+                        _, _, ms, cpu = _display_timed(sim, m, display, frame, t_disp)
+                        times[label][0].append(ms)
+                        times[label][1].append(cpu)
+                if bar is not None:
+                    bar.update(1)
+            for label, (ms, cpu) in times.items():
+                out.setdefault(label, {})[key] = {"ms_median": float(np.median(ms)), "ms_mean": float(np.mean(ms)),
+                                                  "cpu_ms_median": float(np.median(cpu)), "frames": len(ms)}
+            for m in methods.values():
+                m.release()
+        finally:
+            sim.close()
+            sim.ctx.release()
+    return out
+
+
+def run_pareto_bench(scenes=("room",), methods=None, windows=EVALUATION_WINDOWS, latency_ms=128.0,
+                     rate_hz=30.0, stride=8, view_size=(1024, 1024), out_size=(960, 540),
+                     speed_sizes=((960, 540), (1280, 720)), speed_frames=12, flip_every=4, depth_codec="h264",
+                     workers=1, out_dir="out/bench", progress=True) -> dict:
+    from pibr.scenes.registry import load_scene
+
+    variants = default_variants(methods)
+    loaded = [load_scene(s) for s in scenes]
+    latency = LatencyModel(rate_hz=rate_hz, up_ms=latency_ms / 2, down_ms=latency_ms / 2)
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        total = 0
+        for scene in loaded:
+            total += sum(len(display_samples(scene, w.trace, w.start_s, w.duration_s, rate_hz, latency)[::stride])
+                         for w in windows)
+            total += speed_frames * len(speed_sizes)
+        bar = tqdm(total=total, unit="frame", desc="bench pareto", file=sys.stderr, leave=False, disable=None)
+    t0 = time.perf_counter()
+    try:
+        per_scene = {scene.name: measure_scene(scene, variants, windows, latency_ms, rate_hz, stride, view_size,
+                                               out_size, speed_sizes, speed_frames, flip_every, depth_codec,
+                                               workers, bar)
+                     for scene in loaded}
+    finally:
+        if bar is not None:
+            bar.close()
+    result = {"latency_ms": latency_ms, "rate_hz": rate_hz, "server_fps": 10.0, "depth_codec": depth_codec,
+              "windows": windows_json(windows, "reporting"), "scenes": per_scene,
+              "seconds": time.perf_counter() - t0}
+    write_result(out_dir, "pareto.json", result)
+    from .plots import plot_pareto
+
+    plot_pareto(result, os.path.join(out_dir, "pareto.png"))
+    return result
+
+
+def print_pareto_table(r: dict) -> None:
+    w = r["windows"]
+    used = ", ".join("{trace}@{start_s:g}+{duration_s:g}".format(**x) for x in w["used"])
+    relation = "disjoint from" if w["disjoint_from_tuning"] else "OVERLAPPING"
+    print(f"pibr bench pareto: {r['latency_ms']:g} ms round trip, {r['depth_codec']} depth, windows {used} "
+          f"({relation} the tuning windows)")
+    for scene, s in r["scenes"].items():
+        sizes = list(next(iter(s["variants"].values()))["speed"])
+        uniform, frames = sum(s["nearly_uniform_frames"].values()), sum(s["frames"].values())
+        if uniform:
+            print(f"\nwarning: {uniform} of {frames} ground-truth frames of {scene} are nearly one colour (sky or a "
+                  "wall filling the view); every method scores well on them")
+        head = (f"\n{scene}: {'variant':<26}{'DSSIM':>8}{'PSNR':>7}{'FLIP':>7}{'geo holes %':>12}{'own %':>7}"
+                + "".join(f"{'ms ' + z:>14}" for z in sizes) + f"{'prims/px':>9}")
+        print(head)
+        points = {}
+        for label, v in s["variants"].items():
+            q, sp = v["quality"], v["speed"]
+            flip = "-" if q["flip_mean"] is None else f"{q['flip_mean']:.3f}"
+            ms = "".join(f"{sp[z]['ms_median']:>14.1f}" if z in sp else f"{'-':>14}" for z in sizes)
+            print(f"  {label:<32}{q['dssim_mean']:>8.4f}{q['psnr_mean']:>7.2f}{flip:>7}"
+                  f"{100 * q['geometric_holes_mean']:>12.2f}{100 * q['own_holes_mean']:>7.2f}{ms}"
+                  f"{q['primitives_per_view_pixel']:>9.3f}")
+            if sizes and sizes[0] in sp and label != ORACLE:
+                points[label] = (sp[sizes[0]]["ms_median"], q["dssim_mean"])
+        if points:
+            print(f"  Pareto front at {sizes[0]}: {' -> '.join(pareto_front(points))}")

@@ -1,0 +1,74 @@
+"""``homography``: every pixel assumed on one plane (the Oculus SDK's warp, as compared in
+Reinert et al. 2016, Section 6.2).
+
+The primary view's pixels are taken to lie on the plane ``plane_distance`` metres in front of
+its camera, perpendicular to its view axis. Each output ray is intersected with that plane and
+the hit point is looked up in the primary view: a closed-form backward warp, one full-screen
+pass, no depth used. It corrects rotation exactly and translation only for surfaces near the
+plane; ``rotation`` is the limit of an infinitely distant plane. Rays that miss the plane (it
+lies behind or beside them) fall back to the direction alone, and rays that leave the primary
+view's hemisphere are holes (alpha 0).
+"""
+from __future__ import annotations
+
+import math
+
+from pibr.protocol.errors import ConfigError
+from pibr.protocol.pose import Pose
+
+from ..frame_textures import bind_frame_uniforms, frame_glsl, rect_uniform
+from .base import FULLSCREEN_VS, Method, fullscreen_quad, output_tan_half
+
+#: Metres; chosen on the tuning windows by ``pibr bench pareto`` (see bench/windows.py).
+DEFAULT_PLANE_DISTANCE = 2.0
+
+_FS = """
+#version 410
+%(frame)s
+uniform mat3 u_out_to_src;    // output camera -> primary camera rotation
+uniform vec3 u_eye;           // output camera position in the primary camera's space
+uniform float u_plane;        // plane z = -u_plane in the primary camera's space
+uniform vec2 u_tan_half;
+uniform vec2 u_out_size;
+uniform vec4 u_color_rect;
+out vec4 f_color;
+void main() {
+    vec2 ndc = vec2(2.0 * gl_FragCoord.x / u_out_size.x - 1.0, 1.0 - 2.0 * gl_FragCoord.y / u_out_size.y);
+    vec3 d = u_out_to_src * normalize(vec3(ndc * u_tan_half, -1.0));
+    float t = d.z < 0.0 ? (-u_plane - u_eye.z) / d.z : -1.0;
+    vec3 p = t > 0.0 ? u_eye + t * d : d;       // on the plane, or along the ray's direction
+    if (p.z > 0.0) { f_color = vec4(0.0); return; }
+    f_color = vec4(atlas_rgb(u_color_rect, wa_uv(wa_project(p).xy)), 1.0);
+}
+"""
+
+
+class HomographyWarp(Method):
+    name = "homography"
+
+    def __init__(self, ctx, output, config, plane_distance: float = DEFAULT_PLANE_DISTANCE):
+        super().__init__(ctx, output, config)
+        if not (math.isfinite(plane_distance) and plane_distance > 0):
+            raise ConfigError(f"homography plane distance must be a positive number of metres, got {plane_distance}")
+        self.plane_distance = float(plane_distance)
+        self.prog = ctx.program(vertex_shader=FULLSCREEN_VS, fragment_shader=_FS % {"frame": frame_glsl(config)})
+        bind_frame_uniforms(self.prog, config)
+        self.prog["u_tan_half"].value = output_tan_half(output)
+        self.prog["u_out_size"].value = (float(output.width), float(output.height))
+        self.prog["u_color_rect"].value = rect_uniform(config, "primary.color")
+        self.prog["u_plane"].value = self.plane_distance
+        self.vbo, self.vao = fullscreen_quad(ctx, self.prog)
+
+    def render(self, out_pose: Pose, frame, textures, scene_t: float = 0.0) -> None:
+        src = frame.primary_pose
+        r_src = src.rotation()
+        self.prog["u_out_to_src"].write((r_src.T @ out_pose.rotation()).T.astype("f4").tobytes())
+        self.prog["u_eye"].value = tuple(float(x) for x in r_src.T @ (out_pose.p - src.p))
+        textures.use()
+        self.ctx.disable(self.ctx.DEPTH_TEST)
+        self.vao.render(self.ctx.TRIANGLE_STRIP)
+
+    def release(self) -> None:
+        self.vao.release()
+        self.vbo.release()
+        self.prog.release()
