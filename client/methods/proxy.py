@@ -5,7 +5,8 @@ f_p and f_e its distances to the primary and extra cameras and d_p, d_e the dist
 those views stored where it back-projects, e = |(d - f) / f|:
 
 * e_p < tau: the primary view saw this very surface point: take its colour;
-* else e_e < tau: the extra view saw it: take the extra view's colour;
+* else, unless the primary saw past the fragment (its point is empty space, carved), if
+  e_e < tau the extra view saw it: take the extra view's colour;
 * else the proxy is not where the true surface is (an encaging proxy bulges past the
   silhouette, or the surface was hidden in both views). The fragment is not discarded but
   *deprioritised*: written behind every accepted fragment (depth mapped to [0.5, 1) instead
@@ -100,31 +101,37 @@ in vec3 v_e;
 out vec4 f_ref;   // (u, v, view: 0 primary / 1 extra / 2 none, accepted)
 const float NO_MATCH = 1e30;
 // Relative error between a view's stored distance d and the fragment's f; NO_MATCH behind
-// the camera, at its centre, or where the view stores sky (then 'sky' is set).
-float view_error(vec3 c, bool extra, out vec2 uv, out bool sky) {
+// the camera, at its centre, or where the view stores sky (then 'sky' is set). 'past': the
+// view saw beyond the fragment (d > f).
+float view_error(vec3 c, bool extra, out vec2 uv, out bool sky, out bool past) {
     sky = false;
+    past = false;
     uv = vec2(0.0);
     float f = length(c);
     if (c.z > 0.0 || f < 1e-6) return NO_MATCH;
     uv = wa_uv(wa_project(c).xy);
     float d = extra ? extra_distance(uv) : primary_distance(uv);
     if (d <= 0.0) { sky = true; return NO_MATCH; }
+    past = d > f;
     // The transport knows a distance only to within its code step, which grows as f^2
     // (disparity coding): forgive that much before comparing with tau.
     return max(abs(d - f) - u_slack_codes * depth_code_step(f), 0.0) / f;
 }
 void main() {
     vec2 uv_p, uv_e;
-    bool sky_p, sky_e;
-    float e_p = view_error(v_p, false, uv_p, sky_p);
+    bool sky_p, sky_e, past_p, past_e;
+    float e_p = view_error(v_p, false, uv_p, sky_p, past_p);
     float z = gl_FragCoord.z;
     if (e_p < u_tau) {   // the common case: no need to look at the extra view
         f_ref = vec4(uv_p, 0.0, 1.0);
         gl_FragDepth = 0.5 * z;
         return;
     }
+    // Where the primary view saw past the fragment (a farther surface, or sky), its point is
+    // empty space: carve it, whatever the extra view seems to confirm there. The extra view
+    // fills only what the primary could not see: points hidden behind its nearer surfaces.
     float e_e = NO_MATCH;
-    if (u_has_extra) e_e = view_error(v_e, true, uv_e, sky_e);
+    if (u_has_extra && !(past_p || sky_p)) e_e = view_error(v_e, true, uv_e, sky_e, past_e);
     if (e_e < u_tau) {
         f_ref = vec4(uv_e, 1.0, 1.0);
         gl_FragDepth = 0.5 * z;

@@ -4,7 +4,7 @@ import pytest
 
 from pibr.bench.coverage import LatencyModel, display_samples
 from pibr.bench.ibr_bench import Simulation, load_proxies
-from pibr.bench.metrics import psnr
+from pibr.bench.metrics import dssim, psnr, ssim
 from pibr.client.lod_select import LodSelector
 from pibr.protocol.messages import OutputConfig
 from pibr.protocol.pose import Pose, quat_from_axis_angle, quat_from_euler, quat_multiply
@@ -61,46 +61,64 @@ def _run(sim, name, pose, t_render_pose, t=0.0, **options):
     return rgb, holes
 
 
-def test_proxy_matches_ground_truth_without_latency(sim):
+def test_proxy_matches_the_frame_itself_without_latency(sim):
+    """At zero displacement proxy IBR can only lose against showing the frame as it is
+    (``none``: the same transmitted pixels, resampled). Measured: 0.08 dB below it, 0.08 %
+    holes; before the extra view was barred from points the primary saw past, 2.1 dB below."""
     pose = sim.scene.viewer_origin
     gt = sim.ground_truth(pose, 0.0)
+    reference, _ = _run(sim, "none", pose, pose)
     rgb, holes = _run(sim, "proxy", pose, pose)
-    assert holes < 0.03
-    assert psnr(gt, rgb) > 24
+    assert holes < 0.002
+    assert psnr(gt, rgb) >= psnr(gt, reference) - 0.3
 
 
 def test_proxy_beats_rotation_when_the_head_moves(sim):
+    """On every frame the head has moved since (t > 0), proxy's DSSIM is lower than rotation's,
+    and on average well below: measured 0.029 against 0.046 over these six frames."""
     scene = sim.scene
     samples = display_samples(scene, "pred6dof-1", 20.0, 2.0, 30.0, LatencyModel(rate_hz=30.0))[::10]
-    better = 0
+    scores = {"rotation": [], "proxy": []}
     for t_disp, display, t_render, rendered in samples:
         gt = sim.ground_truth(display, t_disp)
         frame = sim.frame_at(t_render, rendered)
-        scores = {}
-        for name in ("rotation", "proxy"):
+        for name in scores:
             m = sim.make_method(name)
             rgb, _, _ = sim.display(m, display, frame, t_disp)
             m.release()
-            scores[name] = psnr(gt, rgb)
-        better += scores["proxy"] > scores["rotation"]
-    assert better >= len(samples) // 2
+            scores[name].append(dssim(ssim(gt, rgb)))
+    rot, prox = np.array(scores["rotation"]), np.array(scores["proxy"])
+    assert np.all(prox[1:] < rot[1:]), (prox, rot)
+    assert prox.mean() < 0.75 * rot.mean()
 
 
-@pytest.mark.parametrize("level", ["box", "proxy", "original"])
-def test_every_level_renders_and_carves(sim, level):
+def test_every_level_renders_and_carves(sim):
+    """Finer levels are better, and even boxes give usable images (carving keeps silhouettes).
+    Measured at zero displacement: original 28.6 dB (as ``none``), proxy 24.2, box 19.9."""
     pose = sim.scene.viewer_origin
     gt = sim.ground_truth(pose, 0.0)
-    rgb, holes = _run(sim, "proxy", pose, pose, lod_level=level)
-    assert np.isfinite(rgb).all() and 0 <= holes <= 1
-    assert psnr(gt, rgb) > 18   # even boxes give usable images: carving keeps silhouettes
+    reference, _ = _run(sim, "none", pose, pose)
+    scores = {}
+    for level in ("original", "proxy", "box"):
+        rgb, holes = _run(sim, "proxy", pose, pose, lod_level=level)
+        assert holes < 0.002, level
+        scores[level] = psnr(gt, rgb)
+    assert scores["original"] >= psnr(gt, reference) - 0.3
+    assert scores["original"] > scores["proxy"] + 2 > scores["box"] + 4
+    assert scores["box"] > 19
 
 
 def test_camera_inside_a_proxy_and_at_extremes(sim):
-    # Inside the exhibit's encaging proxy, looking up at the pole and down.
+    """Inside the exhibit's encaging proxy, looking ahead, up at the projection's pole and
+    down: no worse than the frame itself. Measured (PSNR proxy / none, holes): ahead 24.3 /
+    22.1, 0.35 %; up 30.5 / 26.4, 1.1 %; down 27.0 / 26.4, 2.5 %."""
     for yaw, pitch in ((0.0, 0.0), (0.5, 1.5), (0.0, -1.5)):
         pose = Pose.make((0.3, 1.6, -0.2), quat_from_euler([yaw, pitch, 0.0], "yxz"))
+        gt = sim.ground_truth(pose, 0.0)
+        reference, _ = _run(sim, "none", pose, pose)
         rgb, holes = _run(sim, "proxy", pose, pose)
-        assert np.isfinite(rgb).all() and 0 <= holes <= 1
+        assert psnr(gt, rgb) >= psnr(gt, reference) - 0.5, (yaw, pitch)
+        assert holes < 0.04, (yaw, pitch)
 
 
 def _quad(centre, right, up, half: float) -> ProxyObject:
