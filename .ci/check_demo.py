@@ -7,7 +7,8 @@ import math
 import os
 import sys
 
-FIGURES = ("psnr_mean", "ssim_mean", "dssim_mean", "flip_mean", "hole_fraction_mean", "client_ms_median")
+FIGURES = ("psnr_mean", "ssim_mean", "dssim_mean", "flip_mean", "geometric_holes_mean", "hole_fraction_mean",
+           "client_ms_median")
 
 
 def main() -> int:

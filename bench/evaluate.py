@@ -5,7 +5,9 @@ each method's lossless recording, and compute PSNR, SSIM, DSSIM, FLIP and the ho
 Writes into the run directory:
 
     metrics.json         per method: psnr_mean, ssim_mean, dssim_mean, flip_mean,
-                         hole_fraction_mean, client_ms_median, frames (+ more, see below)
+                         geometric_holes_mean (pixels no transmitted view saw, one definition
+                         for every method), hole_fraction_mean (pixels the method left
+                         unfilled), client_ms_median, frames (+ more, see below)
     metrics_frames.csv   one row per method and tick
     quality.png          quality and frame age over time
     side_by_side.mp4     per method one row: method | ground truth | error image
@@ -34,8 +36,8 @@ from .results import write_result
 
 log = logging.getLogger(__name__)
 
-SUMMARY_KEYS = ("psnr_mean", "ssim_mean", "dssim_mean", "flip_mean", "hole_fraction_mean", "client_ms_median",
-                "frames")
+SUMMARY_KEYS = ("psnr_mean", "ssim_mean", "dssim_mean", "flip_mean", "geometric_holes_mean", "hole_fraction_mean",
+                "client_ms_median", "frames")
 
 
 def _read_session(run_dir: str) -> dict:
@@ -99,6 +101,9 @@ def evaluate_run(run_dir: str, scene_spec: str | None = None, flip_every: int = 
     ppd = pixels_per_degree(width, fov)
     streams = {m: _frames(os.path.join(run_dir, f"{m}.lossless.mkv")) for m in methods}
     gt = GroundTruth(scene, width, height, fov)
+    transmitted = TransmittedViews(scene, info["session"], (width, height), fov)
+    uses_extra = {m: bool((info.get("methods") or {}).get(m, {}).get("uses_extra_view", False)) for m in methods}
+    geometric = []   # per tick: {"primary": fraction, "both": fraction}
     # 'spawn', not fork: FLIP and SSIM use thread pools (OpenMP) that a forked child can find
     # locked forever if the parent used them before.
     pool = (concurrent.futures.ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"))
@@ -118,7 +123,7 @@ def evaluate_run(run_dir: str, scene_spec: str | None = None, flip_every: int = 
     pending: deque = deque()
 
     def settle(block: bool):
-        while pending and (block or pending[0][2].done() or len(pending) > 4 * max(1, workers)):
+        while pending and (block or pool is None or pending[0][2].done() or len(pending) > 4 * max(1, workers)):
             m, i, fut = pending.popleft()
             results[m][i] = fut.result() if pool is not None else fut
     try:
@@ -126,6 +131,7 @@ def evaluate_run(run_dir: str, scene_spec: str | None = None, flip_every: int = 
             rec = records[methods[0]][i]
             pose = Pose.make([rec["px"], rec["py"], rec["pz"]], [rec["qw"], rec["qx"], rec["qy"], rec["qz"]])
             ref = gt.render(pose, rec["scene_t"])
+            geometric.append(transmitted.holes(pose, rec))
             rows = []
             for m in methods:
                 try:
@@ -151,6 +157,7 @@ def evaluate_run(run_dir: str, scene_spec: str | None = None, flip_every: int = 
         if bar is not None:
             bar.close()
         gt.close()
+        transmitted.close()
         if pool is not None:
             pool.shutdown(cancel_futures=True)
         if writer is not None:
@@ -163,7 +170,9 @@ def evaluate_run(run_dir: str, scene_spec: str | None = None, flip_every: int = 
         recs = records[m][:n]
         flips = [p["flip"] for p in per if not math.isnan(p["flip"])]
         ages = [r["age_ms"] for r in recs if not math.isnan(r["age_ms"])]
+        geo = [g["both" if uses_extra[m] else "primary"] for g in geometric]
         summary[m] = {
+            "geometric_holes_mean": float(np.mean(geo)),
             "psnr_mean": float(np.mean([p["psnr"] for p in per])),
             "ssim_mean": float(np.mean([p["ssim"] for p in per])),
             "dssim_mean": float(np.mean([p["dssim"] for p in per])),
@@ -175,8 +184,9 @@ def evaluate_run(run_dir: str, scene_spec: str | None = None, flip_every: int = 
             "age_ms_mean": float(np.mean(ages)) if ages else None,
             "missed_deadlines": int(sum(r["missed"] for r in recs)),
         }
-        for r, p in zip(recs, per):
-            rows_out.append({"method": m, "tick": r["tick"], "t": r["t"], **p, "hole_fraction": r["hole_fraction"],
+        for r, p, g in zip(recs, per, geo):
+            rows_out.append({"method": m, "tick": r["tick"], "t": r["t"], **p, "geometric_holes": g,
+                             "hole_fraction": r["hole_fraction"],
                              "age_ms": r["age_ms"], "client_ms": r["client_ms"], "frame_id": r["frame_id"]})
     out = {"run": os.path.abspath(run_dir), "scene": scene.name, "trace": info.get("trace"),
            "clock": client["clock"], "output": {"width": width, "height": height, "fov_deg": fov,
@@ -194,14 +204,60 @@ def evaluate_run(run_dir: str, scene_spec: str | None = None, flip_every: int = 
     return out
 
 
+class TransmittedViews:
+    """Re-renders the views the server sent for the frame each tick showed, to count the
+    geometric holes: the displayed pixels whose surface no transmitted view saw
+    (``coverage.uncovered``; the same definition for every method, against the primary view for
+    methods that use only it, both views otherwise). Counted on every second pixel of every
+    second row (a quarter of the pixels) to keep evaluation quick."""
+
+    def __init__(self, scene, session: dict, out_size, fov_deg: float, subsample: int = 2):
+        from pibr.protocol.session import SessionConfig
+
+        from .coverage import CoverageProbe
+
+        config = SessionConfig.from_json(session)
+        self.offset = config.extra_offset if config.extra is not None else None
+        size = (max(1, out_size[0] // subsample), max(1, out_size[1] // subsample))
+        self.probe = CoverageProbe(scene, (config.primary.width, config.primary.height), size, fov_deg,
+                                   projection=config.options.get("projection", "vertex"))
+        self._frame = None     # (frame_id, views)
+
+    def holes(self, pose: Pose, rec: dict) -> dict:
+        """{"primary": fraction, "both": fraction} for one tick's record (1.0 before any frame)."""
+        from .coverage import uncovered
+
+        if rec["frame_id"] < 0:
+            return {"primary": 1.0, "both": 1.0}
+        if self._frame is None or self._frame[0] != rec["frame_id"]:
+            frame_pose = Pose.make([rec[f"frame_{k}"] for k in ("px", "py", "pz")],
+                                   [rec[f"frame_{k}"] for k in ("qw", "qx", "qy", "qz")])
+            t = rec["frame_scene_t"]
+            views = [(frame_pose, self.probe.render_primary(frame_pose, t), False)]
+            if self.offset is not None:
+                views.append((frame_pose.compose(self.offset),
+                              self.probe.render_extra(frame_pose, self.offset, t, peel=True), True))
+            self._frame = (rec["frame_id"], views)
+        views = self._frame[1]
+        points, sky, dirs = self.probe.display_points(pose, rec["scene_t"])
+        out = {"primary": float(uncovered(points, sky, dirs, views[:1]).mean())}
+        out["both"] = float(uncovered(points, sky, dirs, views).mean()) if len(views) > 1 else out["primary"]
+        return out
+
+    def close(self) -> None:
+        self.probe.close()
+
+
 def summary_table(metrics: dict) -> str:
     """Plain-text table of metrics.json's per-method means."""
     cols = [("method", "{}"), ("PSNR dB", "{:.2f}"), ("SSIM", "{:.4f}"), ("DSSIM", "{:.4f}"), ("FLIP", "{:.4f}"),
-            ("holes %", "{:.2f}"), ("client ms", "{:.1f}"), ("age ms", "{:.0f}"), ("frames", "{}")]
+            ("geo holes %", "{:.2f}"), ("own holes %", "{:.2f}"), ("client ms", "{:.1f}"), ("age ms", "{:.0f}"),
+            ("frames", "{}")]
     rows = []
     for m, s in metrics["methods"].items():
         vals = [m, s["psnr_mean"], s["ssim_mean"], s["dssim_mean"], s["flip_mean"],
-                100 * s["hole_fraction_mean"], s["client_ms_median"], s["age_ms_mean"], s["frames"]]
+                100 * s["geometric_holes_mean"], 100 * s["hole_fraction_mean"], s["client_ms_median"],
+                s["age_ms_mean"], s["frames"]]
         rows.append(["-" if v is None else fmt.format(v) for (_, fmt), v in zip(cols, vals)])
     widths = [max(len(c[0]), *(len(r[i]) for r in rows)) for i, c in enumerate(cols)]
     line = "  ".join(c[0].rjust(w) for c, w in zip(cols, widths))

@@ -21,10 +21,13 @@ from collections import deque
 
 import numpy as np
 
+POSE_FIELDS = ("px", "py", "pz", "qw", "qx", "qy", "qz")
+#: frame_*: the server frame shown (NaN before the first): its scene time and its primary
+#: view's pose, from which the benchmarks re-render what was transmitted (geometric holes).
 RECORD_FIELDS = (
-    "tick", "t", "scene_t", "px", "py", "pz", "qw", "qx", "qy", "qz",
+    "tick", "t", "scene_t", *POSE_FIELDS,
     "frame_id", "frame_render_t", "frame_pose_t", "frame_arrival_t", "age_ms",
-    "client_ms", "hole_fraction", "missed",
+    "client_ms", "hole_fraction", "missed", "frame_scene_t", *(f"frame_{k}" for k in POSE_FIELDS),
 )
 
 

@@ -48,10 +48,17 @@ def test_server_relay_client_processes(tmp_path):
         assert json.load(f)["methods"].keys() == {"none", "rotation"}
     for m, s in metrics["methods"].items():
         assert s["frames"] == 60 and s["flip_frames"] == 10
-        for k in ("psnr_mean", "ssim_mean", "dssim_mean", "flip_mean", "hole_fraction_mean", "client_ms_median"):
+        for k in ("psnr_mean", "ssim_mean", "dssim_mean", "flip_mean", "client_ms_median"):
             assert math.isfinite(s[k]), (m, k)
-        assert 8 < s["psnr_mean"] < 60
-        assert 0 < s["ssim_mean"] <= 1 and 0 <= s["dssim_mean"] < 0.5
-        assert 0 <= s["flip_mean"] < 1 and 0 <= s["hole_fraction_mean"] <= 1
+        assert s["hole_fraction_mean"] == 0.0    # neither method leaves a pixel unfilled ...
+    none, rot = metrics["methods"]["none"], metrics["methods"]["rotation"]
+    # ... but both show pixels no transmitted view saw: one geometric definition, the same views
+    # (the primary), so the same count. Measured 5.4 % here (a 256x256 primary view).
+    assert none["geometric_holes_mean"] == rot["geometric_holes_mean"]
+    assert 0.01 < rot["geometric_holes_mean"] < 0.15
+    # Following the head's rotation pays: measured DSSIM 0.115 against 0.263, 21.2 against 15.5 dB.
+    assert rot["dssim_mean"] < 0.6 * none["dssim_mean"]
+    assert rot["psnr_mean"] > none["psnr_mean"] + 3
+    assert rot["flip_mean"] < none["flip_mean"]
     for name in ("quality.png", "side_by_side.mp4", "metrics_frames.csv"):
         assert os.path.getsize(os.path.join(out, name)) > 1000
