@@ -37,7 +37,7 @@ from pibr.protocol.pose import Pose
 from .connection import ClientConnection
 from .frame_textures import FrameTextures
 from .methods import make_method, method_names, needs_proxies
-from .recorder import MethodRecorder
+from .recorder import POSE_FIELDS, MethodRecorder
 from .video import H264Decoder
 
 log = logging.getLogger(__name__)
@@ -66,6 +66,7 @@ class ClientConfig:
     tau: float = 0.1         # proxy IBR: relative depth error accepted as the same surface
     lod_pixels: float = 6.0  # proxy IBR: on-screen edge length that selects an object's LoD
     lod_level: str | None = None  # proxy IBR: force original, proxy or box for every object
+    options: dict = field(default_factory=dict)  # other methods' knobs (client/cli.py METHOD_KNOBS)
 
     def __post_init__(self):
         if self.clock not in ("virtual", "real"):
@@ -148,6 +149,7 @@ class Client:
         self.missed = 0
         self._newest: _Decoded | None = None
         self._gl_state = None
+        self._method_info: dict = {}
         self._last_shown: dict = {}
         self.proxies = None
         self.proxy_stats: dict = {}
@@ -175,11 +177,14 @@ class Client:
 
         out = OutputConfig(self.cfg.width, self.cfg.height, self.cfg.fov_deg, self.cfg.rate_hz)
         textures = FrameTextures(ctx, self.session)
-        options = {"tau": self.cfg.tau, "lod_target_px": self.cfg.lod_pixels, "lod_level": self.cfg.lod_level}
+        options = {"tau": self.cfg.tau, "lod_target_px": self.cfg.lod_pixels, "lod_level": self.cfg.lod_level,
+                   **self.cfg.options}
         methods = [make_method(name, ctx, out, self.session, proxies=self.proxies, **options)
                    for name in self.cfg.methods]
         target = OutputTarget(ctx, self.cfg.width, self.cfg.height)
         self._gl_state = (textures, methods, target)
+        self._method_info = {name: {"uses_extra_view": bool(m.uses_extra_view)}
+                             for name, m in zip(self.cfg.methods, methods)}
 
     def _gl_render(self, ctx, pose: Pose, decoded: _Decoded | None, scene_t: float):
         """Upload the newest frame if new, render every method; -> [(rgb, hole fraction, ms)]."""
@@ -330,13 +335,16 @@ class Client:
         f = decoded.frame if decoded is not None else None
         return {
             "tick": tick, "t": t_us / 1e6, "scene_t": (t_us + offset) / 1e6,
-            **dict(zip(("px", "py", "pz", "qw", "qx", "qy", "qz"), pose.as_array())),
+            **dict(zip(POSE_FIELDS, pose.as_array())),
             "frame_id": -1 if f is None else f.frame_id,
             "frame_render_t": float("nan") if f is None else (f.render_t_us - offset) / 1e6,
             "frame_pose_t": float("nan") if f is None else f.pose_t_us / 1e6,
             "frame_arrival_t": float("nan") if f is None else decoded.arrival_us / 1e6,
             "age_ms": float("nan") if f is None else (t_us - f.pose_t_us) / 1e3,
             "client_ms": client_ms, "hole_fraction": hole, "missed": missed,
+            "frame_scene_t": float("nan") if f is None else f.scene_t_us / 1e6,
+            **dict(zip((f"frame_{k}" for k in POSE_FIELDS),
+                       [float("nan")] * 7 if f is None else f.primary_pose.as_array())),
         }
 
     async def _run_virtual(self, trace, interval_us, n_ticks, preroll, progress) -> None:
@@ -414,7 +422,7 @@ class Client:
             rgb, record = self._last_shown[name]
             age = record["age_ms"] + (t_us / 1e6 - record["t"]) * 1e3  # NaN stays NaN: no frame yet
             record = dict(record, tick=tick, t=t_us / 1e6, scene_t=(t_us + self._server_offset_us) / 1e6, missed=1,
-                          age_ms=age, **dict(zip(("px", "py", "pz", "qw", "qx", "qy", "qz"), pose.as_array())))
+                          age_ms=age, **dict(zip(POSE_FIELDS, pose.as_array())))
             rec.submit(rgb, record)
 
     async def _receive_real(self, zero: float) -> None:
@@ -434,6 +442,7 @@ class Client:
             "trace": {"name": trace.name, "start_s": self.cfg.start_s, "duration_s": self._duration},
             "result": asdict(result),
             "proxies": self.proxy_stats or None,
+            "methods": self._method_info,
         }
         with open(os.path.join(self.cfg.out_dir, "session.json"), "w") as f:
             json.dump(info, f, indent=2, default=str)

@@ -59,7 +59,76 @@ def register(sub) -> None:
     p.add_argument("--lod-level", choices=("original", "proxy", "box"), default=None,
                    help="proxy: draw this level for every object instead of choosing by distance")
     p.add_argument("--progress", choices=("bar", "lines", "none"), default="bar")
+    add_method_knobs(p)
     p.set_defaults(func=cmd_client)
+
+
+def _positive_float(text: str) -> float:
+    import math
+
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not (math.isfinite(v) and v > 0):
+        raise argparse.ArgumentTypeError(f"must be a positive number, got {text}")
+    return v
+
+
+def _positive_int(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
+    if v <= 0:
+        raise argparse.ArgumentTypeError(f"must be positive, got {text}")
+    return v
+
+
+# The competitors' knobs: flag, the option it sets, its type, help. Each method takes the
+# options it knows (see make_method); an option no chosen method takes is ignored.
+METHOD_KNOBS = (
+    ("--plane-distance", "plane_distance", _positive_float,
+     "homography: metres from the primary camera to the plane every pixel is taken to lie on"),
+    ("--point-size", "point_size", _positive_float, "splat: point size in output pixels"),
+    ("--split", "split", _positive_float,
+     "meshwarp, quadtree, iterative: relative depth range that splits a triangle at a discontinuity"),
+    ("--coarse-step", "step", _positive_int, "coarse-meshwarp: pixels between grid vertices"),
+    ("--quadtree-threshold", "threshold", _positive_float,
+     "quadtree, iterative: the server merges pixels into a quad while its relative depth range stays below this"),
+    ("--iterations", "iterations", _positive_int, "iterative: fixed-point iterations per pixel"),
+    ("--damping", "damping", _positive_float, "iterative: damping of each correction"),
+    ("--grid-tile", "tile", _positive_int, "gridwarp: tile size of the surface-estimation quadtree, pixels"),
+    ("--grid-epsilon", "epsilon", _positive_float, "gridwarp: relative collinearity tolerance"),
+)
+
+
+def add_method_knobs(parser) -> None:
+    """The competitors' knobs as options of ``parser``; defaults come from the methods."""
+    import inspect
+
+    from .methods import METHODS
+
+    defaults = {}
+    for cls in METHODS.values():
+        for name, param in inspect.signature(cls.__init__).parameters.items():
+            if param.default is not inspect.Parameter.empty:
+                defaults.setdefault(name, param.default)
+    group = parser.add_argument_group("method knobs (each method takes its own)")
+    for flag, option, kind, text in METHOD_KNOBS:
+        if option in defaults:
+            group.add_argument(flag, dest=f"knob_{option}", type=kind, default=None,
+                               metavar=option.upper(), help=f"{text} (default {defaults[option]:g})")
+    if "fill" in defaults:
+        group.add_argument("--no-grid-fill", dest="knob_fill", action="store_const", const=False, default=None,
+                           help="gridwarp: no depth-aware hole filling")
+    group.add_argument("--no-extra-view", dest="knob_extra_view", action="store_const", const=False, default=None,
+                       help="proxy: ignore the transmitted extra view")
+
+
+def method_knobs(args) -> dict:
+    """The knobs given on the command line: option -> value."""
+    return {k[len("knob_"):]: v for k, v in vars(args).items() if k.startswith("knob_") and v is not None}
 
 
 def cmd_client(args) -> int:
@@ -71,7 +140,7 @@ def cmd_client(args) -> int:
                        fov_deg=args.fov, start_s=args.start, duration_s=args.duration, preroll_s=args.preroll,
                        scene=args.scene, depth_codec=args.depth_codec or "", lossless=not args.no_lossless,
                        progress=args.progress, tau=args.tau, lod_pixels=args.lod_pixels,
-                       lod_level=args.lod_level)
+                       lod_level=args.lod_level, options=method_knobs(args))
     from .connection import ServerClosed
 
     try:

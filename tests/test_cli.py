@@ -147,3 +147,23 @@ def test_missing_egl_is_one_line_naming_the_fix(tmp_path, argv):
     assert "Traceback" not in res.stderr and res.stderr.count("\n") == 1, res.stderr
     assert "no headless OpenGL" in res.stderr and "apt-get install libegl1" in res.stderr
     assert "listening on" not in res.stdout
+
+
+def test_method_knobs_reach_the_client_config():
+    from pibr.client.cli import method_knobs
+
+    args = build_parser().parse_args(["client", "--method", "coarse-meshwarp,homography,proxy", "--coarse-step", "8",
+                                      "--plane-distance", "3.5", "--no-extra-view"])
+    assert method_knobs(args) == {"step": 8, "plane_distance": 3.5, "extra_view": False}
+    assert method_knobs(build_parser().parse_args(["client"])) == {}
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["client", "--coarse-step", "0"], "--coarse-step: must be positive"),
+    (["client", "--plane-distance", "inf"], "--plane-distance: must be a positive number"),
+    (["client", "--point-size", "two"], "--point-size: expected a number"),
+])
+def test_bad_method_knobs_are_named(capsys, argv, message):
+    with pytest.raises(SystemExit):
+        build_parser().parse_args(argv)
+    assert message in capsys.readouterr().err
