@@ -31,6 +31,10 @@ def _sizes(text: str) -> tuple:
     return tuple(_size(part) for part in text.split(",") if part.strip())
 
 
+_WINDOWS_HELP = ("head-trace windows: 'evaluation' (default: disjoint from every window a default was fitted "
+                 "on), 'tuning', or TRACE@START+DURATION,... in seconds (see bench/windows.py)")
+
+
 def _windows(text: str) -> tuple:
     from pibr.protocol.errors import ConfigError
 
@@ -172,10 +176,8 @@ def register(sub) -> None:
                         description="Reproduces Reinert et al.'s Figure 4: the fraction of displayed pixels that no "
                                     "transmitted view covers, for four dual-view variants, along real traces.")
     cov.add_argument("--scene", default="room")
-    cov.add_argument("--trace", type=_names, default=("pred6dof-1", "pred6dof-2"), help="comma-separated traces")
+    cov.add_argument("--windows", type=_windows, default="evaluation", help=_WINDOWS_HELP)
     cov.add_argument("--latency-ms", type=_non_negative, default=128.0)
-    cov.add_argument("--start", type=_non_negative, default=10.0)
-    cov.add_argument("--duration", type=_positive, default=8.0)
     cov.add_argument("--rate", type=_positive, default=30.0)
     cov.add_argument("--view-size", type=_size, default=(1024, 1024), metavar="WxH")
     cov.add_argument("--size", type=_size, default=(320, 180), metavar="WxH", help="displayed view size")
@@ -189,10 +191,8 @@ def register(sub) -> None:
                                   "process, on the virtual clock's schedule), the LoD trade, and proxy IBR's ms per "
                                   "frame next to a full-screen pass with the same texture lookups.")
     i.add_argument("--scene", default="room")
-    i.add_argument("--trace", type=_names, default=("pred6dof-1", "pred6dof-2"))
+    i.add_argument("--windows", type=_windows, default="evaluation", help=_WINDOWS_HELP)
     i.add_argument("--latency-ms", type=_non_negative, default=128.0)
-    i.add_argument("--start", type=_non_negative, default=10.0)
-    i.add_argument("--duration", type=_positive, default=8.0)
     i.add_argument("--rate", type=_positive, default=30.0)
     i.add_argument("--stride", type=_positive_int, default=2, help="score every Nth displayed tick (default 2)")
     i.add_argument("--size", type=_size, default=(960, 540), metavar="WxH")
@@ -205,9 +205,8 @@ def register(sub) -> None:
                                    "without temporal context, four passes or one raster pass) against lossless zstd "
                                    "and 8-bit disparity in the H.264 atlas, along real traces.")
     cd.add_argument("--scene", default="room")
-    cd.add_argument("--trace", type=_names, default=("pred6dof-1", "pred6dof-2"))
-    cd.add_argument("--start", type=_non_negative, default=10.0)
-    cd.add_argument("--duration", type=_positive, default=4.0, help="seconds per trace (default 4)")
+    cd.add_argument("--windows", type=_windows, default="evaluation", help=_WINDOWS_HELP)
+    cd.add_argument("--duration", type=_positive, default=4.0, help="seconds of each window (default 4)")
     cd.add_argument("--view-size", type=_size, default=(1024, 1024), metavar="WxH")
     cd.add_argument("--bitrate-kbps", type=_positive, default=16000.0, help="total bitrate for the equal-rate comparison")
     cd.add_argument("--size", type=_size, default=(960, 540), metavar="WxH",
@@ -224,16 +223,17 @@ def register(sub) -> None:
                     help="comma-separated scenes (default room; the sphere scene's frames are mostly sky on the "
                          "shared traces)")
     pa.add_argument("--method", type=parse_methods, default=None, help="only these methods (default: all)")
-    pa.add_argument("--windows", type=_windows, default="evaluation",
-                    help="'evaluation' (default: disjoint from tuning), 'tuning', or TRACE@START+DURATION,...")
+    pa.add_argument("--windows", type=_windows, default="evaluation", help=_WINDOWS_HELP)
     pa.add_argument("--latency-ms", type=_non_negative, default=128.0)
     pa.add_argument("--rate", type=_positive, default=30.0, help="display rate Hz (default 30)")
     pa.add_argument("--stride", type=_positive_int, default=8, help="score every Nth displayed tick (default 8)")
     pa.add_argument("--view-size", type=_size, default=(1024, 1024), metavar="WxH")
-    pa.add_argument("--size", type=_size, default=(960, 540), metavar="WxH", help="output size scored (default 960x540)")
+    pa.add_argument("--size", type=_size, default=(960, 540), metavar="WxH",
+                    help="output size scored (default 960x540)")
     pa.add_argument("--speed-sizes", type=_sizes, default=((960, 540), (1280, 720)), metavar="WxH,...",
                     help="output sizes timed (default 960x540,1280x720)")
-    pa.add_argument("--speed-frames", type=_positive_int, default=12, help="frames timed per size and scene (default 12)")
+    pa.add_argument("--speed-frames", type=_positive_int, default=12,
+                    help="frames timed per size and scene (default 12)")
     pa.add_argument("--flip-every", type=_non_negative_int, default=4, help="FLIP on every Nth scored frame, 0: never")
     pa.add_argument("--depth-codec", choices=("h264", "edge"), default="h264")
     pa.add_argument("--out", default="out/bench")
@@ -253,11 +253,11 @@ def register(sub) -> None:
                       description="Exhaustive (or coarse-to-fine) search over forward offset, height and tilt of "
                                   "the extra view, minimising the mean missing-pixel fraction over traces.")
     o.add_argument("--scene", default="room")
-    o.add_argument("--trace", type=_names, default=("pred6dof-1", "pred6dof-2"))
+    o.add_argument("--windows", type=_windows, default="tuning",
+                   help="where to fit: 'tuning' (default), or TRACE@START+DURATION,... (a fit on the "
+                        "evaluation windows would make them tuning data)")
     o.add_argument("--latency-ms", type=_non_negative, default=128.0)
-    o.add_argument("--start", type=_non_negative, default=10.0)
-    o.add_argument("--duration", type=_positive, default=8.0)
-    o.add_argument("--frames", type=_positive_int, default=12, help="displayed frames per trace (default 12)")
+    o.add_argument("--frames", type=_positive_int, default=12, help="displayed frames per window (default 12)")
     o.add_argument("--forward", type=_range, default="-1:2:0.5", help="metres, START:STOP:STEP or a,b,c")
     o.add_argument("--up", type=_range, default="0:1.8:0.3", help="metres")
     o.add_argument("--tilt", type=_range, default="-30:45:15", help="degrees down")
@@ -327,9 +327,9 @@ def cmd_bench_client(args) -> int:
 def cmd_bench_coverage(args) -> int:
     from .coverage import print_coverage_table, run_coverage_bench
 
-    result = run_coverage_bench(scene_spec=args.scene, traces=args.trace, latency_ms=args.latency_ms,
-                                start_s=args.start, duration_s=args.duration, rate_hz=args.rate,
-                                view_size=args.view_size, out_size=args.size, offset=args.offset, out_dir=args.out)
+    result = run_coverage_bench(scene_spec=args.scene, windows=args.windows, latency_ms=args.latency_ms,
+                                rate_hz=args.rate, view_size=args.view_size, out_size=args.size, offset=args.offset,
+                                out_dir=args.out)
     print_coverage_table(result)
     print(f"written: {args.out}/coverage.json, {args.out}/coverage.png")
     return 0
@@ -338,9 +338,8 @@ def cmd_bench_coverage(args) -> int:
 def cmd_bench_ibr(args) -> int:
     from .ibr_bench import print_ibr_tables, run_ibr_bench
 
-    r = run_ibr_bench(scene_spec=args.scene, traces=args.trace, latency_ms=args.latency_ms, start_s=args.start,
-                      duration_s=args.duration, rate_hz=args.rate, view_size=args.view_size, out_size=args.size,
-                      stride=args.stride, out_dir=args.out)
+    r = run_ibr_bench(scene_spec=args.scene, windows=args.windows, latency_ms=args.latency_ms, rate_hz=args.rate,
+                      view_size=args.view_size, out_size=args.size, stride=args.stride, out_dir=args.out)
     print_ibr_tables(r)
     print(f"written: {args.out}/ibr.json")
     return 0
@@ -349,7 +348,7 @@ def cmd_bench_ibr(args) -> int:
 def cmd_bench_codec(args) -> int:
     from .codec_bench import print_codec_table, run_codec_bench
 
-    r = run_codec_bench(scene_spec=args.scene, traces=args.trace, start_s=args.start, duration_s=args.duration,
+    r = run_codec_bench(scene_spec=args.scene, windows=args.windows, window_s=args.duration,
                         view_size=args.view_size, bitrate_kbps=args.bitrate_kbps, out_size=args.size,
                         out_dir=args.out)
     print_codec_table(r)
@@ -372,8 +371,8 @@ def cmd_bench_offset(args) -> int:
 
     forward, up, tilt = (args.forward, args.up, args.tilt)
     forward, up, tilt = (a if isinstance(a, list) else _range(a) for a in (forward, up, tilt))
-    r = search_offset(scene_spec=args.scene, traces=args.trace, latency_ms=args.latency_ms, start_s=args.start,
-                      duration_s=args.duration, frames_per_trace=args.frames, forward=forward, up=up, tilt=tilt,
+    r = search_offset(scene_spec=args.scene, windows=args.windows, latency_ms=args.latency_ms,
+                      frames_per_window=args.frames, forward=forward, up=up, tilt=tilt,
                       method=args.method, view_size=args.view_size, out_size=args.size, objective=args.objective,
                       out_dir=args.out)
     b = r["best"]

@@ -49,9 +49,9 @@ def _colour_psnr(decoded_rgb: np.ndarray, true_rgb: np.ndarray) -> float:
     return psnr(true_rgb, decoded_rgb)
 
 
-def run_codec_bench(scene_spec="room", traces=("pred6dof-1", "pred6dof-2"), start_s=10.0, duration_s=4.0,
-                    fps=10.0, view_size=(1024, 1024), bitrate_kbps=16000.0, out_dir="out/bench",
-                    progress=True, with_end_to_end=True, out_size=(960, 540)) -> dict:
+def run_codec_bench(scene_spec="room", windows=None, window_s=4.0, fps=10.0, view_size=(1024, 1024),
+                    bitrate_kbps=16000.0, out_dir="out/bench", progress=True, with_end_to_end=True,
+                    out_size=(960, 540)) -> dict:
     import zstandard
 
     from pibr.client.diffusion import codes_to_distance, diffuse, diffuse_plain
@@ -71,12 +71,15 @@ def run_codec_bench(scene_spec="room", traces=("pred6dof-1", "pred6dof-2"), star
 
     from pibr.protocol.errors import ConfigError
 
-    frames_per_trace = int(duration_s * fps)
-    if frames_per_trace < 1:
-        raise ConfigError(f"{duration_s} s at {fps:g} fps is not a single frame")
+    from .windows import EVALUATION_WINDOWS, Window, windows_json
+
+    # The first window_s seconds of each window (default: the evaluation windows).
+    windows = tuple(Window(w.trace, w.start_s, min(w.duration_s, window_s)) for w in (windows or EVALUATION_WINDOWS))
+    if min(int(w.duration_s * fps) for w in windows) < 1:
+        raise ConfigError(f"{min(w.duration_s for w in windows)} s at {fps:g} fps is not a single frame")
     scene = load_scene(scene_spec)
-    for tr in traces:
-        load_trace(tr).window(start_s, duration_s)  # a start outside a trace is refused before any work
+    for w in windows:
+        load_trace(w.trace).window(w.start_s, w.duration_s)  # a start outside a trace is refused before any work
     w, h = view_size
     q8 = h264_quantizer(scene.near, scene.far)
     q12 = edge_quantizer(scene.near, scene.far, EDGE_BITS)
@@ -91,7 +94,7 @@ def run_codec_bench(scene_spec="room", traces=("pred6dof-1", "pred6dof-2"), star
     per_frame = []
     frames_colour, frames_true_rgb = [], []
     bar = None
-    n_frames = frames_per_trace * len(traces)
+    n_frames = sum(int(w.duration_s * fps) for w in windows)
     if progress:
         from tqdm import tqdm
 
@@ -99,18 +102,18 @@ def run_codec_bench(scene_spec="room", traces=("pred6dof-1", "pred6dof-2"), star
     zc = zstandard.ZstdCompressor(level=3)
     zd = zstandard.ZstdDecompressor()
     try:
-        for tr in traces:
-            trace = load_trace(tr)
+        for win in windows:
+            trace, start_s = load_trace(win.trace), win.start_s
             enc_h264 = H264Encoder(with_depth.width, with_depth.height, fps, bitrate_kbps, 30, deterministic=True)
             dec_h264 = H264Decoder(with_depth.width, with_depth.height)
             coders = {name: (EdgeEncoder(w, h, EDGE_BITS, q12, temporal=v["temporal"], passes=v["passes"]),
                              EdgeDecoder(w, h, EDGE_BITS, q12), {"enc": None, "dec": None}) for name, v in variants.items()}
-            for k in range(frames_per_trace):
+            for k in range(int(win.duration_s * fps)):
                 t = k / fps
                 pose = scene.viewer_origin.compose(trace.pose_at(min(start_s + t, trace.duration)))
                 p = producer.produce(pose, t)
                 r_true = p.distances["primary"]
-                row = {"trace": tr, "frame": k}
+                row = {"window": win.label, "frame": k}
                 # (a) 8-bit disparity inside the H.264 atlas
                 t0 = time.perf_counter()
                 data, _ = enc_h264.encode(p.yuv)
@@ -202,11 +205,13 @@ def run_codec_bench(scene_spec="room", traces=("pred6dof-1", "pred6dof-2"), star
     for name in ("zstd-lossless", *variants):
         summary[name]["kbps"] = summary[name]["bytes"] * 8 * fps / 1000
     summary["h264-8bit"]["atlas_kbps"] = summary["h264-8bit"]["atlas_bytes"] * 8 * fps / 1000
-    result = {"scene": scene.name, "traces": list(traces), "fps": fps, "view_size": list(view_size),
+    result = {"scene": scene.name, "windows": windows_json(windows, "reporting"), "fps": fps,
+              "view_size": list(view_size),
               "total_bitrate_kbps": bitrate_kbps, "edge_kbps": edge_kbps, "colour_only_kbps": colour_kbps,
               "summary": summary, "frames": per_frame}
     if with_end_to_end:
-        result["end_to_end"] = end_to_end(scene_spec, traces[0], start_s, duration_s, total_kbps=bitrate_kbps,
+        w0 = windows[0]
+        result["end_to_end"] = end_to_end(scene_spec, w0.trace, w0.start_s, w0.duration_s, total_kbps=bitrate_kbps,
                                           view_size=view_size, out_size=out_size, progress=progress)
     write_result(out_dir, "codec.json", result)
     from .plots import plot_codec

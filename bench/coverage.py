@@ -241,24 +241,28 @@ def measure_coverage(probe: CoverageProbe, samples, offset: Pose, variants=VARIA
     return out
 
 
-def run_coverage_bench(scene_spec="room", traces=("pred6dof-1", "pred6dof-2"), latency_ms=128.0, start_s=10.0,
-                       duration_s=8.0, rate_hz=30.0, view_size=(1024, 1024), out_size=(320, 180), offset=None,
-                       out_dir="out/bench", progress=True) -> dict:
-    """``pibr bench coverage``: JSON and plot of the four variants' missing-pixel fractions."""
+def run_coverage_bench(scene_spec="room", windows=None, latency_ms=128.0, rate_hz=30.0, view_size=(1024, 1024),
+                       out_size=(320, 180), offset=None, out_dir="out/bench", progress=True) -> dict:
+    """``pibr bench coverage``: JSON and plot of the four variants' missing-pixel fractions,
+    per window (default: the evaluation windows of bench/windows.py)."""
     from pibr.scenes.registry import load_scene
     from pibr.server.config import PAPER_EXTRA_OFFSET, extra_offset_pose
 
+    from .windows import EVALUATION_WINDOWS, windows_json
+
+    windows = tuple(windows or EVALUATION_WINDOWS)
     scene = load_scene(scene_spec)
     if offset is None:
         offset_pose = scene.extra_view_offset or extra_offset_pose(*PAPER_EXTRA_OFFSET)
     else:
         offset_pose = extra_offset_pose(*offset)
     latency = LatencyModel(rate_hz=rate_hz, up_ms=latency_ms / 2, down_ms=latency_ms / 2)
+    all_samples = {w.label: display_samples(scene, w.trace, w.start_s, w.duration_s, rate_hz, latency)
+                   for w in windows}
     probe = CoverageProbe(scene, view_size, out_size)
-    per_trace = {}
+    per_window = {}
+    bar = None
     try:
-        bar = None
-        all_samples = {tr: display_samples(scene, tr, start_s, duration_s, rate_hz, latency) for tr in traces}
         if progress:
             import sys
 
@@ -267,26 +271,26 @@ def run_coverage_bench(scene_spec="room", traces=("pred6dof-1", "pred6dof-2"), l
             bar = tqdm(total=sum(len(s) for s in all_samples.values()), unit="frame", desc="coverage",
                        file=sys.stderr, leave=False,
                        disable=None)  # None: no bar when stderr is not a terminal
-        for tr, samples in all_samples.items():
+        for label, samples in all_samples.items():
             series = {}
             for s in samples:
                 for k, vals in measure_coverage(probe, [s], offset_pose).items():
                     series.setdefault(k, []).extend(vals)
                 if bar is not None:
                     bar.update(1)
-            per_trace[tr] = {"times": [s[0] for s in samples], "missing": series,
-                             "means": {k: float(np.mean(v)) for k, v in series.items()}}
+            per_window[label] = {"times": [s[0] for s in samples], "missing": series,
+                                 "means": {k: float(np.mean(v)) for k, v in series.items()}}
+    finally:
         if bar is not None:
             bar.close()
-    finally:
         probe.close()
-    overall = {k: float(np.mean(np.concatenate([per_trace[t]["missing"][k] for t in traces])))
-               for k in per_trace[traces[0]]["missing"]}
-    result = {"scene": scene.name, "traces": list(traces), "latency_ms": latency_ms, "rate_hz": rate_hz,
-              "start_s": start_s, "duration_s": duration_s, "view_size": list(view_size),
-              "output_size": list(out_size), "offset": list(offset_pose.as_array()),
-              "tolerance": COVERAGE_TOLERANCE, "means": overall,
-              "per_trace": per_trace}
+    labels = list(per_window)
+    overall = {k: float(np.mean(np.concatenate([per_window[w]["missing"][k] for w in labels])))
+               for k in per_window[labels[0]]["missing"]}
+    result = {"scene": scene.name, "windows": windows_json(windows, "reporting"), "latency_ms": latency_ms,
+              "rate_hz": rate_hz, "view_size": list(view_size), "output_size": list(out_size),
+              "offset": list(offset_pose.as_array()), "tolerance": COVERAGE_TOLERANCE, "means": overall,
+              "per_window": per_window}
     write_result(out_dir, "coverage.json", result)
     from .plots import plot_coverage
 
@@ -296,14 +300,19 @@ def run_coverage_bench(scene_spec="room", traces=("pred6dof-1", "pred6dof-2"), l
 
 def print_coverage_table(result: dict) -> None:
     print(f"pibr bench coverage: scene {result['scene']}, {result['latency_ms']:g} ms round trip, "
-          f"missing-pixel fraction (lower is better)")
-    traces = result["traces"]
-    head = f"{'variant':<28}" + "".join(f"{t:>14}" for t in traces) + f"{'all':>10}{'geometry only':>15}"
+          f"missing-pixel fraction % (lower is better)")
+    w = result["windows"]
+    if not w["disjoint_from_tuning"]:
+        print("note: some windows overlap the tuning windows (bench/windows.py)")
+    variants = VARIANTS + ("floor",)
+    short = {"primary": "primary", "peel_no_offset": "peel, no off", "offset_no_peel": "offset, no peel",
+             "offset_peel": "offset+peel", "floor": "floor"}
+    head = f"{'window':<26}" + "".join(f"{short[v]:>16}" for v in variants)
     print(head)
     print("-" * len(head))
-    for v in VARIANTS + ("floor",):
-        row = f"{VARIANT_LABELS[v]:<28}" + "".join(f"{100 * result['per_trace'][t]['means'][v]:>13.2f}%"
-                                                   for t in traces)
-        print(row + f"{100 * result['means'][v]:>9.2f}%{100 * result['means'][v + ':geometry']:>14.2f}%")
+    for label, d in result["per_window"].items():
+        print(f"{label:<26}" + "".join(f"{100 * d['means'][v]:>16.2f}" for v in variants))
+    print(f"{'all':<26}" + "".join(f"{100 * result['means'][v]:>16.2f}" for v in variants))
+    print(f"{'all, geometry only':<26}" + "".join(f"{100 * result['means'][v + ':geometry']:>16.2f}" for v in variants))
     print("'geometry only' leaves out pixels showing sky: a peeled extra view cannot tell sky from "
           "peeled-away surfaces, so only unpeeled views vouch for sky.")

@@ -239,19 +239,26 @@ def summarize(series: dict) -> dict:
             "triangles_mean": mean("triangles"), "frames": len(series["ms"])}
 
 
-def run_ibr_bench(scene_spec="room", traces=("pred6dof-1", "pred6dof-2"), latency_ms=128.0, start_s=10.0,
-                  duration_s=8.0, rate_hz=30.0, view_size=(1024, 1024), out_size=(960, 540), stride=2,
-                  lod_targets=(2.0, 6.0, 16.0), speed_sizes=((960, 540), (1280, 720)), speed_frames=20,
-                  out_dir="out/bench", progress=True) -> dict:
+def run_ibr_bench(scene_spec="room", windows=None, latency_ms=128.0, rate_hz=30.0, view_size=(1024, 1024),
+                  out_size=(960, 540), stride=2, lod_targets=(2.0, 6.0, 16.0),
+                  speed_sizes=((960, 540), (1280, 720)), speed_frames=20, out_dir="out/bench",
+                  progress=True) -> dict:
+    """Per window (default: the evaluation windows of bench/windows.py): quality of none,
+    rotation and proxy and the LoD variants; proxy's speed against the floor."""
     from pibr.scenes.registry import load_scene
 
+    from .windows import EVALUATION_WINDOWS, windows_json
+
+    windows = tuple(windows or EVALUATION_WINDOWS)
     scene = load_scene(scene_spec)
     proxies, bundle = load_proxies(scene, progress)
     latency = LatencyModel(rate_hz=rate_hz, up_ms=latency_ms / 2, down_ms=latency_ms / 2)
-    result = {"scene": scene.name, "traces": list(traces), "latency_ms": latency_ms, "rate_hz": rate_hz,
-              "output": list(out_size), "view_size": list(view_size), "stride": stride,
+    result = {"scene": scene.name, "windows": windows_json(windows, "reporting"), "latency_ms": latency_ms,
+              "rate_hz": rate_hz, "output": list(out_size), "view_size": list(view_size), "stride": stride,
               "proxies": bundle.info(1 << 20) | {"build_s": bundle.seconds}, "quality": {}, "lod": {}, "speed": {}}
-    samples = {tr: display_samples(scene, tr, start_s, duration_s, rate_hz, latency)[::stride] for tr in traces}
+    samples = {w.label: display_samples(scene, w.trace, w.start_s, w.duration_s, rate_hz, latency)[::stride]
+               for w in windows}
+    traces = list(samples)
     quality_variants = {"none": ("none", {}), "rotation": ("rotation", {}), "proxy": ("proxy", {})}
     lod_variants = {f"proxy lod {t:g}px": ("proxy", {"lod_target_px": t}) for t in lod_targets}
     lod_variants.update({f"proxy all {lv}": ("proxy", {"lod_level": lv}) for lv in ("original", "proxy", "box")})
@@ -273,7 +280,7 @@ def run_ibr_bench(scene_spec="room", traces=("pred6dof-1", "pred6dof-2"), latenc
             finally:
                 sim.close()
                 sim.ctx.release()
-        speed_samples = samples[traces[0]][:speed_frames]
+        speed_samples = [x for tr in traces for x in samples[tr]][:speed_frames]
         for size in speed_sizes:
             sim = Simulation(scene, view_size, size, proxies=proxies)
             try:

@@ -105,8 +105,7 @@ def coarse_to_fine(objective, axes, keep: int = 3, progress=None) -> dict:
                 evaluate(idx)
 
 
-def search_offset(scene_spec="room", traces=("pred6dof-1", "pred6dof-2"), latency_ms=128.0, start_s=10.0,
-                  duration_s=8.0, rate_hz=30.0, frames_per_trace=12,
+def search_offset(scene_spec="room", windows=None, latency_ms=128.0, rate_hz=30.0, frames_per_window=12,
                   forward=(-1.0, -0.5, 0.0, 0.5, 1.0, 1.5, 2.0), up=(0.0, 0.3, 0.6, 0.9, 1.2, 1.5, 1.8),
                   tilt=(-30.0, -15.0, 0.0, 15.0, 30.0, 45.0), method="exhaustive", view_size=(512, 512),
                   out_size=(192, 108), objective="all", out_dir="out/bench", progress=True) -> dict:
@@ -116,11 +115,14 @@ def search_offset(scene_spec="room", traces=("pred6dof-1", "pred6dof-2"), latenc
         raise ValueError("method must be 'exhaustive' or 'coarse-to-fine'")
     scene = load_scene(scene_spec)
     latency = LatencyModel(rate_hz=rate_hz, up_ms=latency_ms / 2, down_ms=latency_ms / 2)
+    from .windows import TUNING_WINDOWS, windows_json
+
+    windows = tuple(windows or TUNING_WINDOWS)     # a search fits a default: tuning windows only
     samples = []
-    for tr in traces:
-        s = display_samples(scene, tr, start_s, duration_s, rate_hz, latency)
-        stride = max(1, len(s) // frames_per_trace)
-        samples += s[::stride][:frames_per_trace]
+    for w in windows:
+        s = display_samples(scene, w.trace, w.start_s, w.duration_s, rate_hz, latency)
+        stride = max(1, len(s) // frames_per_window)
+        samples += s[::stride][:frames_per_window]
     axes = [list(forward), list(up), list(tilt)]
     probe = CoverageProbe(scene, view_size, out_size)
     bar = None
@@ -144,7 +146,8 @@ def search_offset(scene_spec="room", traces=("pred6dof-1", "pred6dof-2"), latenc
     best_idx = min(values, key=values.get)
     best = {"forward": axes[0][best_idx[0]], "up": axes[1][best_idx[1]], "tilt": axes[2][best_idx[2]],
             "missing": values[best_idx]}
-    result = {"scene": scene.name, "traces": list(traces), "latency_ms": latency_ms, "method": method,
+    result = {"scene": scene.name, "windows": windows_json(windows, "tuning"), "latency_ms": latency_ms,
+              "method": method,
               "objective": objective, "frames": len(samples), "evaluations": len(values),
               "grid": {"forward": axes[0], "up": axes[1], "tilt": axes[2]},
               "surface": np.where(np.isfinite(surface), surface, None).tolist(), "best": best,

@@ -148,7 +148,8 @@ def measure_scene(scene, variants, windows, latency_ms=128.0, rate_hz=30.0, stri
     """Quality and speed of every variant on one scene; see the module docstring."""
     from .ibr_bench import Simulation, load_proxies
 
-    proxies, bundle = load_proxies(scene, progress=False) if any(v.method == "proxy" for v in variants) else (None, None)
+    with_proxies = any(v.method == "proxy" for v in variants)
+    proxies, bundle = load_proxies(scene, progress=False) if with_proxies else (None, None)
     latency = LatencyModel(rate_hz=rate_hz, up_ms=latency_ms / 2, down_ms=latency_ms / 2)
     samples = {w.label: display_samples(scene, w.trace, w.start_s, w.duration_s, rate_hz, latency)[::stride]
                for w in windows}

@@ -38,34 +38,38 @@ def plot_quality_over_time(rows: list[dict], path: str) -> None:
 
 
 def plot_coverage(result: dict, path: str) -> None:
-    """Missing-pixel fraction over time per variant (one panel per trace) and the means."""
+    """Missing-pixel fraction over time per variant (one panel per window) and the means."""
     from .coverage import VARIANT_LABELS, VARIANTS
 
     plt = _pyplot()
-    traces = result["traces"]
-    fig, axes = plt.subplots(1, len(traces) + 1, figsize=(5 * (len(traces) + 1), 4))
-    for ax, tr in zip(axes, traces):
-        d = result["per_trace"][tr]
+    windows = list(result["per_window"])
+    cols = min(4, len(windows) + 1)
+    rows = -(-(len(windows) + 1) // cols)
+    fig, axes = plt.subplots(rows, cols, figsize=(4.5 * cols, 3.6 * rows), squeeze=False)
+    flat = axes.ravel()
+    for ax, label in zip(flat, windows):
+        d = result["per_window"][label]
         for v in VARIANTS + ("floor",):
             ax.plot(d["times"], 100 * np.array(d["missing"][v]), label=VARIANT_LABELS[v], lw=1,
                     ls=":" if v == "floor" else "-")
-        ax.set_title(f"{tr}")
+        ax.set_title(label, fontsize=9)
         ax.set_xlabel("time s")
         ax.set_ylabel("pixels no view covers %")
         ax.grid(alpha=0.3)
-    axes[0].legend(fontsize=8)
-    ax = axes[-1]
-    width = 0.8 / len(traces)
+    flat[0].legend(fontsize=7)
+    ax = flat[len(windows)]
     x = np.arange(len(VARIANTS))
-    for i, tr in enumerate(traces):
-        ax.bar(x + i * width, [100 * result["per_trace"][tr]["means"][v] for v in VARIANTS], width, label=tr)
-    ax.set_xticks(x + width * (len(traces) - 1) / 2)
+    ax.bar(x, [100 * result["means"][v] for v in VARIANTS], 0.4, label="all pixels")
+    ax.bar(x + 0.4, [100 * result["means"][v + ":geometry"] for v in VARIANTS], 0.4, label="geometry only")
+    ax.set_xticks(x + 0.2)
     ax.set_xticklabels([VARIANT_LABELS[v].replace(": ", ":\n") for v in VARIANTS], fontsize=7)
     ax.set_ylabel("mean missing %")
-    ax.set_title(f"{result['scene']}, {result['latency_ms']:g} ms")
+    ax.set_title(f"{result['scene']}, {result['latency_ms']:g} ms, all windows", fontsize=9)
     ax.legend(fontsize=8)
+    for extra in flat[len(windows) + 1:]:
+        extra.axis("off")
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    fig.savefig(path, dpi=100)
     plt.close(fig)
 
 

@@ -71,7 +71,9 @@ def test_bad_cli_values_are_reported(capsys):
 @pytest.mark.parametrize("argv, message", [
     (["bench", "codec", "--size", "0x0"], "width and height must be in"),
     (["bench", "coverage", "--rate", "0"], "--rate: must be positive"),
-    (["bench", "ibr", "--duration", "-1"], "--duration: must be positive"),
+    (["bench", "codec", "--duration", "-1"], "--duration: must be positive"),
+    (["bench", "ibr", "--windows", "pred6dof-1@-3+2"], "need a trace, a start >= 0 and a positive duration"),
+    (["bench", "coverage", "--windows", "pred6dof-1"], "expected 'evaluation', 'tuning' or TRACE@START+DURATION"),
     (["bench", "ibr", "--latency-ms", "nan"], "finite"),
     (["bench", "optimize-offset", "--frames", "0"], "--frames: must be at least 1"),
     (["bench", "lod", "--fraction", "2"], "must be in (0, 1]"),
@@ -85,9 +87,9 @@ def test_bad_bench_arguments_are_named(capsys, argv, message):
 
 
 def test_bench_schedules_outside_the_trace_are_refused(capsys):
-    assert main(["bench", "coverage", "--trace", "pred6dof-1", "--start", "1000"]) == 2
+    assert main(["bench", "coverage", "--windows", "pred6dof-1@1000+2"]) == 2
     assert "outside trace 'pred6dof-1'" in capsys.readouterr().err
-    assert main(["bench", "codec", "--trace", "pred6dof-1", "--duration", "0.01"]) == 2
+    assert main(["bench", "codec", "--windows", "pred6dof-1@30+4", "--duration", "0.01"]) == 2
     assert "not a single frame" in capsys.readouterr().err
     assert main(["serve", "--port", "0", "--edge-kbps", "-5"]) == 2
     assert "edge codec bitrate" in capsys.readouterr().err

@@ -4,6 +4,8 @@ import math
 
 import pytest
 
+from pibr.bench.windows import Window
+
 pytestmark = pytest.mark.gl
 
 TINY_VIEW = (128, 128)
@@ -43,10 +45,11 @@ def test_bench_server_and_client(tmp_path, capsys):
 def test_bench_ibr(tmp_path, capsys):
     from pibr.bench.ibr_bench import print_ibr_tables, run_ibr_bench
 
-    r = run_ibr_bench(traces=("pred6dof-1",), duration_s=0.4, view_size=TINY_VIEW, out_size=TINY_OUT, stride=4,
+    r = run_ibr_bench(windows=(Window("pred6dof-1", 30.0, 0.4),), view_size=TINY_VIEW, out_size=TINY_OUT, stride=4,
                       lod_targets=(6.0,), speed_sizes=(TINY_OUT,), speed_frames=2, out_dir=str(tmp_path),
                       progress=False)
-    quality = r["quality"]["pred6dof-1"]
+    assert r["windows"]["disjoint_from_tuning"]
+    quality = r["quality"]["pred6dof-1 30-30.4 s"]
     assert {"none", "rotation", "proxy"} <= set(quality)
     for m in ("none", "rotation", "proxy"):
         assert 0.0 <= quality[m]["dssim_mean"] <= 0.5 and quality[m]["frames"] > 0
@@ -60,8 +63,9 @@ def test_bench_ibr(tmp_path, capsys):
 def test_bench_codec(tmp_path, capsys):
     from pibr.bench.codec_bench import print_codec_table, run_codec_bench
 
-    r = run_codec_bench(traces=("pred6dof-1",), duration_s=0.3, view_size=TINY_VIEW, out_size=TINY_OUT,
-                        out_dir=str(tmp_path), progress=False)
+    r = run_codec_bench(windows=(Window("pred6dof-1", 30.0, 8.0),), window_s=0.3, view_size=TINY_VIEW,
+                        out_size=TINY_OUT, out_dir=str(tmp_path), progress=False)
+    assert r["windows"]["used"] == [{"trace": "pred6dof-1", "start_s": 30.0, "duration_s": 0.3}]
     s = r["summary"]
     assert {"edge", "edge-intra", "edge-raster", "zstd-lossless", "h264-8bit"} <= set(s)
     for name in ("edge", "edge-intra", "edge-raster"):
