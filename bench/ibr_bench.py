@@ -109,6 +109,7 @@ class Simulation:
         self.proxies = proxies
         self._last_render = None
         self.distances = {}    # the newest frame's true distance maps (keep_distances)
+        self._quadtrees = {}   # threshold -> the newest frame's quadtree payload
         self._oracle = None    # (encoder, decoder, textures) of the zero-latency stream
         self.bytes = []        # H.264 bytes per frame
         self.depth_bytes = []  # edge-codec bytes per frame
@@ -120,6 +121,7 @@ class Simulation:
             return self._last_render[1]
         p = self.producer.produce(pose, t_render)
         self.distances = p.distances
+        self._quadtrees = {}
         data, key = self.encoder.encode(p.yuv)
         self.bytes.append(len(data))
         payloads = [(PayloadKind.H264_ATLAS, data)]
@@ -134,6 +136,18 @@ class Simulation:
         self.textures.upload(self.decoder.decode(data), frame.frame_id, distances)
         self._last_render = (cache_key, frame)
         return frame
+
+    def with_quadtree(self, frame, threshold: float):
+        """``frame`` with the views' quadtrees at ``threshold`` attached, as a server sends them to a
+        client that asked (built from the newest frame's true distances: keep_distances)."""
+        from pibr.server.quadtree import quadtree_payload
+
+        if not self.distances:
+            raise ValueError("quadtrees need the views' distances: make the Simulation with keep_distances=True")
+        if threshold not in self._quadtrees:
+            self._quadtrees[threshold] = quadtree_payload(self.distances, threshold)
+        payloads = tuple(p for p in frame.payloads if p[0] != PayloadKind.QUADTREE)
+        return dataclasses.replace(frame, payloads=payloads + ((PayloadKind.QUADTREE, self._quadtrees[threshold]),))
 
     def oracle_frame(self, t: float, pose, rate_hz: float):
         """The zero-latency oracle: the server's frame rendered at the display pose itself, through
@@ -165,7 +179,10 @@ class Simulation:
         return make_method(name, self.ctx, self.output, self.session, proxies=self.proxies, **options)
 
     def display(self, method, pose, frame, scene_t, textures=None):
-        """-> (rgb (h, w, 3), hole fraction, ms of the display pass)."""
+        """-> (rgb (h, w, 3), hole fraction, ms of the display pass). A method that needs quadtrees
+        gets the frame with them attached if it has none (the server's work, not timed)."""
+        if getattr(method, "needs_quadtree", False) and frame.payload(PayloadKind.QUADTREE) is None:
+            frame = self.with_quadtree(frame, method.threshold)
         self.target.begin()
         t0 = time.perf_counter()
         method.render(pose, frame, textures or self.textures, scene_t)

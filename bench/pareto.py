@@ -231,7 +231,7 @@ def _measure_speed(scene, variants, samples, proxies, view_size, sizes, frames, 
     out: dict = {}
     for size in sizes:
         key = f"{size[0]}x{size[1]}"
-        sim = Simulation(scene, view_size, size, proxies=proxies, depth_codec=depth_codec)
+        sim = Simulation(scene, view_size, size, proxies=proxies, depth_codec=depth_codec, keep_distances=True)
         try:
             methods = {v.label: sim.make_method(v.method, **v.options) for v in variants}
             methods[ORACLE] = sim.make_method("none")

@@ -36,7 +36,7 @@ from pibr.protocol.pose import Pose
 
 from .connection import ClientConnection
 from .frame_textures import FrameTextures
-from .methods import make_method, method_names, needs_proxies
+from .methods import make_method, method_names, needs_proxies, quadtree_threshold
 from .recorder import POSE_FIELDS, MethodRecorder
 from .video import H264Decoder
 
@@ -224,7 +224,8 @@ class Client:
         t_hello = time.monotonic()
         hello = Hello(client="pibr-client/0.1", scene=cfg.scene, clock=cfg.clock,
                       output=OutputConfig(cfg.width, cfg.height, cfg.fov_deg, cfg.rate_hz),
-                      want_proxies=needs_proxies(cfg.methods), depth_codec=cfg.depth_codec)
+                      want_proxies=needs_proxies(cfg.methods), depth_codec=cfg.depth_codec,
+                      quadtree_threshold=quadtree_threshold(cfg.methods, cfg.options))
         try:
             self.session = await self.conn.handshake(hello)
             t_welcome = time.monotonic()

@@ -23,6 +23,8 @@ from .pose import Pose
 PROTOCOL_VERSION = 1
 CLOCKS = ("virtual", "real")
 MAX_TEXT = 4096
+#: Largest relative distance range a client may ask quadtree leaves to span (Hello.quadtree_threshold).
+MAX_QUADTREE_THRESHOLD = 10.0
 
 
 class Message:
@@ -111,7 +113,13 @@ class OutputConfig:
 
 @dataclass(frozen=True)
 class Hello(Message):
-    """Client -> server, first message. ``scene`` empty: the server's default."""
+    """Client -> server, first message. ``scene`` empty: the server's default.
+
+    ``quadtree_threshold`` > 0 asks for a depth quadtree of every view in every ``Frame``
+    (``PayloadKind.QUADTREE``, see :mod:`pibr.protocol.quadtree`) whose leaves span at most
+    this relative distance range; 0 (the default, and then the field is left out of the
+    JSON) asks for none. At most ``MAX_QUADTREE_THRESHOLD``.
+    """
 
     TYPE: ClassVar[int] = 1
     NAME: ClassVar[str] = "Hello"
@@ -122,11 +130,15 @@ class Hello(Message):
     want_proxies: bool = False
     depth_codec: str = ""   # "" = the server's choice
     protocol: int = PROTOCOL_VERSION
+    quadtree_threshold: float = 0.0   # 0 = no quadtree payload
 
     def serialize(self) -> bytes:
-        return _dump_json({"protocol": self.protocol, "client": self.client, "scene": self.scene,
-                           "clock": self.clock, "output": self.output.to_json(),
-                           "want_proxies": self.want_proxies, "depth_codec": self.depth_codec})
+        obj = {"protocol": self.protocol, "client": self.client, "scene": self.scene,
+               "clock": self.clock, "output": self.output.to_json(),
+               "want_proxies": self.want_proxies, "depth_codec": self.depth_codec}
+        if self.quadtree_threshold:
+            obj["quadtree_threshold"] = float(self.quadtree_threshold)
+        return _dump_json(obj)
 
     @classmethod
     def parse(cls, payload: bytes) -> "Hello":
@@ -140,6 +152,8 @@ class Hello(Message):
                                           or OutputConfig().to_json()),
             want_proxies=_get(cls.NAME, o, "want_proxies", bool, False),
             depth_codec=_get(cls.NAME, o, "depth_codec", str, ""),
+            quadtree_threshold=_get(cls.NAME, o, "quadtree_threshold", float, 0.0, lo=0.0,
+                                    hi=MAX_QUADTREE_THRESHOLD),
         )
 
 
@@ -218,8 +232,9 @@ class PayloadKind:
     EDGE_DEPTH = 2        # edge-codec depth of the primary view
     EDGE_DEPTH_EXTRA = 3  # edge-codec depth of the extra view
     EDGE_MOTION = 4       # edge-codec motion of moving objects (primary view)
-    ALL = (H264_ATLAS, EDGE_DEPTH, EDGE_DEPTH_EXTRA, EDGE_MOTION)
-    NAMES = {1: "h264-atlas", 2: "edge-depth", 3: "edge-depth-extra", 4: "edge-motion"}
+    QUADTREE = 5          # depth quadtrees of every view (protocol/quadtree.py), when the Hello asked
+    ALL = (H264_ATLAS, EDGE_DEPTH, EDGE_DEPTH_EXTRA, EDGE_MOTION, QUADTREE)
+    NAMES = {1: "h264-atlas", 2: "edge-depth", 3: "edge-depth-extra", 4: "edge-motion", 5: "quadtree"}
 
 
 _FRAME_HEAD = struct.Struct("<IqqIqI7d7ddd4fB")

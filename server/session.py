@@ -19,6 +19,8 @@ from pibr.protocol.errors import (ConfigError, ProtocolError, SceneError, Unexpe
 from pibr.protocol.messages import (PROTOCOL_VERSION, Bye, Clock, Error, Frame, Hello, PayloadKind, PoseMsg,
                                     Stats, Welcome)
 
+from .quadtree import quadtree_payload
+
 log = logging.getLogger(__name__)
 
 READ_CHUNK = 1 << 16
@@ -39,6 +41,7 @@ class Session:
         self.encoder = None
         self.depth_encoder = None
         self.config = None
+        self.quadtree_threshold = 0.0   # > 0: every frame carries the views' quadtrees
         self.frames_sent = 0
         self.frames_skipped = 0
         self.tick_overruns = 0
@@ -138,6 +141,7 @@ class Session:
             raise UnsupportedVersion(f"client speaks protocol {hello.protocol}, this server speaks {PROTOCOL_VERSION}")
         setup = await self.server.setup_session(hello)
         self.config, self.producer, self.encoder, self.depth_encoder, bundle = setup
+        self.quadtree_threshold = hello.quadtree_threshold
         setup_us = int((time.monotonic() - t_hello) * 1e6)
         self.conn.send(Welcome(server=self.server.name, session=self.id, config=self.config.to_json(),
                                setup_us=setup_us))
@@ -156,12 +160,16 @@ class Session:
         produced = await self.server.gl.run(lambda ctx: self.producer.produce(pose_msg.pose, t_us * 1e-6))
         loop = asyncio.get_running_loop()
         t0 = time.perf_counter()
-        data, key = await loop.run_in_executor(self.server.encode_pool, self.encoder.encode, produced.yuv,
-                                               force_keyframe)
+        jobs = [loop.run_in_executor(self.server.encode_pool, self.encoder.encode, produced.yuv, force_keyframe)]
+        if self.quadtree_threshold > 0:   # the views' quadtrees, built beside the H.264 encode
+            jobs.append(loop.run_in_executor(self.server.encode_pool, quadtree_payload, produced.distances,
+                                             self.quadtree_threshold))
+        (data, key), *quadtree = await asyncio.gather(*jobs)
         payloads = [(PayloadKind.H264_ATLAS, data)]
         if self.depth_encoder is not None:
             payloads += await loop.run_in_executor(self.server.encode_pool, self.depth_encoder.encode, produced)
-        encode_ms = (time.perf_counter() - t0) * 1e3   # H.264 and, with the edge codec, depth
+        payloads += [(PayloadKind.QUADTREE, q) for q in quadtree]
+        encode_ms = (time.perf_counter() - t0) * 1e3   # H.264 and, with the edge codec, depth (and quadtrees)
         frame = Frame(frame_id=self.frames_sent, render_t_us=t_us, pose_t_us=pose_msg.t_us, pose_seq=pose_msg.seq,
                       scene_t_us=t_us, primary_pose=produced.primary_pose, extra_pose=produced.extra_pose,
                       near=self.config.near, far=self.config.far,

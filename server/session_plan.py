@@ -10,6 +10,7 @@ from pibr.protocol.session import SessionConfig, ViewConfig
 from .config import PAPER_EXTRA_OFFSET, ServerConfig, extra_offset_pose
 from .depth_stream import edge_quantizer
 from .pipeline import ProducerSpec
+from .quadtree import ROOT_TILE as QUADTREE_ROOT_TILE
 
 
 def extra_offset_for(cfg: ServerConfig, scene):
@@ -33,14 +34,18 @@ def plan_session(cfg: ServerConfig, scene, hello: Hello, proxies: dict | None = 
     layout = build_layout((pw, ph), extra_size, depth_in_atlas=not edge)
     quantizer = edge_quantizer(scene.near, scene.far) if edge else h264_quantizer(scene.near, scene.far)
     motion = edge and scene.is_dynamic   # a scene with nothing moving sends no motion at all
+    options = {"projection": cfg.projection}
+    quadtree = hello.quadtree_threshold > 0   # a quadtree payload in every frame, built from the float distances
+    if quadtree:
+        options["quadtree"] = {"threshold": hello.quadtree_threshold, "tile": QUADTREE_ROOT_TILE}
     config = SessionConfig(
         scene=scene.info(), clock=hello.clock, server_fps=cfg.fps,
         server_delay_us=int(round(cfg.server_delay_ms * 1000)),
         primary=ViewConfig(pw, ph), extra=ViewConfig(*extra_size) if extra_size else None,
         extra_offset=offset, atlas=layout, video_bitrate_kbps=cfg.bitrate_kbps, keyint=cfg.keyint,
         depth_codec=depth_codec, depth_bits=quantizer.bits, depth_min_code=quantizer.min_code,
-        motion=motion, proxies=proxies, options={"projection": cfg.projection})
+        motion=motion, proxies=proxies, options=options)
     spec = ProducerSpec((pw, ph), layout, None if edge else quantizer, cfg.projection, extra_size, offset,
-                        keep_distance=edge, motion_dt=1.0 / cfg.fps if motion else None,
+                        keep_distance=edge or quadtree, motion_dt=1.0 / cfg.fps if motion else None,
                         low_colour=8 if edge and cfg.edge.perceptual else 0)
     return config, spec

@@ -6,12 +6,15 @@ import inspect
 from .base import Method
 from .direction_warp import NoCompensation, RotationWarp
 from .homography import HomographyWarp
+from .iterative_warp import IterativeWarp
 from .mesh_warp import CoarseMeshWarp, MeshWarp
 from .proxy import ProxyIBR
+from .quadtree_warp import QuadtreeWarp
 from .splat import PointSplat
 
 METHODS: dict[str, type[Method]] = {m.name: m for m in (NoCompensation, RotationWarp, HomographyWarp, PointSplat,
-                                                        MeshWarp, CoarseMeshWarp, ProxyIBR)}
+                                                        MeshWarp, CoarseMeshWarp, QuadtreeWarp, IterativeWarp,
+                                                        ProxyIBR)}
 
 
 def method_names() -> list[str]:
@@ -20,6 +23,17 @@ def method_names() -> list[str]:
 
 def needs_proxies(names) -> bool:
     return any(METHODS[n].needs_proxies for n in names if n in METHODS)
+
+
+def quadtree_threshold(names, options: dict) -> float:
+    """What the client asks the server for in ``Hello.quadtree_threshold``: 0 unless a method in
+    ``names`` needs the views' quadtrees, else the ``threshold`` option or that method's default."""
+    wanted = [n for n in names if getattr(METHODS.get(n), "needs_quadtree", False)]
+    if not wanted:
+        return 0.0
+    if options.get("threshold") is not None:
+        return float(options["threshold"])
+    return float(inspect.signature(METHODS[wanted[0]].__init__).parameters["threshold"].default)
 
 
 def method_options(name: str) -> tuple[str, ...]:

@@ -31,6 +31,8 @@ class Method:
 
     name = "?"
     needs_proxies = False
+    #: Needs every frame to carry the views' depth quadtrees (Hello.quadtree_threshold).
+    needs_quadtree = False
     #: Draws from the extra view as well as the primary (instances may say otherwise: it also
     #: depends on whether the session has one). Benchmarks count geometric holes against the
     #: views a method uses.

@@ -117,16 +117,28 @@ out vec4 f_color;
 void main() { f_color = vec4(atlas_rgb(u_color_rect, v_uv), 1.0); }
 """
 
+# Instead of the colour, where it comes from: (u, v, view, 1) into an RGBA32F target, for a
+# pass that resolves each pixel later (iterative warping starts from it).
+_REFS_FS = """
+#version 410
+uniform int u_view;
+in vec2 v_uv;
+out vec4 f_ref;
+void main() { f_ref = vec4(v_uv, float(u_view), 1.0); }
+"""
+
 
 class MeshWarpProgram:
     """The shaders of a mesh warp: grid vertices (attributeless, indexed) or given ones
-    (``in_px``), with the discontinuity split (a geometry shader) or without (``split`` None)."""
+    (``in_px``), with the discontinuity split (a geometry shader) or without (``split`` None).
+    ``refs``: the fragments write (u, v, view, 1) instead of the view's colour."""
 
-    def __init__(self, ctx, config, split: float | None, grid: bool = True):
+    def __init__(self, ctx, config, split: float | None, grid: bool = True, refs: bool = False):
         glsl = {"frame": frame_glsl(config), "view": VIEW_POINT_GLSL,
                 "vertex": (_GRID_VERTEX if grid else _LIST_VERTEX) % {}}
         gs = None if split is None else _SPLIT_GS % glsl
-        self.prog = ctx.program(vertex_shader=_VS % glsl, geometry_shader=gs, fragment_shader=_FS % glsl)
+        fs = _REFS_FS if refs else _FS % glsl
+        self.prog = ctx.program(vertex_shader=_VS % glsl, geometry_shader=gs, fragment_shader=fs)
         bind_frame_uniforms(self.prog, config)
         if split is not None:
             self.prog["u_split"].value = float(split)
