@@ -154,3 +154,34 @@ def load_scene_objects():
     from pibr.scenes.registry import load_scene
 
     return load_scene("room").objects
+
+
+async def test_every_method_runs_in_the_client(relay_endpoint, tmp_path):
+    """All methods side by side through the real client (quadtrees asked for in the Hello,
+    proxies received), each recording every tick; their views drawn from are in session.json."""
+    from pibr.client.methods import method_names
+
+    host, port = relay_endpoint
+    names = tuple(method_names())
+    result = await run_client(_cfg(host, port, tmp_path, methods=names, duration_s=0.2, start_s=20.0,
+                                   options={"step": 8, "threshold": 0.05}))
+    assert result.ticks == 6
+    info = json.load(open(tmp_path / "session.json"))
+    assert info["session"]["options"]["quadtree"]["threshold"] == 0.05
+    assert set(info["methods"]) == set(names)
+    assert info["methods"]["proxy"]["uses_extra_view"] and not info["methods"]["coarse-meshwarp"]["uses_extra_view"]
+    last = {}
+    for m in names:
+        rows = read_records(tmp_path / f"{m}.records.csv")
+        frames = _frames(tmp_path / f"{m}.lossless.mkv")
+        assert len(rows) == len(frames) == 6, m
+        assert rows[-1]["frame_id"] >= 0 and rows[-1]["hole_fraction"] < 0.2, m
+        last[m] = frames[-1].astype(int)
+        assert last[m].mean() > 20, m             # something was drawn, not a black screen
+    # Every method compensates the head's motion since the frame: its image is much closer to
+    # proxy's than the uncompensated frame (none) is (measured: at most a third of none's).
+    def distance(a, b):
+        return float(np.abs(last[a] - last[b]).mean())
+    for m in names:
+        if m not in ("none", "proxy"):
+            assert distance(m, "proxy") < 0.4 * distance("none", "proxy"), (m, distance(m, "proxy"))
