@@ -177,6 +177,7 @@ def register(sub) -> None:
                                     "transmitted view covers, for four dual-view variants, along real traces.")
     cov.add_argument("--scene", default="room")
     cov.add_argument("--windows", type=_windows, default="evaluation", help=_WINDOWS_HELP)
+    cov.add_argument("--stride", type=_positive_int, default=2, help="measure every Nth displayed tick (default 2)")
     cov.add_argument("--latency-ms", type=_non_negative, default=128.0)
     cov.add_argument("--rate", type=_positive, default=30.0)
     cov.add_argument("--view-size", type=_size, default=(1024, 1024), metavar="WxH")
@@ -329,7 +330,7 @@ def cmd_bench_coverage(args) -> int:
 
     result = run_coverage_bench(scene_spec=args.scene, windows=args.windows, latency_ms=args.latency_ms,
                                 rate_hz=args.rate, view_size=args.view_size, out_size=args.size, offset=args.offset,
-                                out_dir=args.out)
+                                stride=args.stride, out_dir=args.out)
     print_coverage_table(result)
     print(f"written: {args.out}/coverage.json, {args.out}/coverage.png")
     return 0

@@ -242,7 +242,7 @@ def measure_coverage(probe: CoverageProbe, samples, offset: Pose, variants=VARIA
 
 
 def run_coverage_bench(scene_spec="room", windows=None, latency_ms=128.0, rate_hz=30.0, view_size=(1024, 1024),
-                       out_size=(320, 180), offset=None, out_dir="out/bench", progress=True) -> dict:
+                       out_size=(320, 180), offset=None, stride=2, out_dir="out/bench", progress=True) -> dict:
     """``pibr bench coverage``: JSON and plot of the four variants' missing-pixel fractions,
     per window (default: the evaluation windows of bench/windows.py)."""
     from pibr.scenes.registry import load_scene
@@ -257,7 +257,7 @@ def run_coverage_bench(scene_spec="room", windows=None, latency_ms=128.0, rate_h
     else:
         offset_pose = extra_offset_pose(*offset)
     latency = LatencyModel(rate_hz=rate_hz, up_ms=latency_ms / 2, down_ms=latency_ms / 2)
-    all_samples = {w.label: display_samples(scene, w.trace, w.start_s, w.duration_s, rate_hz, latency)
+    all_samples = {w.label: display_samples(scene, w.trace, w.start_s, w.duration_s, rate_hz, latency)[::stride]
                    for w in windows}
     probe = CoverageProbe(scene, view_size, out_size)
     per_window = {}
@@ -288,7 +288,7 @@ def run_coverage_bench(scene_spec="room", windows=None, latency_ms=128.0, rate_h
     overall = {k: float(np.mean(np.concatenate([per_window[w]["missing"][k] for w in labels])))
                for k in per_window[labels[0]]["missing"]}
     result = {"scene": scene.name, "windows": windows_json(windows, "reporting"), "latency_ms": latency_ms,
-              "rate_hz": rate_hz, "view_size": list(view_size), "output_size": list(out_size),
+              "rate_hz": rate_hz, "stride": stride, "view_size": list(view_size), "output_size": list(out_size),
               "offset": list(offset_pose.as_array()), "tolerance": COVERAGE_TOLERANCE, "means": overall,
               "per_window": per_window}
     write_result(out_dir, "coverage.json", result)
