@@ -5,6 +5,7 @@ import inspect
 
 from .base import Method
 from .direction_warp import NoCompensation, RotationWarp
+from .grid_warp import GridWarp
 from .homography import HomographyWarp
 from .iterative_warp import IterativeWarp
 from .mesh_warp import CoarseMeshWarp, MeshWarp
@@ -14,7 +15,7 @@ from .splat import PointSplat
 
 METHODS: dict[str, type[Method]] = {m.name: m for m in (NoCompensation, RotationWarp, HomographyWarp, PointSplat,
                                                         MeshWarp, CoarseMeshWarp, QuadtreeWarp, IterativeWarp,
-                                                        ProxyIBR)}
+                                                        GridWarp, ProxyIBR)}
 
 
 def method_names() -> list[str]:
