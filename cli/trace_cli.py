@@ -7,11 +7,50 @@ import json
 
 from pibr.protocol.errors import TraceError
 
-_DELIMITERS = {"tab": "\t", "\\t": "\t", "space": None, "whitespace": None}
+_DELIMITERS = {"tab": "\t", "\\t": "\t", "space": None, "whitespace": None, "auto": "auto"}
 # Options that only mean something for --format csv, with their defaults.
-_CSV_OPTIONS = {"time_unit": "s", "rotation": "quat", "quat_order": "wxyz", "euler_order": "yxz",
-                "radians": False, "left_handed": False, "delimiter": ",", "skip_rows": 0,
-                "drop_duplicates": False}
+_CSV_OPTIONS = {"rotation": "quat", "quat_order": "wxyz", "euler_order": "yxz", "radians": False,
+                "left_handed": False, "delimiter": "auto", "skip_rows": 0, "drop_duplicates": False, "up": "y",
+                "forward": None, "positions": "columns"}
+
+
+def add_import_options(c) -> None:
+    """How to read a trace file: shared by convert and show."""
+    g = c.add_argument_group("reading the input")
+    g.add_argument("--format", choices=("auto", "canonical", "pred6dof", "csv"), default="auto",
+                   help="input format (default: from the header line; csv when --columns is given)")
+    g.add_argument("--columns", metavar="MAP",
+                   help="csv: KEY=COLUMN pairs, COLUMN a header name or 0-based index; keys t, px, py, pz "
+                        "(or p=first index), qw, qx, qy, qz (or q=first index, see --quat-order) or Euler "
+                        "angles rx, ry, rz (about the recording's x, y, z; or pitch, yaw, roll). Columns not "
+                        "named are ignored")
+    g.add_argument("--time-unit", choices=("s", "ms", "us", "ns", "ticks"), default=None,
+                   help="unit of the time column (ticks = 100 ns); default s for csv, for pred6dof ticks if "
+                        "the stamps are integers else seconds")
+    g.add_argument("--rotation", choices=("quat", "euler"), default="quat", help="csv: quaternion or Euler columns")
+    g.add_argument("--quat-order", choices=("wxyz", "xyzw"), default="wxyz",
+                   help="csv: component order of q=INDEX (default wxyz)")
+    g.add_argument("--euler", "--euler-order", dest="euler_order", default="yxz", metavar="ORDER",
+                   help="csv: the axes of the Euler rotations in the order applied, intrinsically (each about "
+                        "the rotated axes): yxz = yaw, pitch, roll (default); zxy, xyz, ...")
+    g.add_argument("--radians", action="store_true", help="csv: Euler angles are in radians (default degrees)")
+    g.add_argument("--left-handed", action="store_true",
+                   help="csv: left-handed axes (Unity: +Y up, +Z forward), converted to pibr's")
+    g.add_argument("--up", choices=("y", "z"), default="y", help="csv: the recording's up axis (default y)")
+    g.add_argument("--forward", default=None, metavar="AXIS",
+                   help="csv: where a head at identity looks, e.g. -z, z, y, x (default: -z right-handed Y-up, "
+                        "z left-handed Y-up, y Z-up)")
+    g.add_argument("--delimiter", default="auto",
+                   help="csv: field separator: auto (per line: comma, semicolon, tab or whitespace; default), "
+                        "',', ';', 'tab' or 'whitespace'")
+    g.add_argument("--skip-rows", type=int, default=0, metavar="N", help="csv: lines to skip before the header")
+    g.add_argument("--drop-duplicates", action="store_true",
+                   help="csv: drop samples repeating the previous timestamp instead of failing")
+    g.add_argument("--positions", choices=("columns", "fixed", "neck"), default="columns",
+                   help="csv: columns (default), or for orientation-only traces fixed (the head at the origin) or "
+                        "neck (a seated head-neck model)")
+    g.add_argument("--recentre", nargs="?", const="position", choices=("position", "yaw"), default=None,
+                   help="move the first position to the origin; 'yaw' also turns the first heading to -Z")
 
 
 def register(subparsers) -> None:
@@ -35,26 +74,7 @@ def register(subparsers) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter)
     c.add_argument("input", metavar="IN", help="trace file or built-in name (see 'pibr trace list')")
     c.add_argument("output", metavar="OUT", help="canonical CSV to write")
-    c.add_argument("--format", choices=("auto", "canonical", "pred6dof", "csv"), default="auto",
-                   help="input format (default: from the header line; csv when --columns is given)")
-    c.add_argument("--columns", metavar="MAP",
-                   help="csv: KEY=COLUMN pairs, COLUMN a header name or 0-based index; keys t, px, py, pz "
-                        "(or p=first index), qw, qx, qy, qz (or q=first index, see --quat-order) or yaw, "
-                        "pitch, roll")
-    c.add_argument("--time-unit", choices=("s", "ms", "us", "ns", "ticks"), default="s",
-                   help="csv: unit of the time column (ticks = 100 ns); default s")
-    c.add_argument("--rotation", choices=("quat", "euler"), default="quat", help="csv: quaternion or Euler columns")
-    c.add_argument("--quat-order", choices=("wxyz", "xyzw"), default="wxyz",
-                   help="csv: component order of q=INDEX (default wxyz)")
-    c.add_argument("--euler-order", default="yxz",
-                   help="csv: intrinsic rotation order of yaw (Y), pitch (X), roll (Z); default yxz")
-    c.add_argument("--radians", action="store_true", help="csv: Euler angles are in radians (default degrees)")
-    c.add_argument("--left-handed", action="store_true",
-                   help="csv: Unity-style left-handed axes (+Y up, +Z forward), converted to pibr's")
-    c.add_argument("--delimiter", default=",", help="csv: field separator; 'tab' or 'whitespace' (default ,)")
-    c.add_argument("--skip-rows", type=int, default=0, metavar="N", help="csv: lines to skip before the header")
-    c.add_argument("--drop-duplicates", action="store_true",
-                   help="csv: drop samples repeating the previous timestamp instead of failing")
+    add_import_options(c)
     c.add_argument("--rate", type=float, metavar="HZ", help="resample uniformly at this rate")
     c.add_argument("--start", type=float, default=0.0, metavar="S", help="start at this time (s)")
     c.add_argument("--duration", type=float, metavar="S", help="keep this many seconds")
@@ -62,7 +82,9 @@ def register(subparsers) -> None:
 
     s = sub.add_parser("show", help="summarise a trace (speeds, rate, extent), optionally plot it",
                        description="Print a trace's statistics; --plot draws the path, yaw/pitch and speeds.")
-    s.add_argument("trace", metavar="FILE_OR_NAME", help="trace file (canonical or pred6dof) or built-in name")
+    s.add_argument("input", metavar="FILE_OR_NAME", help="trace file or built-in name; other CSV shapes with the "
+                   "options of 'pibr trace convert'")
+    add_import_options(s)
     s.add_argument("--plot", metavar="PNG", help="write a plot to this PNG file")
     s.add_argument("--json", action="store_true", help="print the summary as JSON")
     s.set_defaults(func=run_show)
@@ -93,17 +115,9 @@ def register(subparsers) -> None:
 
 
 def run_convert(args) -> int:
-    from pibr.protocol.trace import load_trace, write_canonical_csv
+    from pibr.protocol.trace import write_canonical_csv
 
-    fmt = "csv" if args.format == "auto" and args.columns else args.format
-    if fmt == "csv":
-        trace = _import_csv(args)
-    else:
-        changed = [name for name, default in _CSV_OPTIONS.items() if getattr(args, name) != default]
-        if args.columns or changed:
-            options = ", ".join("--" + n.replace("_", "-") for n in (["columns"] if args.columns else []) + changed)
-            raise TraceError(f"{options} only apply to --format csv (input format is {fmt})")
-        trace = load_trace(args.input, fmt)
+    trace = read_input(args)
     if args.rate is not None:
         trace = trace.resample(args.rate, args.start, args.duration)
     elif args.start or args.duration is not None:
@@ -114,9 +128,7 @@ def run_convert(args) -> int:
 
 
 def run_show(args) -> int:
-    from pibr.protocol.trace import load_trace
-
-    trace = load_trace(args.trace)
+    trace = read_input(args)
     info = trace.summary()
     if args.plot:
         plot_trace(trace, args.plot)
@@ -157,17 +169,38 @@ def run_list(args) -> int:
 # --------------------------------------------------------------------------------- helpers
 
 
-def _import_csv(args):
-    from pibr.protocol.trace_import import import_csv, parse_columns
+def read_input(args):
+    """The trace the import options describe (format, columns, axes, recentring)."""
+    from pibr.protocol.trace import detect_format, load_trace
+    from pibr.protocol.trace_import import import_csv, import_pred6dof, parse_columns
 
-    if not args.columns:
-        raise TraceError("--format csv needs --columns, e.g. --columns t=time,px=x,py=y,pz=z,qw=qw,qx=qx,qy=qy,qz=qz")
-    delimiter = _DELIMITERS.get(args.delimiter.lower(), args.delimiter)
-    return import_csv(args.input, parse_columns(args.columns), time_unit=args.time_unit,
-                      rotation=args.rotation, quat_order=args.quat_order, euler_order=args.euler_order,
-                      degrees=not args.radians, handedness="left" if args.left_handed else "right",
-                      delimiter=delimiter, skip_rows=args.skip_rows,
-                      duplicates="drop" if args.drop_duplicates else "error")
+    fmt = "csv" if args.format == "auto" and args.columns else args.format
+    if fmt == "csv":
+        if not args.columns:
+            raise TraceError("--format csv needs --columns, e.g. --columns t=time,px=x,py=y,pz=z,qw=qw,qx=qx,qy=qy,qz=qz")
+        delimiter = _DELIMITERS.get(args.delimiter.lower(), args.delimiter)
+        return import_csv(args.input, parse_columns(args.columns), time_unit=args.time_unit or "s",
+                          rotation=args.rotation, quat_order=args.quat_order, euler_order=args.euler_order,
+                          degrees=not args.radians, handedness="left" if args.left_handed else "right",
+                          delimiter=delimiter, skip_rows=args.skip_rows,
+                          duplicates="drop" if args.drop_duplicates else "error", up=args.up, forward=args.forward,
+                          positions=args.positions, recentre=args.recentre)
+    changed = [name for name, default in _CSV_OPTIONS.items() if getattr(args, name) != default]
+    if args.columns or changed:
+        options = ", ".join("--" + n.replace("_", "-") for n in (["columns"] if args.columns else []) + changed)
+        raise TraceError(f"{options} only apply to --format csv (input format is {fmt})")
+    import os
+
+    if fmt == "auto" and os.path.isfile(args.input):
+        fmt = detect_format(args.input)
+    if fmt == "pred6dof":
+        trace = import_pred6dof(args.input, args.time_unit)
+    else:
+        if args.time_unit is not None:
+            what = f"{fmt} input" if os.path.isfile(args.input) else "a built-in or synthetic trace"
+            raise TraceError(f"--time-unit applies to pred6dof and csv input, not to {what}")
+        trace = load_trace(args.input, fmt)
+    return trace.recentred(yaw=args.recentre == "yaw") if args.recentre else trace
 
 
 def format_summary(info: dict) -> str:
@@ -185,6 +218,7 @@ def format_summary(info: dict) -> str:
         ("position", "  ".join(f"{a} {l:.3f}..{h:.3f}" for a, l, h in zip("xyz", lo, hi)) + " m"),
         ("extent", " x ".join(f"{e:.3f}" for e in ext) + " m"),
     ]
+    rows += [(f"assumed {k}", v) for k, v in info.get("assumptions", {}).items()]
     rows += [("warning", w) for w in info.get("warnings", [])]
     width = max(len(k) for k, _ in rows)
     return "\n".join(f"{k:<{width}}  {v}" for k, v in rows)

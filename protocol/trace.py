@@ -21,7 +21,7 @@ from typing import Iterator
 import numpy as np
 
 from .errors import TraceError
-from .pose import MIN_QUAT_NORM, Pose, quat_angle, quat_normalize, quat_slerp, quat_to_matrix
+from .pose import MIN_QUAT_NORM, Pose, quat_angle, quat_multiply, quat_normalize, quat_slerp, quat_to_matrix
 
 CANONICAL_COLUMNS = ("t", "px", "py", "pz", "qw", "qx", "qy", "qz")
 CANONICAL_HEADER = ",".join(CANONICAL_COLUMNS)
@@ -52,6 +52,8 @@ class HeadTrace:
     orientations : (n, 4) float64 unit quaternions (w, x, y, z), camera-to-world
     name : a label (file stem, built-in name, synthetic kind)
     warnings : what an importer fixed or noticed (dropped duplicates, gaps), for reports
+    assumptions : what an importer took the recording to mean (units, axes, handedness,
+        ignored columns, ...), name -> text, for ``pibr trace show``
 
     The arrays are stored read-only, so a trace can be shared without copying. Build one from
     raw samples (any start time, unnormalised quaternions) with :meth:`from_samples`.
@@ -62,6 +64,7 @@ class HeadTrace:
     orientations: np.ndarray
     name: str = "trace"
     warnings: list = field(default_factory=list)
+    assumptions: dict = field(default_factory=dict)
 
     def __post_init__(self):
         t = np.array(self.t, dtype=np.float64)
@@ -96,9 +99,11 @@ class HeadTrace:
             a.flags.writeable = False
         self.t, self.positions, self.orientations = t, p, q
         self.warnings = list(self.warnings)
+        self.assumptions = dict(self.assumptions)
 
     @classmethod
-    def from_samples(cls, t, positions, orientations, name: str = "trace", warnings=()) -> "HeadTrace":
+    def from_samples(cls, t, positions, orientations, name: str = "trace", warnings=(),
+                     assumptions=None) -> "HeadTrace":
         """Trace from raw samples: times re-based to start at 0, quaternions normalised (w >= 0).
 
         t : (n,) seconds; positions : (n, 3); orientations : (n, 4) (w, x, y, z), non-zero
@@ -111,7 +116,7 @@ class HeadTrace:
         q = np.asarray(orientations, dtype=np.float64)
         if q.ndim != 2 or q.shape[1] != 4:
             raise TraceError(f"head trace {name!r}: orientations must have shape (n, 4), got {q.shape}")
-        return cls(t - t[0], positions, unit_quaternions(q, name), name, list(warnings))
+        return cls(t - t[0], positions, unit_quaternions(q, name), name, list(warnings), dict(assumptions or {}))
 
     # ----------------------------------------------------------------------------- basics
 
@@ -170,7 +175,7 @@ class HeadTrace:
         count = int(math.floor((end - start) * rate_hz + 1e-9)) + 1
         rel = np.arange(count, dtype=np.float64) / rate_hz
         pos, rot = self.sample(start + rel)
-        return HeadTrace(rel, pos, rot, self.name, self.warnings)
+        return HeadTrace(rel, pos, rot, self.name, self.warnings, self.assumptions)
 
     def slice(self, start: float, duration: float | None = None) -> "HeadTrace":
         """The part in [start, start + duration], re-based to 0; the original samples inside,
@@ -182,7 +187,25 @@ class HeadTrace:
         keep = np.concatenate([[True], np.diff(times) > 1e-12])
         times = times[keep]
         pos, rot = self.sample(times)
-        return HeadTrace(times - start, pos, rot, self.name, self.warnings)
+        return HeadTrace(times - start, pos, rot, self.name, self.warnings, self.assumptions)
+
+    def recentred(self, yaw: bool = False) -> "HeadTrace":
+        """A copy moved so its first position is the origin; with ``yaw`` also turned about +Y
+        so its first heading (the view direction projected on the floor) is -Z. For traces
+        recorded in a world's own coordinates (a game level, a room-scale play area)."""
+        positions = self.positions - self.positions[0]
+        orientations = self.orientations
+        note = "first position moved to the origin"
+        if yaw:
+            forward = quat_to_matrix(self.orientations[0])[:, 2] * -1.0
+            heading = math.atan2(-forward[0], -forward[2])   # 0 when looking along -Z
+            turn = np.array([math.cos(-heading / 2), 0.0, math.sin(-heading / 2), 0.0])
+            rot = quat_to_matrix(turn)
+            positions = positions @ rot.T
+            orientations = quat_multiply(np.broadcast_to(turn, orientations.shape), orientations)
+            note += f", turned {math.degrees(-heading):+.1f} deg about +Y to look along -Z"
+        return HeadTrace(self.t, positions, unit_quaternions(orientations, self.name), self.name, self.warnings,
+                         {**self.assumptions, "recentred": note})
 
     def window(self, start: float, duration: float | None) -> tuple[float, float]:
         """(start, end) seconds of the part from ``start`` lasting ``duration`` (default and at
@@ -231,6 +254,7 @@ class HeadTrace:
             "position_max": hi.tolist(),
             "position_extent": (hi - lo).tolist(),
             "warnings": list(self.warnings),
+            "assumptions": dict(self.assumptions),
         }
 
 
@@ -374,12 +398,14 @@ def detect_format(path) -> str:
     names = header_fields(text)
     if names == list(CANONICAL_COLUMNS):
         return "canonical"
-    if [f.lower() for f in names] == list(PRED6DOF_COLUMNS):
-        return "pred6dof"
+    from .trace_import import split_fields
+
+    if set(PRED6DOF_COLUMNS) <= {f.lower() for f in split_fields(text, "auto")}:
+        return "pred6dof"   # extra columns (velocities, ...) are ignored by the importer
     raise TraceError(
         f"{path}: line {line}: unrecognised trace header {text!r}; expected {CANONICAL_HEADER!r} "
-        f"(canonical) or {','.join(PRED6DOF_COLUMNS)!r} (pred6dof/HoloLens). For other CSV files name "
-        "the columns: pibr trace convert IN OUT --format csv --columns t=...,px=...")
+        f"(canonical) or one with {','.join(PRED6DOF_COLUMNS)!r} (pred6dof/HoloLens). For other CSV files "
+        "name the columns: pibr trace convert IN OUT --format csv --columns t=...,px=...")
 
 
 #: ``synth-KIND`` or ``synth-KIND-seedN``: a synthetic trace (protocol/trace_synth.py) by name.

@@ -239,8 +239,13 @@ def test_pred6dof_duplicates_dropped_backwards_rejected(tmp_path):
     rows[3] = "1050000, 3, 0, 0, 0, 0, 0, 1"
     with pytest.raises(TraceError, match="line 5: time goes backwards"):
         import_pred6dof(write(tmp_path / "b.csv", PRED6DOF_HEADER + "\n" + "\n".join(rows)))
-    with pytest.raises(TraceError, match="line 2: timestamp '1.5e6' is not an integer"):
-        import_pred6dof(write(tmp_path / "f.csv", PRED6DOF_HEADER + "\n1.5e6, 0, 0, 0, 0, 0, 0, 1\n"))
+    with pytest.raises(TraceError, match="line 3: timestamp 1500000.0 mixes decimal and integer timestamps"):
+        import_pred6dof(write(tmp_path / "f.csv", PRED6DOF_HEADER + "\n1000000, 0, 0, 0, 0, 0, 0, 1\n"
+                                                                   "1.5e6, 0, 0, 0, 0, 0, 0, 1\n"))
+    seconds = import_pred6dof(write(tmp_path / "s.csv", PRED6DOF_HEADER + "\n10.5, 0, 0, 0, 0, 0, 0, 1\n"
+                                                                        "10.75, 0, 0, 0, 0, 0, 0, 1\n"))
+    np.testing.assert_allclose(seconds.t, [0.0, 0.25])      # decimals are seconds, and say so
+    assert seconds.assumptions["time"] == "column 'timestamp' in seconds (from its decimal values)"
     with pytest.raises(TraceError, match="line 2: zero quaternion"):
         import_pred6dof(write(tmp_path / "z.csv", PRED6DOF_HEADER + "\n1, 0, 0, 0, 0, 0, 0, 0\n"))
 
@@ -399,7 +404,7 @@ def test_cli_convert_csv_columns_and_slice(tmp_path):
     trace = read_canonical_csv(out)
     np.testing.assert_allclose(trace.t, [0.0, 0.25, 0.75])
     np.testing.assert_allclose(trace.positions[:, 0], [0.5, 1.0, 2.0])
-    with pytest.raises(TraceError, match="--time-unit only apply to --format csv"):
+    with pytest.raises(TraceError, match="--time-unit applies to pred6dof and csv input, not to a built-in"):
         run_registered(["trace", "convert", "pred6dof-1", str(out), "--time-unit", "ms"])
 
 

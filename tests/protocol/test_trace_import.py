@@ -1,0 +1,185 @@
+"""Head traces as users bring them: each shape of recording that once needed hand-written
+Python, in a small file of the same shape made here, imported with one documented command."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from pibr.protocol.errors import TraceError
+from pibr.protocol.pose import Pose, quat_from_axis_angle, quat_rotate
+from pibr.protocol.trace import detect_format, load_trace, read_canonical_csv
+from pibr.protocol.trace_import import axis_conversion, convert_axes, import_csv, import_pred6dof, parse_columns
+
+
+def write(path, text: str):
+    path.write_text(text)
+    return path
+
+
+def forward(q) -> np.ndarray:
+    """Where a pibr head with orientation q looks (its -Z)."""
+    return quat_rotate(q, [0.0, 0.0, -1.0])
+
+
+def run_cli(argv):
+    from pibr.cli import main
+
+    return main(argv)
+
+
+# ------------------------------------------------------------------------------ axes
+
+
+@pytest.mark.parametrize("handedness, up, fwd, right", [
+    ("right", "y", "-z", (1, 0, 0)), ("left", "y", "z", (1, 0, 0)),
+    ("right", "z", "y", (1, 0, 0)), ("right", "z", "x", (0, -1, 0)),
+])
+def test_axis_conversion_maps_forward_up_and_right(handedness, up, fwd, right):
+    m = axis_conversion(handedness, up, fwd)
+    axis = {"x": [1, 0, 0], "y": [0, 1, 0], "z": [0, 0, 1], "-z": [0, 0, -1]}
+    np.testing.assert_allclose(m @ axis[up], [0, 1, 0], atol=1e-12)
+    np.testing.assert_allclose(m @ axis[fwd], [0, 0, -1], atol=1e-12)
+    np.testing.assert_allclose(m @ np.array(right, float), [1, 0, 0], atol=1e-12)
+
+
+def test_unity_conversion_matches_the_mirror_of_z():
+    """The general conversion reproduces the pred6dof importer's left-handed mirror exactly."""
+    rng = np.random.default_rng(1)
+    p, q = rng.normal(size=(20, 3)), rng.normal(size=(20, 4))
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    p2, q2 = convert_axes(p, q, axis_conversion("left", "y", "z"))
+    np.testing.assert_allclose(p2, p * [1, 1, -1], atol=1e-12)
+    same = np.minimum(np.abs(q2 - q * [1, -1, -1, 1]).max(axis=1), np.abs(q2 + q * [1, -1, -1, 1]).max(axis=1))
+    assert same.max() < 1e-12
+
+
+def test_bad_axes_are_named():
+    with pytest.raises(TraceError, match="perpendicular"):
+        axis_conversion("right", "z", "-z")
+    with pytest.raises(TraceError, match="unknown axis 'w'"):
+        axis_conversion("right", "y", "w")
+
+
+# ------------------------------------------------------------------------------ 1. HoloLens 2 with extra columns
+
+
+HL2 = ("timestamp,x,y,z,qx,qy,qz,qw,vx,vy,vz,speed\n"
+       "638000000000000000,0.1,1.5,0.2,0,0,0,1,0,0,0,0\n"
+       "638000000000166667,0.1,1.5,0.3,0,0.0871557,0,0.9961947,0,0,6,6\n")
+
+
+def test_hololens2_log_with_velocity_columns_imports_as_pred6dof(tmp_path):
+    path = write(tmp_path / "hl2.csv", HL2)
+    assert detect_format(path) == "pred6dof"
+    trace = import_pred6dof(path)
+    assert len(trace) == 2 and trace.t[1] == pytest.approx(0.0166667)
+    np.testing.assert_allclose(trace.positions[1], [0.1, 1.5, -0.3])       # Unity +Z forward -> pibr -Z
+    assert trace.assumptions["ignored columns"] == "vx, vy, vz, speed"
+    assert "left-handed" in trace.assumptions["axes"] and "converted" in trace.assumptions["axes"]
+    assert load_trace(path).assumptions == trace.assumptions                  # found by its header alone
+
+
+# ------------------------------------------------------------------------------ 2. Quest 2: mixed delimiters, Euler
+
+
+def test_quest_log_with_whitespace_header_over_comma_rows(tmp_path):
+    """Header 'Time x y z alpha beta gamma' split on spaces, rows on commas; angles about Z, X,
+    Y applied in that order (intrinsic zxy), in a Y-up right-handed world."""
+    path = write(tmp_path / "quest.txt", "Time x y z alpha beta gamma\n"
+                                         "0.000,0.0,1.6,0.0,0,0,0\n"
+                                         "0.020,0.0,1.6,0.0,0,0,90\n"
+                                         "0.040,0.0,1.6,0.0,90,0,0\n")
+    trace = import_csv(path, parse_columns("t=Time,px=x,py=y,pz=z,rz=alpha,rx=beta,ry=gamma"), rotation="euler",
+                       euler_order="zxy")
+    assert len(trace) == 3
+    np.testing.assert_allclose(forward(trace.orientations[0]), [0, 0, -1], atol=1e-9)
+    np.testing.assert_allclose(forward(trace.orientations[1]), [-1, 0, 0], atol=1e-9)   # 90 deg about +Y: left
+    np.testing.assert_allclose(forward(trace.orientations[2]), [0, 0, -1], atol=1e-9)   # roll keeps the view axis
+    assert trace.assumptions["delimiter"] == "whitespace (header), comma (rows)"
+    assert "intrinsically in the order z (alpha) then x (beta) then y (gamma)" in trace.assumptions["rotation"]
+
+
+def test_a_mismatched_explicit_delimiter_says_how_to_fix_it(tmp_path):
+    path = write(tmp_path / "quest.txt", "Time x y z alpha beta gamma\n0.0,0,1.6,0,0,0,0\n")
+    with pytest.raises(TraceError, match="line 2: has 1 columns, the header has 7.*--delimiter auto"):
+        import_csv(path, parse_columns("t=Time,px=x,py=y,pz=z,rz=alpha,rx=beta,ry=gamma"), rotation="euler",
+                   euler_order="zxy", delimiter=None)
+
+
+# ------------------------------------------------------------------------------ 3. absolute game-world positions
+
+
+def test_recentre_moves_the_first_pose_to_the_origin_and_optionally_its_heading(tmp_path):
+    turned = quat_from_axis_angle([0, 1, 0], math.radians(30))
+    rows = [f"{t},{24 + t},1.7,{-3 - t},{turned[0]},{turned[1]},{turned[2]},{turned[3]}" for t in range(3)]
+    path = write(tmp_path / "level.csv", "t,x,y,z,qw,qx,qy,qz\n" + "\n".join(rows) + "\n")
+    columns = parse_columns("t=t,px=x,py=y,pz=z,qw=qw,qx=qx,qy=qy,qz=qz")
+    plain = import_csv(path, columns, recentre="position")
+    np.testing.assert_allclose(plain.positions[0], 0, atol=1e-12)
+    np.testing.assert_allclose(plain.positions[2], [2, 0, -2], atol=1e-12)
+    yawed = import_csv(path, columns, recentre="yaw")
+    np.testing.assert_allclose(forward(yawed.orientations[0]), [0, 0, -1], atol=1e-9)
+    # the path turned with it: it went forward-right at 45 deg, minus the 30 deg heading
+    step = yawed.positions[1] - yawed.positions[0]
+    assert math.degrees(math.atan2(step[0], -step[2])) == pytest.approx(45 + 30)
+    assert "turned -30.0 deg" in yawed.assumptions["recentred"]
+
+
+def test_cli_recentre_works_for_any_format(tmp_path, capsys):
+    path = write(tmp_path / "hl2.csv", HL2)
+    out = tmp_path / "out.csv"
+    assert run_cli(["trace", "convert", str(path), str(out), "--recentre"]) == 0
+    np.testing.assert_allclose(read_canonical_csv(out).positions[0], 0, atol=1e-12)
+
+
+# ------------------------------------------------------------------------------ 4. orientation only, Z up
+
+
+def test_orientation_only_z_up_trace_from_a_360_video_study(tmp_path):
+    """'timestamp viewpoint w x y z' (whitespace), quaternions in a Z-up world whose identity
+    looks along +Y: no positions, so the head stays at the origin, or moves on a neck model."""
+    left = quat_from_axis_angle([0, 0, 1], math.radians(90))            # turn left about Z-up
+    up = quat_from_axis_angle([1, 0, 0], math.radians(30))              # look up about the right axis
+    rows = [f"{0.1 * i:.1f} {i} " + " ".join(map(str, q)) for i, q in enumerate(([1, 0, 0, 0], left, up))]
+    path = write(tmp_path / "video.txt", "timestamp viewpoint w x y z\n" + "\n".join(rows) + "\n")
+    columns = parse_columns("t=timestamp,qw=w,qx=x,qy=y,qz=z")
+    with pytest.raises(TraceError, match="--positions fixed.*--positions neck"):
+        import_csv(path, columns, up="z")
+    fixed = import_csv(path, columns, up="z", positions="fixed")
+    np.testing.assert_allclose(fixed.positions, 0)
+    np.testing.assert_allclose(forward(fixed.orientations[0]), [0, 0, -1], atol=1e-9)
+    np.testing.assert_allclose(forward(fixed.orientations[1]), [-1, 0, 0], atol=1e-9)
+    np.testing.assert_allclose(forward(fixed.orientations[2]), [0, math.sin(math.radians(30)),
+                                                                -math.cos(math.radians(30))], atol=1e-9)
+    assert fixed.assumptions["ignored columns"] == "viewpoint"
+    assert "orientation only" in fixed.assumptions["positions"]
+    neck = import_csv(path, columns, up="z", positions="neck")
+    np.testing.assert_allclose(neck.positions[0], 0, atol=1e-12)
+    # turning the head swings the eyes around the pivot: 8 cm forward becomes 8 cm to the left
+    np.testing.assert_allclose(neck.positions[1], [-0.08, 0, 0.08], atol=1e-9)
+    assert "head-neck model" in neck.assumptions["positions"]
+
+
+def test_positions_mode_and_position_columns_must_agree(tmp_path):
+    path = write(tmp_path / "a.csv", "t,x,y,z,qw,qx,qy,qz\n0,0,0,0,1,0,0,0\n")
+    with pytest.raises(TraceError, match="--positions fixed is for traces without positions"):
+        import_csv(path, parse_columns("t=t,px=x,py=y,pz=z,qw=qw,qx=qx,qy=qy,qz=qz"), positions="fixed")
+
+
+# ------------------------------------------------------------------------------ trace show
+
+
+def test_trace_show_prints_what_was_assumed(tmp_path, capsys):
+    path = write(tmp_path / "hl2.csv", HL2)
+    assert run_cli(["trace", "show", str(path)]) == 0
+    out = capsys.readouterr().out
+    for fragment in ("assumed format", "pred6dof", "assumed time", ".NET ticks", "assumed axes", "left-handed",
+                     "assumed ignored columns", "vx, vy, vz, speed", "rate"):
+        assert fragment in out, fragment
+    video = write(tmp_path / "video.txt", "timestamp viewpoint w x y z\n0 1 1 0 0 0\n0.1 1 1 0 0 0\n")
+    assert run_cli(["trace", "show", str(video), "--columns", "t=timestamp,qw=w,qx=x,qy=y,qz=z", "--up", "z",
+                    "--positions", "neck"]) == 0
+    out = capsys.readouterr().out
+    assert "+z up" in out and "head-neck model" in out
