@@ -124,6 +124,8 @@ def register(sub) -> None:
     d.add_argument("--scene", default="room")
     d.add_argument("--trace", default="pred6dof-1")
     d.add_argument("--start", type=_non_negative, default=10.0, help="seconds into the trace (default 10)")
+    d.add_argument("--anchor", choices=("start", "origin", "none"), default="start",
+                   help="how the trace is placed in the scene (see 'pibr client --help'; default start)")
     d.add_argument("--duration", type=_positive, default=6.0, help="seconds to replay (default 6)")
     d.add_argument("--rate", type=_positive, default=30.0, help="output rate Hz (default 30)")
     d.add_argument("--size", type=_size, default=(960, 540), metavar="WxH")
@@ -289,7 +291,7 @@ def cmd_demo(args) -> int:
 
     metrics = run_demo(out_dir=args.out, scene=args.scene, trace=args.trace, start_s=args.start,
                        duration_s=args.duration, rate_hz=args.rate, size=args.size, latency_ms=args.latency_ms,
-                       methods=args.method, clock=args.clock, flip_every=args.flip_every,
+                       methods=args.method, clock=args.clock, flip_every=args.flip_every, anchor=args.anchor,
                        server_args=("--depth-codec", args.depth_codec))
     print_report(metrics, args.out)
     return 0

@@ -60,7 +60,7 @@ def run_codec_bench(scene_spec="room", windows=None, window_s=4.0, fps=10.0, vie
     from pibr.protocol.depth import h264_quantizer
     from pibr.protocol.edgecodec.codec import EdgeDecoder, EdgeEncoder, warp_samples
     from pibr.protocol.gl import create_context
-    from pibr.protocol.trace import load_trace
+    from pibr.protocol.trace import load_trace, placement
     from pibr.scenes.registry import load_scene
     from pibr.server.depth_stream import EDGE_BITS, edge_quantizer
     from pibr.server.edge_extract import extract_edge_samples
@@ -104,13 +104,14 @@ def run_codec_bench(scene_spec="room", windows=None, window_s=4.0, fps=10.0, vie
     try:
         for win in windows:
             trace, start_s = load_trace(win.trace), win.start_s
+            origin = placement(trace, start_s, scene.viewer_origin)
             enc_h264 = H264Encoder(with_depth.width, with_depth.height, fps, bitrate_kbps, 30, deterministic=True)
             dec_h264 = H264Decoder(with_depth.width, with_depth.height)
             coders = {name: (EdgeEncoder(w, h, EDGE_BITS, q12, temporal=v["temporal"], passes=v["passes"]),
                              EdgeDecoder(w, h, EDGE_BITS, q12), {"enc": None, "dec": None}) for name, v in variants.items()}
             for k in range(int(win.duration_s * fps)):
                 t = k / fps
-                pose = scene.viewer_origin.compose(trace.pose_at(min(start_s + t, trace.duration)))
+                pose = origin.compose(trace.pose_at(min(start_s + t, trace.duration)))
                 p = producer.produce(pose, t)
                 r_true = p.distances["primary"]
                 row = {"window": win.label, "frame": k}

@@ -191,15 +191,16 @@ class CoverageProbe:
 
 
 def display_samples(scene, trace_spec: str, start_s: float, duration_s: float | None, rate_hz: float,
-                    latency: LatencyModel, stride: int = 1):
-    """[(display time s, display pose, render time s, render pose)] along a trace."""
-    from pibr.protocol.trace import load_trace
+                    latency: LatencyModel, stride: int = 1, anchor: str = "start"):
+    """[(display time s, display pose, render time s, render pose)] along a trace window,
+    placed in the scene as the client places it (``protocol.trace.placement``)."""
+    from pibr.protocol.trace import load_trace, placement
 
     trace = load_trace(trace_spec)
     _, end = trace.window(start_s, duration_s)
     n = max(1, int(math.floor((end - start_s) * rate_hz + 1e-9)))
     tick_us = int(round(1e6 / rate_hz))
-    origin = scene.viewer_origin
+    origin = placement(trace, start_s, scene.viewer_origin, anchor)
     out = []
     for i in range(0, n, stride):
         t_us = i * tick_us

@@ -16,11 +16,12 @@ from .results import write_result
 
 
 def _poses(scene, trace_spec: str, count: int, fps: float, start_s: float = 10.0):
-    from pibr.protocol.trace import load_trace
+    from pibr.protocol.trace import load_trace, placement
 
     trace = load_trace(trace_spec)
     start = min(start_s, max(0.0, trace.duration - count / fps))
-    return [(start + k / fps, scene.viewer_origin.compose(trace.pose_at(start + k / fps))) for k in range(count)]
+    origin = placement(trace, start, scene.viewer_origin)
+    return [(start + k / fps, origin.compose(trace.pose_at(start + k / fps))) for k in range(count)]
 
 
 def _server_cfg(**kw):

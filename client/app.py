@@ -57,6 +57,7 @@ class ClientConfig:
     fov_deg: float = 90.0
     start_s: float = 0.0
     duration_s: float | None = None
+    anchor: str = "start"    # how the trace window is placed in the scene (protocol.trace.placement)
     preroll_s: float = 0.5
     scene: str = ""
     depth_codec: str = ""
@@ -82,6 +83,10 @@ class ClientConfig:
             raise ConfigError(f"output rate must be in 1..1000 Hz, got {self.rate_hz}")
         if self.duration_s is not None and self.duration_s <= 0:
             raise ConfigError(f"duration must be positive, got {self.duration_s}")
+        from pibr.protocol.trace import ANCHORS
+
+        if self.anchor not in ANCHORS:
+            raise ConfigError(f"anchor must be one of {', '.join(ANCHORS)}, got {self.anchor!r}")
         if self.preroll_s < 0:
             raise ConfigError("preroll must be >= 0")
         if not (0 < self.tau < 10):
@@ -150,6 +155,7 @@ class Client:
         self._newest: _Decoded | None = None
         self._gl_state = None
         self._method_info: dict = {}
+        self._placement: Pose | None = None   # trace -> scene (protocol.trace.placement)
         self._last_shown: dict = {}
         self.proxies = None
         self.proxy_stats: dict = {}
@@ -170,7 +176,11 @@ class Client:
 
     def _pose_at(self, trace, t_s: float) -> Pose:
         local = trace.pose_at(self.cfg.start_s + min(max(t_s, 0.0), self._duration))
-        return self.session.viewer_origin.compose(local)
+        if self._placement is None:
+            from pibr.protocol.trace import placement
+
+            self._placement = placement(trace, self.cfg.start_s, self.session.viewer_origin, self.cfg.anchor)
+        return self._placement.compose(local)
 
     def _gl_setup(self, ctx):
         from .output_target import OutputTarget
@@ -440,7 +450,8 @@ class Client:
         info = {
             "client": asdict(self.cfg) | {"methods": list(self.cfg.methods)},
             "session": self.session.to_json(),
-            "trace": {"name": trace.name, "start_s": self.cfg.start_s, "duration_s": self._duration},
+            "trace": {"name": trace.name, "start_s": self.cfg.start_s, "duration_s": self._duration,
+                      "anchor": self.cfg.anchor, "assumptions": trace.assumptions},
             "result": asdict(result),
             "proxies": self.proxy_stats or None,
             "methods": self._method_info,

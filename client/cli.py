@@ -47,6 +47,10 @@ def register(sub) -> None:
     p.add_argument("--fov", type=float, default=90.0, help="horizontal field of view in degrees (default 90)")
     p.add_argument("--start", type=float, default=0.0, help="start this many seconds into the trace")
     p.add_argument("--duration", type=float, default=None, help="seconds of trace to replay (default: all)")
+    p.add_argument("--anchor", choices=("start", "origin", "none"), default="start",
+                   help="place the trace in the scene: its pose at --start at the scene's viewer origin and "
+                        "heading (start, default), its own origin at the viewer origin (origin), or as recorded in "
+                        "the scene's coordinates (none)")
     p.add_argument("--preroll", type=float, default=0.5,
                    help="seconds of poses sent before the first displayed tick (default 0.5)")
     p.add_argument("--scene", default="", help="ask the server for this scene (default: the server's)")
@@ -138,6 +142,7 @@ def cmd_client(args) -> int:
     cfg = ClientConfig(host=host, port=port, trace=args.trace, rate_hz=args.rate, clock=args.clock,
                        methods=tuple(args.method), out_dir=args.out, width=args.size[0], height=args.size[1],
                        fov_deg=args.fov, start_s=args.start, duration_s=args.duration, preroll_s=args.preroll,
+                       anchor=args.anchor,
                        scene=args.scene, depth_codec=args.depth_codec or "", lossless=not args.no_lossless,
                        progress=args.progress, tau=args.tau, lod_pixels=args.lod_pixels,
                        lod_level=args.lod_level, options=method_knobs(args))

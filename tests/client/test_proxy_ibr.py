@@ -75,7 +75,7 @@ def test_proxy_matches_the_frame_itself_without_latency(sim):
 
 def test_proxy_beats_rotation_when_the_head_moves(sim):
     """On every frame the head has moved since (t > 0), proxy's DSSIM is lower than rotation's,
-    and on average well below: measured 0.029 against 0.046 over these six frames."""
+    and on average well below: measured 0.027 against 0.067 over these six frames."""
     scene = sim.scene
     samples = display_samples(scene, "pred6dof-1", 20.0, 2.0, 30.0, LatencyModel(rate_hz=30.0))[::10]
     scores = {"rotation": [], "proxy": []}
