@@ -183,3 +183,30 @@ def test_trace_show_prints_what_was_assumed(tmp_path, capsys):
                     "--positions", "neck"]) == 0
     out = capsys.readouterr().out
     assert "+z up" in out and "head-neck model" in out
+
+
+# ------------------------------------------------------------------------------ 5. placing the window
+
+
+def test_a_late_window_starts_at_the_viewer_origin_facing_its_way():
+    from pibr.protocol.trace import heading, placement
+
+    trace = load_trace("pred6dof-1")
+    origin = Pose.make([2.0, 1.6, -1.0], quat_from_axis_angle([0, 1, 0], math.radians(40)))
+    for start in (0.0, 30.0, 70.0):
+        place = placement(trace, start, origin)
+        first = place.compose(trace.pose_at(start))
+        np.testing.assert_allclose(first.p, origin.p, atol=1e-9)
+        assert heading(first.q) == pytest.approx(math.radians(40), abs=1e-9)
+        # the head's pitch is kept: the angle of its view axis above the floor
+        raw = forward(trace.pose_at(start).q)
+        placed = forward(first.q)
+        assert math.asin(placed[1]) == pytest.approx(math.asin(raw[1]), abs=1e-9)
+        # the motion is rigid: distances along the window are the trace's
+        later = place.compose(trace.pose_at(start + 2.0))
+        assert np.linalg.norm(later.p - first.p) == pytest.approx(
+            np.linalg.norm(trace.pose_at(start + 2.0).p - trace.pose_at(start).p))
+    assert placement(trace, 30.0, origin, "origin") == origin
+    assert placement(trace, 30.0, origin, "none") == Pose.identity()
+    with pytest.raises(TraceError, match="unknown anchor"):
+        placement(trace, 30.0, origin, "middle")
