@@ -121,7 +121,9 @@ def register(sub) -> None:
                        description="Start a server, a 128 ms relay and a client as separate processes, replay a "
                                    "real head trace, then compare the methods against ground truth.")
     d.add_argument("--out", default="out", help="output directory (default out)")
-    d.add_argument("--scene", default="room")
+    d.add_argument("--scene", default="room",
+                   help="a built-in name, a scene description or an asset file (FILE#up=z for a Z-up asset)")
+    d.add_argument("--up", choices=("y", "z", "auto"), default=None, help="an asset file's up axis (default auto)")
     d.add_argument("--trace", default="pred6dof-1")
     d.add_argument("--start", type=_non_negative, default=10.0, help="seconds into the trace (default 10)")
     d.add_argument("--anchor", choices=("start", "origin", "none"), default="start",
@@ -289,7 +291,9 @@ def cmd_bench_pareto(args) -> int:
 def cmd_demo(args) -> int:
     from .demo import print_report, run_demo
 
-    metrics = run_demo(out_dir=args.out, scene=args.scene, trace=args.trace, start_s=args.start,
+    from pibr.scenes.registry import with_up
+
+    metrics = run_demo(out_dir=args.out, scene=with_up(args.scene, args.up), trace=args.trace, start_s=args.start,
                        duration_s=args.duration, rate_hz=args.rate, size=args.size, latency_ms=args.latency_ms,
                        methods=args.method, clock=args.clock, flip_every=args.flip_every, anchor=args.anchor,
                        server_args=("--depth-codec", args.depth_codec))

@@ -11,12 +11,16 @@ def register(subparsers) -> None:
                     "scene description, or asset file): objects, triangles, bounds, lights, viewer.")
     p.add_argument("--show", metavar="SPEC", help="summarise this scene instead of listing")
     p.add_argument("--json", action="store_true", help="print JSON")
+    p.add_argument("--up", choices=("y", "z", "auto"), default=None,
+                   help="with --show ASSET: its up axis (default auto: decided from its geometry)")
     p.set_defaults(func=run)
 
 
 def run(args) -> int:
     if args.show:
-        return _show(args.show, args.json)
+        from .registry import with_up
+
+        return _show(with_up(args.show, args.up), args.json)
     from .registry import DEFAULT_SCENE, available_scenes
 
     scenes = available_scenes()
@@ -51,6 +55,7 @@ def summary(scene) -> dict:
         "near": scene.near,
         "far": scene.far,
         "extra_view": scene.extra_view,
+        "notes": list(scene.notes),
     }
 
 
@@ -74,6 +79,8 @@ def _show(spec: str, as_json: bool) -> int:
     print(f"lights     {lights}")
     print(f"viewer     at {_vec(vp['position'])}, orientation (w, x, y, z) {_vec(vp['orientation_wxyz'])}")
     print(f"clip       near {info['near']:g} m, far {info['far']:g} m; extra view {'on' if info['extra_view'] else 'off'}")
+    for note in info["notes"]:
+        print(f"note       {note}")
     return 0
 
 

@@ -249,7 +249,8 @@ class _Builder:
         if not isinstance(description, str):
             self.fail("description", f"expected a string, got {_show(description)}")
         self.default_units = self.units(d.get("units", "m"), "units")
-        self.default_up = self.choice(d.get("up", "y"), "up", ("y", "z", "auto"))
+        self.default_up = self.choice(d.get("up", "auto"), "up", ("y", "z", "auto"))
+        self.notes = []
         near = self.number(d.get("near", 0.1), "near", positive=True)
         far = self.number(d.get("far", 1000.0), "far", positive=True)
         if far <= near:
@@ -280,7 +281,8 @@ class _Builder:
         try:
             return Scene(name=name, objects=objects, description=description, viewer_origin=viewer,
                          near=near, far=far, sky_color=sky, extra_view=extra_view,
-                         extra_view_offset=offset, view_region=region, source=str(self.path), **kwargs)
+                         extra_view_offset=offset, view_region=region, source=str(self.path), notes=self.notes,
+                         **kwargs)
         except SceneError as exc:
             self.fail("", str(exc))
 
@@ -421,7 +423,8 @@ class _Builder:
         fit = self.number(t["fit_size"], f"{key}.fit_size", positive=True) if "fit_size" in t else None
         center = self.choice(t["center"], f"{key}.center", ("bounds", "base")) if "center" in t else None
         try:
-            return load_asset(path, up=up, units=units, fit_size=fit, center=center, scale=scale, name=name)
+            return load_asset(path, up=up, units=units, fit_size=fit, center=center, scale=scale, name=name,
+                          notes=self.notes)
         except SceneError as exc:
             self.fail(f"{key}.asset", str(exc))
 

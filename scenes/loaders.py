@@ -17,6 +17,7 @@ Any failure raises :class:`SceneError` naming the file and the reason.
 """
 from __future__ import annotations
 
+import io
 import logging
 import math
 from dataclasses import dataclass
@@ -134,18 +135,20 @@ class _Part:
     material: Material
 
 
-def load_asset(path, *, up: str = "y", units=None, fit_size: float | None = None,
-               center: str | None = None, scale=1.0, name: str | None = None) -> list[SceneObject]:
+def load_asset(path, *, up: str = "auto", units=None, fit_size: float | None = None,
+               center: str | None = None, scale=1.0, name: str | None = None,
+               notes: list | None = None) -> list[SceneObject]:
     """Load an asset file as a list of static scene objects, in metres and +Y up.
 
-    up       : 'y', 'z' (converted to +Y up) or 'auto' (glTF: 'y' by spec; other formats:
-               a guess from the bounds -- resting on z = 0 or flatter along z means Z-up).
+    up       : 'y', 'z' (converted to +Y up) or 'auto' (the default; glTF: 'y' by spec; other
+               formats: decided from the geometry, see :func:`guess_up`, and logged).
     units    : the file's unit, a name (m, cm, mm, km, in, ft) or metres per unit; None: metres.
     fit_size : if given, scale the asset so its largest bounding-box extent is this many metres.
     center   : None (keep the file's origin), 'bounds' (box centre to the origin) or 'base'
                (bottom centre of the box to the origin: the asset stands on y = 0).
     scale    : extra scale factor, a number or (3,) per axis, positive, applied last.
     name     : object name prefix (default: the file stem); parts are named ``name/part``.
+    notes    : a list to which what was decided or fixed is appended (the up axis and why).
 
     Each object's ``transform`` is the translation to its bounding-box centre; rotations,
     scales and node transforms are baked into the (float32, small) vertices.
@@ -169,9 +172,16 @@ def load_asset(path, *, up: str = "y", units=None, fit_size: float | None = None
         what = f" (skipped: {', '.join(skipped)})" if skipped else ""
         raise SceneError(f"{path}: the asset contains no triangles{what}")
 
+    up_reason = "as given"
     if up == "auto":
-        up = "y" if path.suffix.lower() in _Y_UP_FORMATS else _guess_up(_union_bounds(parts))
-        log.info("%s: up axis %s (auto)", path, up)
+        if path.suffix.lower() in _Y_UP_FORMATS:
+            up, up_reason = "y", "auto: glTF is +Y up by specification"
+        else:
+            up, why = guess_up(parts)
+            up_reason = f"auto: {why}"
+        log.info("%s: up axis %s (%s)", path, up, up_reason)
+    if notes is not None:
+        notes.append(f"{path.name}: +{up} up ({up_reason})")
     convert = np.diag([to_metres, to_metres, to_metres, 1.0])
     if up == "z":
         convert = convert @ _Z_TO_Y
@@ -231,10 +241,92 @@ def _read(path: Path):
         raise SceneError(f"{path}: unsupported asset format {path.suffix or '(no extension)'!r}; "
                          f"readable: {', '.join(formats)}")
     try:
+        if path.suffix.lower() == ".obj":
+            text, stats = normalise_obj(path)
+            tscene = trimesh.load_scene(file_obj=io.BytesIO(text.encode("utf-8")), file_type="obj",
+                                        resolver=trimesh.resolvers.FilePathResolver(str(path.parent)),
+                                        split_objects=True, split_groups=True)
+            _check_obj_counts(path, tscene, stats)
+            return tscene
         return trimesh.load_scene(str(path))
+    except SceneError:
+        raise
     except Exception as exc:  # trimesh raises anything from KeyError to struct.error on bad files
         reason = str(exc) or type(exc).__name__
         raise SceneError(f"{path}: cannot read asset: {type(exc).__name__}: {reason}") from exc
+
+
+@dataclass
+class ObjStats:
+    """What an OBJ file itself holds: vertices, triangles its faces make (an n-gon makes n - 2)."""
+
+    vertices: int = 0
+    triangles: int = 0
+    relative_indices: int = 0
+    objects: int = 0
+
+
+def normalise_obj(path: Path) -> tuple[str, ObjStats]:
+    """The OBJ text with what trimesh misreads rewritten, and what the file holds.
+
+    trimesh takes relative (negative) face indices against the current object's vertices
+    rather than the file's (a later object's faces then point into the wrong vertices, and a
+    whole object can vanish), and is unreliable with tab-separated fields. Every index is
+    made absolute and every run of whitespace one space; all else is kept."""
+    try:
+        lines = path.read_text(encoding="utf-8", errors="replace").splitlines()
+    except OSError as exc:
+        raise SceneError(f"{path}: cannot read: {exc.strerror or exc}") from exc
+    counts = {"v": 0, "vt": 0, "vn": 0}
+    stats = ObjStats()
+    out = []
+    for number, line in enumerate(lines, start=1):
+        fields = line.split()
+        if not fields or fields[0].startswith("#"):
+            out.append(line)
+            continue
+        key = fields[0]
+        if key in counts:
+            counts[key] += 1
+        elif key in ("o", "g"):
+            stats.objects += key == "o"
+        elif key == "f":
+            corners = []
+            for corner in fields[1:]:
+                refs = corner.split("/")
+                for k, (ref, kind) in enumerate(zip(refs, ("v", "vt", "vn"))):
+                    if not ref:
+                        continue
+                    try:
+                        i = int(ref)
+                    except ValueError:
+                        raise SceneError(f"{path}:{number}: face index {ref!r} is not an integer") from None
+                    if i < 0:
+                        stats.relative_indices += 1
+                        i = counts[kind] + 1 + i
+                    if not 1 <= i <= counts[kind]:
+                        raise SceneError(f"{path}:{number}: face refers to {kind} {ref} but only "
+                                         f"{counts[kind]} are defined before it")
+                    refs[k] = str(i)
+                corners.append("/".join(refs))
+            if len(corners) >= 3:
+                stats.triangles += len(corners) - 2
+            out.append("f " + " ".join(corners))
+            continue
+        out.append(" ".join(fields))
+    stats.vertices = counts["v"]
+    return "\n".join(out) + "\n", stats
+
+
+def _check_obj_counts(path: Path, tscene, stats: ObjStats) -> None:
+    """Refuse a read that lost triangles, rather than serve a scene with parts missing."""
+    loaded = sum(len(g.faces) for g in tscene.geometry.values() if hasattr(g, "faces"))
+    if loaded < stats.triangles:
+        raise SceneError(f"{path}: the file has {stats.triangles} triangles but only {loaded} were read "
+                         "(a malformed face or an OBJ feature the reader does not handle)")
+    log.info("%s: OBJ with %d vertices, %d triangles in %d geometries%s", path, stats.vertices, loaded,
+             len(tscene.geometry), f"; {stats.relative_indices} relative indices made absolute"
+             if stats.relative_indices else "")
 
 
 def _extract_parts(tscene, path: Path) -> tuple[list[_Part], list[str]]:
@@ -436,22 +528,42 @@ def _union_bounds(parts) -> tuple[np.ndarray, np.ndarray]:
     return lo, hi
 
 
-def _guess_up(bounds) -> str:
-    """'z' or 'y' for an asset of unknown convention, from its (2, 3) bounds in file axes.
+def guess_up(parts) -> tuple[str, str]:
+    """('y' or 'z', why) for an asset of unknown convention, from its geometry in file axes.
 
-    Assets usually rest on the ground plane: one that sits on z = 0 but not on y = 0 is Z-up,
-    and the reverse Y-up; otherwise the flatter axis of the two is taken as up (scenes are
-    wider than tall). A guess: pass ``up`` explicitly when you know.
-    """
-    lo, hi = np.asarray(bounds[0]), np.asarray(bounds[1])
+    A closed surface's area-weighted normals sum to zero; what does not cancel comes from open
+    surfaces -- terrain, ground planes, floors, the tops of stands -- and those face up. So the
+    axis among y and z with the larger net area facing one way is up, when that net area is a
+    sizeable share (5 %) of the total. Otherwise the asset is a set of closed objects: one that
+    rests on z = 0 but not on y = 0 is Z-up, the reverse Y-up, and failing that the flatter of
+    the two axes is up (scenes are wider than tall). Pass ``up`` explicitly when you know."""
+    total = 0.0
+    net = np.zeros(3)
+    for p in parts:
+        tri = p.vertices[p.faces]
+        cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])   # 2 x area x unit normal
+        net += 0.5 * cross.sum(axis=0)
+        total += 0.5 * float(np.linalg.norm(cross, axis=1).sum())
+    if total > 0:
+        share = np.abs(net[1:]) / total
+        axis = int(np.argmax(share))
+        if share[axis] >= 0.05:
+            name = "yz"[axis]
+            sign = "+" if net[1 + axis] > 0 else "-"
+            why = f"{100 * share[axis]:.0f} % of the surface area faces {sign}{name} without a counterpart"
+            if sign == "-":
+                why += " (it faces down: the file may be upside down)"
+            return name, why
+    lo, hi = _union_bounds(parts)
     ext = hi - lo
     tol = 0.02 * max(float(np.linalg.norm(ext)), 1e-12)
     on_y, on_z = abs(lo[1]) <= tol, abs(lo[2]) <= tol
     if on_z and not on_y:
-        return "z"
+        return "z", "it rests on z = 0"
     if on_y and not on_z:
-        return "y"
-    return "z" if ext[2] < ext[1] else "y"
+        return "y", "it rests on y = 0"
+    flatter = "z" if ext[2] < ext[1] else "y"
+    return flatter, f"it is flatter along {flatter} (closed objects, no ground to tell)"
 
 
 def _unique_names(base: str, part_names: list[str]) -> list[str]:
@@ -500,7 +612,8 @@ def load_asset_scene(path, name: str | None = None, **options):
     from .scene import Scene
 
     path = Path(path).expanduser()
-    objects = load_asset(path, **options)
+    notes: list = []
+    objects = load_asset(path, notes=notes, **options)
     scene_name = name if name is not None else path.stem
     lo = np.min([o.world_bounds()[0] for o in objects], axis=0)
     hi = np.max([o.world_bounds()[1] for o in objects], axis=0)
@@ -514,4 +627,5 @@ def load_asset_scene(path, name: str | None = None, **options):
         near=near,
         far=far,
         source=str(path),
+        notes=notes,
     )

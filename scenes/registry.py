@@ -31,6 +31,46 @@ def available_scenes() -> dict[str, str]:
     return {name: description for name, (description, _builder) in _builtins().items()}
 
 
+#: Options an asset file's spec may carry after a '#': ``statue.obj#up=z,units=cm``.
+ASSET_OPTIONS = {"up": ("y", "z", "auto"), "units": None}
+
+
+def asset_spec(path: str, **options) -> str:
+    """``path`` with asset options (None values left out) appended as the registry reads them."""
+    given = {k: v for k, v in options.items() if v is not None}
+    return path + ("#" + ",".join(f"{k}={v}" for k, v in given.items()) if given else "")
+
+
+def with_up(spec: str, up: str | None) -> str:
+    """``spec`` with an asset's up axis (``--up`` of the command line); None leaves it alone.
+    SceneError when ``spec`` is no asset file (built-in scenes and descriptions have their own)."""
+    if up is None:
+        return spec
+    from .loaders import is_asset_path
+
+    if spec in _builtins() or not is_asset_path(spec.partition("#")[0]):
+        raise SceneError(f"--up applies to an asset file, not to {spec!r} (a scene description sets 'up' per asset)")
+    return asset_spec(spec, up=up)
+
+
+def _split_options(spec: str) -> tuple[str, dict]:
+    """``file.obj#up=z,units=cm`` -> ("file.obj", {"up": "z", "units": "cm"})."""
+    path, sep, tail = spec.rpartition("#")
+    if not sep or "=" not in tail or not path:
+        return spec, {}
+    options = {}
+    for item in tail.split(","):
+        key, eq, value = item.partition("=")
+        key, value = key.strip(), value.strip()
+        if not eq or key not in ASSET_OPTIONS:
+            raise SceneError(f"scene {spec!r}: unknown asset option {item!r}; expected up=y|z|auto or units=NAME")
+        choices = ASSET_OPTIONS[key]
+        if choices is not None and value not in choices:
+            raise SceneError(f"scene {spec!r}: {key} must be one of {', '.join(choices)}, got {value!r}")
+        options[key] = value
+    return path, options
+
+
 def _find(spec):
     """-> (cache key, builder) for ``spec``; SceneError for an unknown name or a missing file."""
     from .description import is_description_path, load_description
@@ -42,6 +82,7 @@ def _find(spec):
     builtins = _builtins()
     if spec in builtins:
         return (spec, None), builtins[spec][1]
+    spec, options = _split_options(spec)
     path = Path(spec).expanduser()
     if not path.is_file():
         if path.suffix or os.sep in spec or "/" in spec:
@@ -49,10 +90,13 @@ def _find(spec):
         raise SceneError(f"unknown scene {spec!r}; built-in scenes: {', '.join(sorted(builtins))} "
                          "(or give a .toml/.json scene description or an asset file)")
     resolved = path.resolve()
-    key = (str(resolved), resolved.stat().st_mtime_ns)
+    key = (asset_spec(str(resolved), **options), resolved.stat().st_mtime_ns)
     if is_description_path(resolved):
+        if options:
+            raise SceneError(f"scene {spec!r}: asset options ({', '.join(options)}) go on the assets inside a "
+                             "scene description, not on the description")
         return key, lambda: load_description(path)
-    return key, lambda: load_asset_scene(path)
+    return key, lambda: load_asset_scene(path, **options)
 
 
 def check_scene_spec(spec) -> None:

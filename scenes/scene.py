@@ -214,6 +214,7 @@ class Scene:
     extra_view_offset : the dual view's offset for this scene (``None``: the default).
     view_region   : (2, 3) world box where viewers' eyes go (``None``: 3 m around the viewer
                     origin horizontally, 0.6 m vertically); geometry is tessellated for it.
+    notes         : what loading decided or fixed (an asset's up axis and why, ...).
     """
 
     name: str
@@ -229,6 +230,7 @@ class Scene:
     extra_view_offset: Pose | None = None
     view_region: np.ndarray | None = None
     source: str = "builtin"
+    notes: list = field(default_factory=list)   # what loading decided (up axis, fixes), for 'pibr scenes --show'
 
     def __post_init__(self):
         if not (0 < self.near < self.far) or not math.isfinite(self.far):

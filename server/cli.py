@@ -43,6 +43,8 @@ def register(sub) -> None:
                        description="Serve wide-angle views of a scene to pibr clients over TCP.")
     p.add_argument("--scene", default="room", help="default scene: a built-in name (see 'pibr scenes'), "
                    "a scene description (.toml/.json) or an asset file (default: room)")
+    p.add_argument("--up", choices=("y", "z", "auto"), default=None,
+                   help="an asset file's up axis (default auto: decided from its geometry; see 'pibr scenes --show')")
     p.add_argument("--host", default="127.0.0.1")
     p.add_argument("--port", type=int, default=DEFAULT_PORT, help=f"TCP port, 0 for any free one (default {DEFAULT_PORT})")
     p.add_argument("--fps", type=float, default=10.0, help="server frame rate (default 10)")
@@ -93,7 +95,9 @@ def cmd_serve(args) -> int:
     from .config import ServerConfig
     from .depth_stream import EdgeSettings
 
-    config = ServerConfig(host=args.host, port=args.port, scene=args.scene, fps=args.fps,
+    from pibr.scenes.registry import with_up
+
+    config = ServerConfig(host=args.host, port=args.port, scene=with_up(args.scene, args.up), fps=args.fps,
                           view_size=tuple(args.view_size), extra_view=args.extra_view,
                           extra_offset=args.extra_offset, bitrate_kbps=args.bitrate_kbps, keyint=args.keyint,
                           preset=args.preset, projection=args.projection, max_edge_deg=args.max_edge_deg,

@@ -72,7 +72,7 @@ def test_obj_with_two_materials_and_no_uvs_or_normals(tmp_path):
     (tmp_path / "two.obj").write_text(
         "mtllib two.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nv 9 9 9\n"
         "usemtl red\nf 1 2 3\nusemtl green\nf 2 4 3\nf 1 1 2\nf 1 2 2\n")  # two degenerate faces
-    objects = load_asset(tmp_path / "two.obj")
+    objects = load_asset(tmp_path / "two.obj", up="y")
     by_name = {o.name: o for o in objects}
     assert set(by_name) == {"two/red", "two/green"}
     assert by_name["two/red"].material.base_color[:3] == (1.0, 0.0, 0.0)
@@ -167,15 +167,17 @@ def test_z_up_obj_is_converted(tmp_path):
     assert signed_volume(obj) == pytest.approx(2.0, rel=1e-6)  # a rotation: still outward
     (guessed,) = load_asset(path, up="auto")  # rests on z = 0, not on y = 0
     np.testing.assert_allclose(guessed.world_bounds(), expected, atol=1e-6)
-    (as_is,) = load_asset(path)  # default: the file is taken as +Y up
+    (default,) = load_asset(path)  # the default is auto
+    np.testing.assert_allclose(default.world_bounds(), expected, atol=1e-6)
+    (as_is,) = load_asset(path, up="y")  # the file taken as +Y up
     np.testing.assert_allclose(as_is.world_bounds(), [[-0.5, -0.5, 0], [0.5, 0.5, 2]], atol=1e-6)
 
 
 def test_units_fit_size_center_and_scale(tmp_path):
     path = write_z_up_obj(tmp_path)
-    (cm,) = load_asset(path, units="cm")
+    (cm,) = load_asset(path, units="cm", up="y")
     np.testing.assert_allclose(cm.world_bounds()[1], [0.005, 0.005, 0.02], atol=1e-9)
-    (inch,) = load_asset(path, units=0.0254)
+    (inch,) = load_asset(path, units=0.0254, up="y")
     np.testing.assert_allclose(inch.world_bounds()[1, 2], 2 * 0.0254)
     (fit,) = load_asset(path, up="z", fit_size=1.0, center="base")
     np.testing.assert_allclose(fit.world_bounds(), [[-0.25, 0, -0.25], [0.25, 1.0, 0.25]], atol=1e-6)
@@ -203,7 +205,7 @@ def test_huge_coordinates_stay_precise(tmp_path):
     box.apply_translation([1e6 + 0.25, 2e6, -3e6])
     path = tmp_path / "far.ply"
     box.export(path, encoding="ascii")  # float64 text: the file itself keeps full precision
-    (obj,) = load_asset(path)
+    (obj,) = load_asset(path, up="y")
     assert obj.mesh.vertices.dtype == np.float32
     assert np.abs(obj.mesh.vertices).max() <= 1.0 + 1e-6  # re-centred: small float32
     np.testing.assert_allclose(obj.transform[:3, 3], [1e6 + 0.25, 2e6, -3e6], atol=1e-9)
