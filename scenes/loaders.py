@@ -210,9 +210,13 @@ def load_asset(path, *, up: str = "auto", units=None, fit_size: float | None = N
     base = name if name is not None else path.stem
     names = _unique_names(base, [p.name for p in parts])
     objects = []
-    for p, obj_name in zip(parts, names):
+    layers = decal_layers(parts)
+    if any(layers) and notes is not None:
+        notes.append(f"{path.name}: {sum(1 for x in layers if x)} part(s) lie flat on larger ones and are drawn as "
+                     "decals over them (no z-fighting)")
+    for p, obj_name, layer in zip(parts, names, layers):
         try:
-            objects.append(_to_object(p, obj_name))
+            objects.append(_to_object(p, obj_name, layer))
         except SceneError as exc:
             raise SceneError(f"{path}: part {p.name!r}: {exc}") from None
     return objects
@@ -511,7 +515,51 @@ def _clean(part: _Part) -> bool:
     return True
 
 
-def _to_object(part: _Part, name: str) -> SceneObject:
+def decal_layers(parts, tolerance: float = 1e-4) -> list[int]:
+    """Per part, its decal layer: 0, or one more than the highest layer of the larger parts it
+    lies flat on (a flat part whose plane holds triangles of a larger part overlapping it,
+    within ``tolerance`` of the asset's size). Coplanar surfaces of different materials --
+    the lines painted on a pitch -- would otherwise z-fight; the renderer draws each layer a
+    little in front of the ones below (a polygon offset, not a move in space)."""
+    lo, hi = _union_bounds(parts)
+    tol = tolerance * max(float(np.linalg.norm(hi - lo)), 1e-9)
+    planes = []                # per part: (normal, offset) if it is flat, else None
+    areas = []
+    for p in parts:
+        tri = p.vertices[p.faces]
+        cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        areas.append(0.5 * float(np.linalg.norm(cross, axis=1).sum()))
+        n = cross.sum(axis=0)
+        plane = None
+        if np.linalg.norm(n) > 0:
+            n = n / np.linalg.norm(n)
+            d = p.vertices @ n
+            if d.max() - d.min() <= tol:
+                plane = (n, float(d.mean()))
+        planes.append(plane)
+    layers = [0] * len(parts)
+    order = sorted(range(len(parts)), key=lambda i: -areas[i])    # bases before what lies on them
+    for rank, i in enumerate(order):
+        if planes[i] is None:
+            continue
+        n, d = planes[i]
+        a_lo, a_hi = parts[i].vertices.min(0) - tol, parts[i].vertices.max(0) + tol
+        for j in order[:rank]:
+            other = parts[j]
+            if np.any(other.vertices.max(0) < a_lo) or np.any(other.vertices.min(0) > a_hi):
+                continue
+            tri = other.vertices[other.faces]
+            on_plane = np.all(np.abs(tri @ n - d) <= tol, axis=1)
+            if not on_plane.any():
+                continue
+            t = tri[on_plane]
+            overlap = np.all(t.max(axis=1) >= a_lo, axis=1) & np.all(t.min(axis=1) <= a_hi, axis=1)
+            if overlap.any():
+                layers[i] = max(layers[i], layers[j] + 1)
+    return layers
+
+
+def _to_object(part: _Part, name: str, layer: int = 0) -> SceneObject:
     lo, hi = part.vertices.min(0), part.vertices.max(0)
     centre = (lo + hi) / 2
     transform = np.eye(4)
@@ -519,7 +567,7 @@ def _to_object(part: _Part, name: str) -> SceneObject:
     mesh = Mesh((part.vertices - centre).astype(np.float32), part.faces.astype(np.uint32),
                 normals=None if part.normals is None else part.normals.astype(np.float32),
                 uvs=part.uvs, colors=part.colors)
-    return SceneObject(name, mesh, part.material, transform)
+    return SceneObject(name, mesh, part.material, transform, layer=layer)
 
 
 def _union_bounds(parts) -> tuple[np.ndarray, np.ndarray]:

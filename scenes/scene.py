@@ -151,6 +151,9 @@ class SceneObject:
     material: Material = field(default_factory=Material)
     transform: np.ndarray = field(default_factory=lambda: np.eye(4))
     animation: Animation | None = None
+    #: Decal layer: drawn over coplanar surfaces of lower layers (a road marking on its road),
+    #: where equal depths would otherwise z-fight. See scenes.loaders.decal_layers.
+    layer: int = 0
 
     def __post_init__(self):
         t = np.asarray(self.transform, dtype=np.float64)

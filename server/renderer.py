@@ -31,6 +31,8 @@ DEFAULT_PROJECTION = "vertex"
 #: Largest angle one rasterised edge may span in the wide-angle projection. At 1024 px over
 #: 180 degrees a 6 degree chord bends by 0.08 degrees, under half a pixel.
 MAX_EDGE_ANGLE_DEG = 6.0
+#: Depth-buffer units a decal layer is drawn in front of the layer below (polygon offset).
+DECAL_OFFSET_UNITS = 4.0
 
 GL_CLIP_DISTANCE0 = 0x3000  # moderngl has no name for it; see moderngl issue #620
 _VERTEX_FORMAT = "3f 3f 2f 4f1"
@@ -466,7 +468,11 @@ class Renderer:
                 prog[name].write(np.ascontiguousarray(value, dtype=np.float32).tobytes()) \
                     if isinstance(value, np.ndarray) else setattr(prog[name], "value", value)
         members = set(prog)  # the compiler drops uniforms a shader does not use
+        layer = 0
         for g in self.objects:
+            if g.obj.layer != layer:   # decals: in front of the coplanar surfaces they lie on
+                layer = g.obj.layer
+                self.ctx.polygon_offset = (0.0, -DECAL_OFFSET_UNITS * layer)
             model = g.obj.world_matrix(t)
             mv = view @ model
             moving = motion_dt is not None and g.obj.is_dynamic
@@ -493,6 +499,8 @@ class Renderer:
                 g.original.vaos[prog_name].render(self.ctx.PATCHES)
             else:
                 g.original.vaos["perspective"].render(self.ctx.TRIANGLES)
+        if layer:
+            self.ctx.polygon_offset = (0.0, 0.0)
 
     def _begin(self, target: RenderTarget) -> None:
         ctx = self.ctx

@@ -123,3 +123,35 @@ def test_asset_options_in_a_spec_are_checked(tmp_path):
     with pytest.raises(SceneError, match="--up applies to an asset file, not to 'room'"):
         with_up("room", "z")
     assert load_scene(f"{path}#up=y,units=cm").bounds()[1][1] == pytest.approx(0.4)   # y up to 40 cm
+
+
+def test_markings_on_a_pitch_are_decals_and_show(tmp_path):
+    """The line lies flat on the pitch: it becomes a decal layer, and rendered from above it
+    shows its own colour over the whole of its width instead of z-fighting with the pitch."""
+    (tmp_path / "stadium.mtl").write_text("newmtl grass\nKd 0.1 0.6 0.1\nnewmtl paint\nKd 1 1 1\n"
+                                          "newmtl concrete\nKd 0.5 0.5 0.5\n")
+    text = z_up_stadium_obj().replace("o pitch\n", "mtllib stadium.mtl\no pitch\nusemtl grass\n")
+    # 'zline': drawn after the pitch (objects load in name order), where a tie in depth loses
+    text = text.replace("o stand\n", "o stand\nusemtl concrete\n").replace("o line\n", "o zline\nusemtl paint\n")
+    text = text.replace("v -0.1 -30 0", "v -2 -30 0").replace("v 0.1 -30 0", "v 2 -30 0")
+    text = text.replace("v 0.1 30 0", "v 2 30 0").replace("v -0.1 30 0", "v -2 30 0")
+    path = tmp_path / "stadium.obj"
+    path.write_text(text)
+    scene = load_scene(str(path))
+    layers = {o.name.split("/")[-1].split("_")[0]: o.layer for o in scene.objects}   # stadium/line_paint
+    assert layers == {"pitch": 0, "stand": 0, "zline": 1}, layers
+    assert any("drawn as decals" in n for n in scene.notes)
+    from pibr.bench.groundtruth import GroundTruth
+    from pibr.protocol.pose import Pose
+
+    pytest.importorskip("moderngl")
+    gt = GroundTruth(scene, 64, 64, 20.0)
+    try:
+        above = Pose.look_at([0.0, 60.0, 0.01], [0.0, 0.0, 0.0], up=(0.0, 0.0, -1.0))
+        image = gt.render(above, 0.0)
+    finally:
+        gt.close()
+    centre = image[20:44, 30:34].reshape(-1, 3).astype(int)     # inside the 4 m wide line
+    # white paint, not grass (without the decal offset: 20 % white, the rest z-fights away)
+    assert (centre.min(axis=1) > 150).mean() > 0.99
+
