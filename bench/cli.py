@@ -244,6 +244,16 @@ def register(sub) -> None:
     pa.add_argument("--out", default="out/bench")
     pa.set_defaults(func=cmd_bench_pareto)
 
+    sp = bs.add_parser("split", help="a one-mesh level, whole against cut into pieces: LoD, client ms, DSSIM",
+                       description="Generates a one-mesh atrium (167k triangles) and serves it whole and cut into "
+                                   "pieces (scenes/split.py): LoD build time, proxy's client ms and quality on "
+                                   "synthetic walks inside it. Writes split.json.")
+    sp.add_argument("--duration", type=_positive, default=6.0, help="seconds of each synthetic trace (default 6)")
+    sp.add_argument("--stride", type=_positive_int, default=6, help="score every Nth displayed tick (default 6)")
+    sp.add_argument("--size", type=_size, default=(960, 540), metavar="WxH")
+    sp.add_argument("--out", default="out/bench")
+    sp.set_defaults(func=cmd_bench_split)
+
     lo = bs.add_parser("lod", help="encaging level-of-detail proxies: triangles, enclosure, time per object",
                        description="Generate (or read from the cache) every object's encaging proxy and report the "
                                    "triangle counts, the fraction of original vertices enclosed and the time taken.")
@@ -273,6 +283,15 @@ def register(sub) -> None:
     o.add_argument("--size", type=_size, default=(192, 108), metavar="WxH")
     o.add_argument("--out", default="out/bench")
     o.set_defaults(func=cmd_bench_offset)
+
+
+def cmd_bench_split(args) -> int:
+    from .split_bench import print_split_table, run_split_bench
+
+    r = run_split_bench(out_dir=args.out, duration_s=args.duration, stride=args.stride, out_size=args.size)
+    print_split_table(r)
+    print(f"written: {args.out}/split.json")
+    return 0
 
 
 def cmd_bench_pareto(args) -> int:

@@ -99,7 +99,7 @@ _TOP_KEYS = ("name", "description", "units", "up", "near", "far", "sky_color", "
              "extra_view", "extra_view_offset", "view_region", "lights", "objects")
 _COMMON_OBJECT_KEYS = ("name", "position", "rotation_deg", "quaternion", "scale", "color", "texture",
                        "animation")
-_ASSET_KEYS = ("asset", "units", "up", "fit_size", "center")
+_ASSET_KEYS = ("asset", "units", "up", "fit_size", "center", "split")
 PRIMITIVES = {  # kind -> parameters it accepts (besides the common ones)
     "box": ("size",),
     "sphere": ("radius", "segments"),
@@ -412,7 +412,7 @@ class _Builder:
                                     base_color=color if color is not None else material.base_color,
                                     texture=texture if texture is not None and p.mesh.uvs is not None
                                     else material.texture)
-            objects.append(SceneObject(p.name, p.mesh, material, placement @ p.transform, animation))
+            objects.append(SceneObject(p.name, p.mesh, material, placement @ p.transform, animation, layer=p.layer))
         return objects
 
     def asset(self, t: dict, key: str, path: Path, name: str, scale: np.ndarray) -> list[SceneObject]:
@@ -422,9 +422,14 @@ class _Builder:
         up = self.choice(t["up"], f"{key}.up", ("y", "z", "auto")) if "up" in t else self.default_up
         fit = self.number(t["fit_size"], f"{key}.fit_size", positive=True) if "fit_size" in t else None
         center = self.choice(t["center"], f"{key}.center", ("bounds", "base")) if "center" in t else None
+        split = None
+        if "split" in t:
+            split = t["split"]
+            if isinstance(split, bool) or not isinstance(split, int) or split < 0:
+                self.fail(f"{key}.split", f"expected a whole number of triangles (0: none), got {_show(split)}")
         try:
             return load_asset(path, up=up, units=units, fit_size=fit, center=center, scale=scale, name=name,
-                          notes=self.notes)
+                              notes=self.notes, split=split)
         except SceneError as exc:
             self.fail(f"{key}.asset", str(exc))
 

@@ -137,7 +137,7 @@ class _Part:
 
 def load_asset(path, *, up: str = "auto", units=None, fit_size: float | None = None,
                center: str | None = None, scale=1.0, name: str | None = None,
-               notes: list | None = None) -> list[SceneObject]:
+               notes: list | None = None, split: int | None = None) -> list[SceneObject]:
     """Load an asset file as a list of static scene objects, in metres and +Y up.
 
     up       : 'y', 'z' (converted to +Y up) or 'auto' (the default; glTF: 'y' by spec; other
@@ -149,6 +149,9 @@ def load_asset(path, *, up: str = "auto", units=None, fit_size: float | None = N
     scale    : extra scale factor, a number or (3,) per axis, positive, applied last.
     name     : object name prefix (default: the file stem); parts are named ``name/part``.
     notes    : a list to which what was decided or fixed is appended (the up axis and why).
+    split    : cut meshes of more triangles than this into spatially coherent pieces
+               (scenes/split.py; default :data:`~pibr.scenes.split.DEFAULT_PIECE_TRIANGLES`,
+               0 keeps every mesh whole).
 
     Each object's ``transform`` is the translation to its bounding-box centre; rotations,
     scales and node transforms are baked into the (float32, small) vertices.
@@ -209,8 +212,27 @@ def load_asset(path, *, up: str = "auto", units=None, fit_size: float | None = N
 
     base = name if name is not None else path.stem
     names = _unique_names(base, [p.name for p in parts])
+    from .split import DEFAULT_PIECE_TRIANGLES, split_arrays
+
+    split = DEFAULT_PIECE_TRIANGLES if split is None else split
+    if isinstance(split, bool) or not isinstance(split, int) or split < 0:
+        raise SceneError(f"{path}: split must be a whole number of triangles (0: none), got {split!r}")
     objects = []
     layers = decal_layers(parts)
+    if split:
+        pieces_parts, pieces_names, pieces_layers, cut = [], [], [], []
+        for p, obj_name, layer in zip(parts, names, layers):
+            pieces = split_arrays(p.vertices, p.faces, {"normals": p.normals, "uvs": p.uvs, "colors": p.colors},
+                                  split)
+            if len(pieces) > 1:
+                cut.append(f"{obj_name} ({len(p.faces)} triangles) into {len(pieces)}")
+            for k, (v, f, a) in enumerate(pieces):
+                pieces_parts.append(_Part(p.name, v, f, a["normals"], a["uvs"], a["colors"], p.material))
+                pieces_names.append(obj_name if len(pieces) == 1 else f"{obj_name}.{k}")
+                pieces_layers.append(layer)
+        if cut and notes is not None:
+            notes.append(f"{path.name}: cut into pieces of at most {split} triangles: " + "; ".join(cut))
+        parts, names, layers = pieces_parts, pieces_names, pieces_layers
     if any(layers) and notes is not None:
         notes.append(f"{path.name}: {sum(1 for x in layers if x)} part(s) lie flat on larger ones and are drawn as "
                      "decals over them (no z-fighting)")

@@ -179,11 +179,13 @@ def cached_lod(mesh: Mesh, resolution: int = 128, target_fraction: float = 0.005
 def lods_for_scene(scene, resolution: int = 128, target_fraction: float = 0.005, progress: bool = True,
                    min_triangles: int = 12, tolerance: float | None = None,
                    max_iterations: int = DEFAULT_MAX_ITERATIONS,
-                   directory: Path | str | None = None) -> dict[str, LodResult]:
+                   directory: Path | str | None = None, workers: int | None = None) -> dict[str, LodResult]:
     """LoDs of every object of ``scene``: object name -> :class:`~pibr.scenes.lod.LodResult`.
 
     Cached meshes are read, never regenerated; the others are generated (each distinct mesh once,
-    however many objects share it) under a tqdm progress bar on stderr when ``progress``.
+    however many objects share it), several at a time in worker processes (``workers``, default
+    one per core) when there are several to make, under a tqdm progress bar on stderr (one
+    step per mesh, its name shown) when ``progress``.
     """
     from tqdm import tqdm
 
@@ -195,18 +197,42 @@ def lods_for_scene(scene, resolution: int = 128, target_fraction: float = 0.005,
         by_key.setdefault(cache_key(obj.mesh, **params), []).append(obj)
     todo = [k for k in by_key if not (base / f"{k}.npz").is_file()]
     results: dict[str, LodResult] = {}
+    workers = min(os.cpu_count() or 1, len(todo)) if workers is None else min(workers, len(todo))
     with tqdm(total=len(todo), desc=f"LoD proxies ({scene.name})", unit="mesh", file=sys.stderr,
               disable=not progress or not todo, leave=False) as bar:
+        if workers > 1:
+            results.update(_generate_in_parallel(by_key, todo, workers, base, params, bar))
         for key, objs in by_key.items():
+            if key in results:
+                continue
             name = objs[0].name
             generating = key in todo
 
             def stage(text: str, name=name) -> None:
                 bar.set_postfix_str(f"{name}: {text}", refresh=True)
 
-            result = cached_lod(objs[0].mesh, progress=stage if generating else None, directory=base, **params)
-            for obj in objs:
-                results[obj.name] = result
+            results[key] = cached_lod(objs[0].mesh, progress=stage if generating else None, directory=base, **params)
             if generating:
                 bar.update(1)
-    return {obj.name: results[obj.name] for obj in scene.objects}
+    by_name = {obj.name: results[key] for key, objs in by_key.items() for obj in objs}
+    return {obj.name: by_name[obj.name] for obj in scene.objects}
+
+
+def _generate_in_parallel(by_key: dict, todo: list, workers: int, directory: Path, params: dict, bar) -> dict:
+    """Generate the meshes of ``todo`` (cache keys) in ``workers`` processes -> key -> LodResult.
+    Each worker writes its cache file; the counters of this process count what they made."""
+    import concurrent.futures
+    import multiprocessing
+
+    out = {}
+    context = multiprocessing.get_context("spawn")   # no fork of a process that may hold GL or threads
+    with concurrent.futures.ProcessPoolExecutor(workers, mp_context=context) as pool:
+        futures = {pool.submit(cached_lod, by_key[k][0].mesh, directory=directory, **params): k for k in todo}
+        for future in concurrent.futures.as_completed(futures):
+            key = futures[future]
+            out[key] = future.result()
+            _count("misses")
+            _count("generated")
+            bar.set_postfix_str(f"{by_key[key][0].name}: done", refresh=True)
+            bar.update(1)
+    return out

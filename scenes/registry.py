@@ -32,7 +32,7 @@ def available_scenes() -> dict[str, str]:
 
 
 #: Options an asset file's spec may carry after a '#': ``statue.obj#up=z,units=cm``.
-ASSET_OPTIONS = {"up": ("y", "z", "auto"), "units": None}
+ASSET_OPTIONS = {"up": ("y", "z", "auto"), "units": None, "split": None}
 
 
 def asset_spec(path: str, **options) -> str:
@@ -63,7 +63,13 @@ def _split_options(spec: str) -> tuple[str, dict]:
         key, eq, value = item.partition("=")
         key, value = key.strip(), value.strip()
         if not eq or key not in ASSET_OPTIONS:
-            raise SceneError(f"scene {spec!r}: unknown asset option {item!r}; expected up=y|z|auto or units=NAME")
+            raise SceneError(f"scene {spec!r}: unknown asset option {item!r}; expected up=y|z|auto, units=NAME "
+                             "or split=TRIANGLES")
+        if key == "split":
+            if not value.isdigit():
+                raise SceneError(f"scene {spec!r}: split must be a whole number of triangles (0: none), got {value!r}")
+            options[key] = int(value)
+            continue
         choices = ASSET_OPTIONS[key]
         if choices is not None and value not in choices:
             raise SceneError(f"scene {spec!r}: {key} must be one of {', '.join(choices)}, got {value!r}")
