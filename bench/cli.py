@@ -27,6 +27,10 @@ def _number(text: str, kind=float) -> float:
     return v
 
 
+def _floats(text: str) -> tuple:
+    return tuple(_positive(part) for part in text.split(",") if part.strip())
+
+
 def _sizes(text: str) -> tuple:
     return tuple(_size(part) for part in text.split(",") if part.strip())
 
@@ -195,14 +199,22 @@ def register(sub) -> None:
                       description="Quality of the client methods at the given latency on real traces (in one "
                                   "process, on the virtual clock's schedule), the LoD trade, and proxy IBR's ms per "
                                   "frame next to a full-screen pass with the same texture lookups.")
-    i.add_argument("--scene", default="room")
+    i.add_argument("--scene", default="room", help="scene spec (default room)")
     i.add_argument("--windows", type=_windows, default="evaluation", help=_WINDOWS_HELP)
-    i.add_argument("--latency-ms", type=_non_negative, default=128.0)
-    i.add_argument("--rate", type=_positive, default=30.0)
+    i.add_argument("--latency-ms", type=_non_negative, default=128.0, help="round trip (default 128)")
+    i.add_argument("--rate", type=_positive, default=30.0, help="display rate Hz (default 30)")
     i.add_argument("--stride", type=_positive_int, default=2, help="score every Nth displayed tick (default 2)")
-    i.add_argument("--size", type=_size, default=(960, 540), metavar="WxH")
-    i.add_argument("--view-size", type=_size, default=(1024, 1024), metavar="WxH")
-    i.add_argument("--out", default="out/bench")
+    i.add_argument("--size", type=_size, default=(960, 540), metavar="WxH", help="output size (default 960x540)")
+    i.add_argument("--view-size", type=_size, default=(1024, 1024), metavar="WxH",
+                   help="primary view size (default 1024x1024)")
+    i.add_argument("--lod-targets", type=_floats, default=(), metavar="PX,...",
+                   help="also score proxy at these LoD pixel targets, e.g. 2,16 (default: none)")
+    i.add_argument("--lod-levels", type=_names, default=(), metavar="LEVEL,...",
+                   help="also score proxy with every object at this level: original, proxy, box (default: none)")
+    i.add_argument("--speed-sizes", type=_sizes, default=((960, 540), (1280, 720)), metavar="WxH,...",
+                   help="output sizes of the speed comparison with the floor (default 960x540,1280x720; '' for none)")
+    i.add_argument("--speed-frames", type=_positive_int, default=20, help="frames timed per size (default 20)")
+    i.add_argument("--out", default="out/bench", help="output directory (default out/bench)")
     i.set_defaults(func=cmd_bench_ibr)
 
     cd = bs.add_parser("codec", help="depth transports: edge codec variants, zstd, 8-bit in H.264",
@@ -261,6 +273,8 @@ def register(sub) -> None:
     lo.add_argument("--asset", type=_names, default=None, help="asset files to measure as well (default: the shipped real asset)")
     lo.add_argument("--resolution", type=int, default=128, help="voxels along an object's longest side")
     lo.add_argument("--fraction", type=_fraction, default=0.005, help="proxy triangles / original triangles")
+    lo.add_argument("--no-cache", action="store_true",
+                    help="generate every proxy afresh (timing this machine) instead of reading the LoD cache")
     lo.add_argument("--out", default="out/bench")
     lo.set_defaults(func=cmd_bench_lod)
 
@@ -362,10 +376,17 @@ def cmd_bench_coverage(args) -> int:
 
 
 def cmd_bench_ibr(args) -> int:
+    from pibr.protocol.errors import ConfigError
+
     from .ibr_bench import print_ibr_tables, run_ibr_bench
 
+    bad = [lv for lv in args.lod_levels if lv not in ("original", "proxy", "box")]
+    if bad:
+        raise ConfigError(f"--lod-levels: unknown level(s) {', '.join(bad)}; expected original, proxy, box")
     r = run_ibr_bench(scene_spec=args.scene, windows=args.windows, latency_ms=args.latency_ms, rate_hz=args.rate,
-                      view_size=args.view_size, out_size=args.size, stride=args.stride, out_dir=args.out)
+                      view_size=args.view_size, out_size=args.size, stride=args.stride, lod_targets=args.lod_targets,
+                      lod_levels=args.lod_levels, speed_sizes=args.speed_sizes, speed_frames=args.speed_frames,
+                      out_dir=args.out)
     print_ibr_tables(r)
     print(f"written: {args.out}/ibr.json")
     return 0
@@ -386,7 +407,7 @@ def cmd_bench_lod(args) -> int:
     from .lod_bench import print_lod_table, run_lod_bench
 
     r = run_lod_bench(scene_specs=args.scene, assets=args.asset, resolution=args.resolution,
-                      target_fraction=args.fraction, out_dir=args.out)
+                      target_fraction=args.fraction, out_dir=args.out, use_cache=not args.no_cache)
     print_lod_table(r)
     print(f"written: {args.out}/lod.json")
     return 0

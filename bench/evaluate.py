@@ -31,7 +31,7 @@ import numpy as np
 from pibr.protocol.errors import ConfigError
 from pibr.protocol.pose import Pose
 
-from .metrics import error_image, frame_metrics, pixels_per_degree
+from .metrics import error_image, frame_metrics, nearly_uniform, pixels_per_degree
 from .results import write_result
 
 log = logging.getLogger(__name__)
@@ -104,6 +104,7 @@ def evaluate_run(run_dir: str, scene_spec: str | None = None, flip_every: int = 
     transmitted = TransmittedViews(scene, info["session"], (width, height), fov)
     uses_extra = {m: bool((info.get("methods") or {}).get(m, {}).get("uses_extra_view", False)) for m in methods}
     geometric = []   # per tick: {"primary": fraction, "both": fraction}
+    uniform = 0      # ticks whose ground truth is nearly one colour
     # 'spawn', not fork: FLIP and SSIM use thread pools (OpenMP) that a forked child can find
     # locked forever if the parent used them before.
     pool = (concurrent.futures.ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"))
@@ -131,6 +132,7 @@ def evaluate_run(run_dir: str, scene_spec: str | None = None, flip_every: int = 
             rec = records[methods[0]][i]
             pose = Pose.make([rec["px"], rec["py"], rec["pz"]], [rec["qw"], rec["qx"], rec["qy"], rec["qz"]])
             ref = gt.render(pose, rec["scene_t"])
+            uniform += nearly_uniform(ref)
             geometric.append(transmitted.holes(pose, rec))
             rows = []
             for m in methods:
@@ -191,12 +193,17 @@ def evaluate_run(run_dir: str, scene_spec: str | None = None, flip_every: int = 
     out = {"run": os.path.abspath(run_dir), "scene": scene.name, "trace": info.get("trace"),
            "clock": client["clock"], "output": {"width": width, "height": height, "fov_deg": fov,
                                                 "rate_hz": client["rate_hz"], "pixels_per_degree": ppd},
-           "flip_every": flip_every, "methods": summary}
+           "flip_every": flip_every, "nearly_uniform_frames": uniform, "methods": summary}
+    if uniform:
+        log.warning("%s: %d of %d ground-truth frames are nearly one colour (sky or a wall filling the view); "
+                    "every method scores well on them", run_dir, uniform, n)
     write_result(run_dir, "metrics.json", out)
     with open(os.path.join(run_dir, "metrics_frames.csv"), "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=list(rows_out[0].keys()))
         w.writeheader()
-        w.writerows(rows_out)
+        # A metric not computed on a frame (FLIP on every Nth) is an empty cell, not "nan".
+        w.writerows({k: ("" if isinstance(v, float) and math.isnan(v) else v) for k, v in row.items()}
+                    for row in rows_out)
     if plot:
         from .plots import plot_quality_over_time
 
@@ -262,4 +269,9 @@ def summary_table(metrics: dict) -> str:
     widths = [max(len(c[0]), *(len(r[i]) for r in rows)) for i, c in enumerate(cols)]
     line = "  ".join(c[0].rjust(w) for c, w in zip(cols, widths))
     body = ["  ".join(v.rjust(w) for v, w in zip(r, widths)) for r in rows]
+    uniform = metrics.get("nearly_uniform_frames", 0)
+    if uniform:
+        frames = next(iter(metrics["methods"].values()))["frames"]
+        body.append(f"warning: {uniform} of {frames} ground-truth frames are nearly one colour (sky or a wall "
+                    "filling the view); every method scores well on them")
     return "\n".join([line, "-" * len(line), *body])

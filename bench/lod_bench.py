@@ -1,8 +1,9 @@
 """``pibr bench lod``: encaging LoD proxies (Reinert et al. 2016) per object -- size, enclosure, time.
 
 For every object of each scene (built-in names or asset files, loaded with
-:func:`pibr.scenes.registry.load_scene`) the proxy is generated afresh (``use_cache=False``, the
-default, so the seconds are this machine's) or read through the LoD cache, and reported with
+:func:`pibr.scenes.registry.load_scene`) the proxy is read through the LoD cache (generated and
+stored there if missing; the seconds are those of its generation) or, with ``use_cache=False``
+(``--no-cache``), generated afresh on this machine, and reported with
 its triangle counts, kind (simplified / box), the enclosed fraction of the original vertices
 and the largest distance of one outside the proxy, measured on the proxy itself.
 """
@@ -26,7 +27,7 @@ def default_assets() -> tuple[str, ...]:
 
 
 def run_lod_bench(scene_specs=("room",), assets=None, resolution=128, target_fraction=0.005,
-                  out_dir="out/bench", use_cache=False, min_triangles=12, progress=None) -> dict:
+                  out_dir="out/bench", use_cache=True, min_triangles=12, progress=None) -> dict:
     """Generate (or read cached) LoDs of every object; write ``out_dir/lod.json``; return the result.
 
     assets   : asset file paths (None: :func:`default_assets`)
@@ -96,9 +97,9 @@ def _totals(rows: list[dict]) -> dict:
 
 def print_lod_table(result: dict) -> None:
     """Per object and per scene, as a fixed-width table on stdout."""
-    print(f"pibr bench lod: resolution {result['resolution']}, target {100 * result['target_fraction']:g} % "
-          f"of the original triangles (at least {result['min_triangles']}), "
-          f"{'cached' if result['cached'] else 'generated'}")
+    print(f"pibr bench lod: requested resolution {result['resolution']}, target "
+          f"{100 * result['target_fraction']:g} % of the original triangles (at least {result['min_triangles']}), "
+          f"{'through the LoD cache' if result['cached'] else 'generated afresh (--no-cache)'}")
     head = (f"{'object':<28} {'kind':<10} {'tris':>7} {'proxy':>6} {'enclosed':>9} {'max out m':>10} "
             f"{'vol/box':>7} {'res':>4} {'s':>7}")
     for s in result["scenes"]:
@@ -111,6 +112,8 @@ def print_lod_table(result: dict) -> None:
             print(f"{r['object'][:28]:<28} {r['kind']:<10} {r['triangles_original']:>7} {r['triangles_proxy']:>6} "
                   f"{r['enclosed_fraction']:>9.4f} {r['max_outside_distance']:>10.2g} {ratio:>7} {res:>4} "
                   f"{r['seconds']:>7.2f}")
+            if r["resolution_used"] not in (None, result["resolution"]) and r["note"]:
+                print(f"{'':<28}   resolution {r['resolution_used']}, not {result['resolution']}: {r['note']}")
         _print_totals(s["totals"], head)
     if len(result["scenes"]) > 1:
         print("\nall scenes")

@@ -60,5 +60,12 @@ def test_server_relay_client_processes(tmp_path):
     assert rot["dssim_mean"] < 0.6 * none["dssim_mean"]
     assert rot["psnr_mean"] > none["psnr_mean"] + 3
     assert rot["flip_mean"] < none["flip_mean"]
+    assert metrics["nearly_uniform_frames"] == 0
+    import csv
+
+    with open(os.path.join(out, "metrics_frames.csv")) as f:
+        rows = [r for r in csv.DictReader(f) if r["method"] == "rotation"]
+    assert [r["flip"] == "" for r in rows] == [i % 6 != 0 for i in range(60)]   # not computed: empty, not nan
+    assert all(0 < float(r["flip"]) < 1 for r in rows[::6])
     for name in ("quality.png", "side_by_side.mp4", "metrics_frames.csv"):
         assert os.path.getsize(os.path.join(out, name)) > 1000

@@ -51,3 +51,14 @@ def test_evaluate_needs_a_recording(tmp_path):
 
     with pytest.raises(ConfigError, match="no session.json"):
         evaluate_run(str(tmp_path))
+
+
+def test_summary_warns_of_frames_that_say_little():
+    from pibr.bench.evaluate import summary_table
+
+    row = {"psnr_mean": 49.9, "ssim_mean": 1.0, "dssim_mean": 0.0, "flip_mean": 0.0, "geometric_holes_mean": 0.0,
+           "hole_fraction_mean": 0.0, "client_ms_median": 3.0, "age_ms_mean": 200.0, "frames": 30}
+    quiet = summary_table({"methods": {"none": row}, "nearly_uniform_frames": 0})
+    assert "warning" not in quiet
+    loud = summary_table({"methods": {"none": row}, "nearly_uniform_frames": 28})
+    assert "warning: 28 of 30 ground-truth frames are nearly one colour" in loud

@@ -293,11 +293,17 @@ def test_cache_dir_default(monkeypatch):
 
 # ----------------------------------------------------------------------------- benchmark
 
-def test_lod_bench_writes_json_and_table(tmp_path, capsys):
+def test_lod_bench_writes_json_and_table(tmp_path, capsys, cache_dir):
     from pibr.bench.lod_bench import print_lod_table, run_lod_bench
 
     result = run_lod_bench(scene_specs=("sphere",), assets=(str(SPOT),), resolution=32, target_fraction=0.005,
                            out_dir=str(tmp_path))
+    # it goes through the LoD cache: a second run generates nothing and reads the same proxies
+    generated = lod_cache.cache_stats()["generated"]
+    again = run_lod_bench(scene_specs=("sphere",), assets=(str(SPOT),), resolution=32, target_fraction=0.005,
+                          out_dir=str(tmp_path))
+    assert lod_cache.cache_stats()["generated"] == generated and again["totals"] == result["totals"]
+    assert result["cached"] is True
     saved = json.loads((tmp_path / "lod.json").read_text())
     assert saved["totals"] == result["totals"]
     assert [s["scene"] for s in result["scenes"]] == ["sphere", "spot_triangulated"]
