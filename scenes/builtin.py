@@ -695,6 +695,64 @@ def build_empty() -> Scene:
                  viewer_origin=VIEWER_ORIGIN, source="builtin")
 
 
+#: The courtyard's half width (metres) to its colonnades, and their height.
+COURTYARD_HALF = 20.0
+COURTYARD_COLUMN_HEIGHT = 4.5
+
+
+def build_courtyard() -> Scene:
+    """A large open-air courtyard under open sky: paving, four colonnades 20 m out with walls
+    behind them, a fountain, a statue on a plinth, planters. Most of every view is sky -- the
+    scene for measuring what a dual view does where there is little geometry."""
+    b = _SceneBuilder()
+    half, h = COURTYARD_HALF, COURTYARD_COLUMN_HEIGHT
+    paving = b.material("paving", (0.85, 0.82, 0.76), "brick")
+    b.add("paving", prim.grid_plane(2 * half + 6, 2 * half + 6, 2.0, uv_scale=2.0), paving)
+    marble = b.material("column_marble", (0.95, 0.94, 0.9), "marble")
+    wall = b.material("courtyard_wall", (0.9, 0.85, 0.78), "plaster")
+    for side, (axis, sign) in enumerate(((0, 1), (0, -1), (2, 1), (2, -1))):
+        columns = []
+        for k in range(-6, 7):
+            pos = [0.0, 0.0, 0.0]
+            pos[axis] = sign * half
+            pos[2 - axis] = 3.0 * k
+            columns.append((prim.cylinder(0.3, h, 24, caps=False, uv_scale=1.0, height_segments=6),
+                            prim.translation(*pos)))
+        b.add(f"colonnade_{side}", prim.merge(columns), marble)
+        beam = [0.0, h + 0.3, 0.0]
+        beam[axis] = sign * half
+        size = [2 * half + 1.0, 0.6, 2 * half + 1.0]
+        size[axis] = 1.0
+        b.add(f"entablature_{side}", prim.box(tuple(size), tuple(beam), 1.0), marble)
+        back = [0.0, (h + 0.6) / 2, 0.0]
+        back[axis] = sign * (half + 2.5)
+        size = [2 * half + 6.0, h + 0.6, 2 * half + 6.0]
+        size[axis] = 0.4
+        b.add(f"wall_{side}", prim.box(tuple(size), tuple(back), _PLASTER_M, 1.0), wall)
+    stone = b.material("fountain_stone", (0.8, 0.8, 0.82), "marble")
+    b.add("fountain_basin", prim.torus(1.6, 0.25, 48, 12), stone, prim.translation(0.0, 0.35, -7.0))
+    b.add("fountain_column", prim.cylinder(0.25, 1.6, 24), stone, prim.translation(0.0, 0.0, -7.0))
+    b.add("statue_plinth", prim.box((1.0, 1.2, 1.0), (0.0, 0.6, 0.0), 1.0), stone, prim.translation(5.0, 0.0, -4.0))
+    b.add("statue", prim.torus_knot(0.45, 0.07), b.material("statue_bronze", (0.55, 0.4, 0.25)),
+          prim.translation(5.0, 1.75, -4.0))
+    planter = b.material("planter", (0.45, 0.5, 0.3), "grass")
+    for k, (x, z) in enumerate(((-5.0, -3.0), (-5.0, 3.5), (6.0, 4.0))):
+        b.add(f"planter_{k}", prim.box((1.6, 0.7, 1.6), (x, 0.35, z), 1.0), planter)
+    return Scene(
+        name="courtyard",
+        objects=b.objects,
+        lights=[Light("ambient", color=(0.92, 0.95, 1.0), intensity=0.35),
+                Light("directional", color=(1.0, 0.95, 0.85), intensity=0.85, direction=(0.4, -0.8, -0.45))],
+        description=BUILTIN_SCENES["courtyard"][0],
+        viewer_origin=VIEWER_ORIGIN,
+        near=0.1,
+        far=1000.0,
+        sky_color=(0.55, 0.72, 0.93),
+        extra_view=True,
+        source="builtin",
+    )
+
+
 #: name -> (one-line description, builder). ``room`` is the default scene.
 BUILTIN_SCENES: dict[str, tuple[str, Callable[[], Scene]]] = {
     "room": ("Exhibition room around a torus-knot sculpture: pillars, plinths, bookshelves, a railing, "
@@ -702,5 +760,7 @@ BUILTIN_SCENES: dict[str, tuple[str, Callable[[], Scene]]] = {
              build_room),
     "sphere": ("A single test-pattern sphere (radius 0.4 m) 2.6 m in front of the viewer; no extra view needed",
                build_sphere),
+    "courtyard": ("A large open-air courtyard under open sky: colonnades 20 m out, a fountain, a statue, "
+                  "planters; mostly sky (measures dual views where there is little geometry)", build_courtyard),
     "empty": ("No objects: sky only (edge-case tests)", build_empty),
 }

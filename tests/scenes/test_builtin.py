@@ -377,3 +377,19 @@ def test_tiling_textures_wrap_seamlessly(name):
     inner_v = np.abs(np.diff(image, axis=0)).mean()
     seam_v = np.abs(image[0] - image[-1]).mean()
     assert seam_v < 2.5 * inner_v + 2
+
+
+@pytest.mark.gl
+def test_courtyard_is_mostly_sky_with_geometry_all_round():
+    from pibr.bench.coverage import CoverageProbe
+    from pibr.protocol.pose import Pose, quat_from_axis_angle
+
+    scene = BUILTIN_SCENES["courtyard"][1]()
+    probe = CoverageProbe(scene, (128, 128), (160, 90))
+    try:
+        for yaw in (0.0, 1.5, 3.0, 4.5):
+            pose = Pose.make(scene.viewer_origin.p, quat_from_axis_angle([0, 1, 0], yaw))
+            _, sky, _ = probe.display_points(pose, 0.0)
+            assert 0.2 < sky.mean() < 0.6, (yaw, sky.mean())     # sky above colonnades on every side
+    finally:
+        probe.close()
