@@ -30,11 +30,16 @@ void main() {
 
 
 class DirectionWarp(Method):
+    """A full-screen pass sampling the primary view along each output ray (turned by
+    ``u_out_to_src``); subclasses may bring their own fragment shader."""
+
     follow_rotation = True
+    fragment_shader = _FS
 
     def __init__(self, ctx, output, config):
         super().__init__(ctx, output, config)
-        self.prog = ctx.program(vertex_shader=FULLSCREEN_VS, fragment_shader=_FS % {"frame": frame_glsl(config)})
+        self.prog = ctx.program(vertex_shader=FULLSCREEN_VS,
+                                fragment_shader=self.fragment_shader % {"frame": frame_glsl(config)})
         bind_frame_uniforms(self.prog, config)
         self.prog["u_tan_half"].value = output_tan_half(output)
         self.prog["u_out_size"].value = (float(output.width), float(output.height))

@@ -16,8 +16,7 @@ import math
 from pibr.protocol.errors import ConfigError
 from pibr.protocol.pose import Pose
 
-from ..frame_textures import bind_frame_uniforms, frame_glsl, rect_uniform
-from .base import FULLSCREEN_VS, Method, fullscreen_quad, output_tan_half
+from .direction_warp import DirectionWarp
 
 #: Metres. Fitted on the tuning windows (``pibr bench pareto --method rotation,homography
 #: --windows tuning``, room, 128 ms): DSSIM 1 m 0.150, 2 m 0.112, 4 m 0.075, 8 m 0.102,
@@ -45,21 +44,16 @@ void main() {
 """
 
 
-class HomographyWarp(Method):
+class HomographyWarp(DirectionWarp):
     name = "homography"
+    fragment_shader = _FS
 
     def __init__(self, ctx, output, config, plane_distance: float = DEFAULT_PLANE_DISTANCE):
-        super().__init__(ctx, output, config)
         if not (math.isfinite(plane_distance) and plane_distance > 0):
             raise ConfigError(f"homography plane distance must be a positive number of metres, got {plane_distance}")
+        super().__init__(ctx, output, config)
         self.plane_distance = float(plane_distance)
-        self.prog = ctx.program(vertex_shader=FULLSCREEN_VS, fragment_shader=_FS % {"frame": frame_glsl(config)})
-        bind_frame_uniforms(self.prog, config)
-        self.prog["u_tan_half"].value = output_tan_half(output)
-        self.prog["u_out_size"].value = (float(output.width), float(output.height))
-        self.prog["u_color_rect"].value = rect_uniform(config, "primary.color")
         self.prog["u_plane"].value = self.plane_distance
-        self.vbo, self.vao = fullscreen_quad(ctx, self.prog)
 
     def render(self, out_pose: Pose, frame, textures, scene_t: float = 0.0) -> None:
         src = frame.primary_pose
@@ -69,8 +63,3 @@ class HomographyWarp(Method):
         textures.use()
         self.ctx.disable(self.ctx.DEPTH_TEST)
         self.vao.render(self.ctx.TRIANGLE_STRIP)
-
-    def release(self) -> None:
-        self.vao.release()
-        self.vbo.release()
-        self.prog.release()

@@ -29,7 +29,7 @@ from pibr.protocol.pose import Pose
 
 from ..frame_textures import bind_frame_uniforms, frame_glsl
 from .base import Method
-from .view_warp import SKY_FRACTION, VIEW_POINT_GLSL, output_projection, source_views
+from .view_warp import COLOR_FS, SKY_FRACTION, VIEW_POINT_GLSL, output_projection, source_views
 
 #: A triangle is split where max - min distance > DEFAULT_SPLIT * min distance + slack.
 DEFAULT_SPLIT = 0.05
@@ -108,15 +108,6 @@ void main() {
 }
 """
 
-_FS = """
-#version 410
-%(frame)s
-uniform vec4 u_color_rect;
-in vec2 v_uv;
-out vec4 f_color;
-void main() { f_color = vec4(atlas_rgb(u_color_rect, v_uv), 1.0); }
-"""
-
 # Instead of the colour, where it comes from: (u, v, view, 1) into an RGBA32F target, for a
 # pass that resolves each pixel later (iterative warping starts from it).
 _REFS_FS = """
@@ -137,7 +128,7 @@ class MeshWarpProgram:
         glsl = {"frame": frame_glsl(config), "view": VIEW_POINT_GLSL,
                 "vertex": (_GRID_VERTEX if grid else _LIST_VERTEX) % {}}
         gs = None if split is None else _SPLIT_GS % glsl
-        fs = _REFS_FS if refs else _FS % glsl
+        fs = _REFS_FS if refs else COLOR_FS % glsl
         self.prog = ctx.program(vertex_shader=_VS % glsl, geometry_shader=gs, fragment_shader=fs)
         bind_frame_uniforms(self.prog, config)
         if split is not None:

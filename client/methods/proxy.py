@@ -33,6 +33,7 @@ from pibr.protocol.pose import Pose
 from ..frame_textures import bind_frame_uniforms, frame_glsl, has_extra_depth, rect_uniform
 from ..lod_select import DEFAULT_TARGET_PX, LodSelector
 from .base import FULLSCREEN_VS, Method, fullscreen_quad, output_tan_half
+from .view_warp import output_projection
 
 DEFAULT_TAU = 0.1
 
@@ -144,16 +145,6 @@ void main() {
 """
 
 
-def _perspective(output, near: float, far: float) -> np.ndarray:
-    tx, ty = output_tan_half(output)
-    m = np.zeros((4, 4))
-    m[0, 0], m[1, 1] = 1 / tx, 1 / ty
-    m[2, 2] = (far + near) / (near - far)
-    m[2, 3] = 2 * far * near / (near - far)
-    m[3, 2] = -1.0
-    return m
-
-
 class ProxyIBR(Method):
     name = "proxy"
     needs_proxies = True
@@ -189,7 +180,7 @@ class ProxyIBR(Method):
         self.prog["u_tau"].value = float(tau)
         self.resolve_vbo, self.resolve_vao = fullscreen_quad(ctx, self.resolve)
         self.near, self.far = config.near, config.far
-        self.projection = _perspective(output, self.near, self.far)
+        self.projection = output_projection(output, self.near, self.far)
         self._buffers = []
         self.vaos = []   # per object: level -> (vao, triangles)
         for o in proxies:

@@ -12,7 +12,7 @@ from pibr.protocol.pose import Pose
 
 from ..frame_textures import bind_frame_uniforms, frame_glsl
 from .base import Method
-from .view_warp import SKY_FRACTION, VIEW_POINT_GLSL, output_projection, source_views
+from .view_warp import COLOR_FS, SKY_FRACTION, VIEW_POINT_GLSL, output_projection, source_views
 
 DEFAULT_POINT_SIZE = 2.0
 
@@ -29,16 +29,6 @@ void main() {
 }
 """
 
-_FS = """
-#version 410
-%(frame)s
-uniform vec4 u_color_rect;
-in vec2 v_uv;
-out vec4 f_color;
-void main() { f_color = vec4(atlas_rgb(u_color_rect, v_uv), 1.0); }
-"""
-
-
 class PointSplat(Method):
     name = "splat"
 
@@ -49,7 +39,7 @@ class PointSplat(Method):
 
             raise ConfigError(f"splat point size must be in 0.5..64 pixels, got {point_size}")
         glsl = {"frame": frame_glsl(config), "view": VIEW_POINT_GLSL}
-        self.prog = ctx.program(vertex_shader=_VS % glsl, fragment_shader=_FS % glsl)
+        self.prog = ctx.program(vertex_shader=_VS % glsl, fragment_shader=COLOR_FS % glsl)
         bind_frame_uniforms(self.prog, config)
         self.vao = ctx.vertex_array(self.prog, [])
         self.views = source_views(config)

@@ -78,6 +78,17 @@ vec4 warp_point(vec3 dir, float d) {
 """
 
 
+# The fragment shader of the forward warps: the bound view's colour at the interpolated uv.
+COLOR_FS = """
+#version 410
+%(frame)s
+uniform vec4 u_color_rect;
+in vec2 v_uv;
+out vec4 f_color;
+void main() { f_color = vec4(atlas_rgb(u_color_rect, v_uv), 1.0); }
+"""
+
+
 def output_projection(output, near: float, far: float) -> np.ndarray:
     """(4, 4) OpenGL perspective matrix of the output camera."""
     tx, ty = output_tan_half(output)
