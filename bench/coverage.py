@@ -4,9 +4,9 @@ For a displayed pose the ground-truth renderer gives, per output pixel, the surf
 the viewer sees (or sky). A pixel is *covered* when some transmitted view shows that same
 point: its back-projection into the view lands on a texel (any of the four around it)
 whose stored distance matches the point's distance within a relative tolerance — the same
-test depth peeling uses. Sky is covered where a view without peeling shows sky in that
-direction (a peeled view's empty texels say nothing). Everything else is a hole an ideal,
-depth-exact warp of the transmitted views could not fill.
+test depth peeling uses. Sky is covered where a view shows sky in that direction: a peeled
+view marks what it peeled away apart from sky (protocol/depth.py), so it vouches for sky too.
+Everything else is a hole an ideal, depth-exact warp of the transmitted views could not fill.
 
 Variants (``VARIANTS``): the primary view alone; plus an extra view at zero offset with
 peeling (a second depth layer); at the offset without peeling; at the offset with peeling.
@@ -114,15 +114,16 @@ def uncovered(points, sky, dirs, views, tolerance: float = COVERAGE_TOLERANCE) -
     geometric definition of a hole, the same for every method.
 
     points, dirs : (n, 3) world points and directions of the displayed pixels (ground truth);
-    sky : (n,) the pixel shows sky; views : [(pose, distance map (h, w), peeled)]."""
+    sky : (n,) the pixel shows sky; views : [(pose, distance map (h, w), peeled)]. Every view
+    vouches for sky where it stores sky (distance 0): a depth-peeled view marks the pixels it
+    peeled away with a negative distance (protocol/depth.py PEELED), so its 0 is sky too."""
     covered = np.zeros(len(points), bool)
     geo = ~sky
-    for pose, dist, peeled in views:
+    for pose, dist, _peeled in views:
         todo = geo & ~covered
         covered[todo] = matches_view(points[todo], pose, dist, tolerance)
-        if not peeled:
-            s = sky & ~covered
-            covered[s] = sky_in_view(dirs[s], pose, dist)
+        s = sky & ~covered
+        covered[s] = sky_in_view(dirs[s], pose, dist)
     return ~covered
 
 
@@ -320,7 +321,6 @@ def print_coverage_table(result: dict) -> None:
         print(f"{label:<26}" + "".join(f"{100 * d['means'][v]:>16.2f}" for v in variants))
     print(f"{'all':<26}" + "".join(f"{100 * result['means'][v]:>16.2f}" for v in variants))
     print(f"{'all, geometry only':<26}" + "".join(f"{100 * result['means'][v + ':geometry']:>16.2f}" for v in variants))
-    print("'geometry only' leaves out pixels showing sky: a peeled extra view cannot tell sky from "
-          "peeled-away surfaces, so only unpeeled views vouch for sky.")
+    print("'geometry only' leaves out pixels showing sky.")
     if sky:
         print(f"warning: {sky} displayed frames are more than 95 % sky; there is little to cover on them")

@@ -35,7 +35,8 @@ of the 12-bit codes, max error 37 codes, 60 ms; plain push-pull 54.1 dB, max 276
 
 Codes are diffused (disparity is linear on planes, so diffusion between edge samples
 reconstructs planes); :func:`codes_to_distance` turns them into distance, with 0 (sky) where
-the sky code dominates (a diffused code below min_code / 2).
+the sky code dominates (a diffused code below a quarter of min_code) and the peeled marker
+below three quarters (protocol/depth.py).
 """
 from __future__ import annotations
 

@@ -1,14 +1,17 @@
 """Depth on the wire: radial distance <-> quantized disparity (numpy and GLSL from one source).
 
 Disparity is ``near / r`` in (0, 1] for geometry between the near and far spheres. A code of
-``bits`` bits stores it linearly in ``[min_code, 2**bits - 1]``; codes below ``min_code / 2``
-mean *sky* (nothing hit). Inside pibr a distance of 0 means sky, because no surface can be
-closer than the near sphere.
+``bits`` bits stores it linearly in ``[min_code, 2**bits - 1]``. Inside pibr a distance of 0
+means *sky* (nothing hit: no surface can be closer than the near sphere) and a negative
+distance (:data:`PEELED`) a pixel of the depth-peeled extra view whose every surface the
+primary view already shows: not sky, just nothing new (Reinert et al.'s dual view).
 
-``min_code`` leaves a guard band between sky and the farthest geometry for lossy transports:
-in the H.264 atlas (8 bits) sky is 0 and geometry starts at 16, so coding noise of a few
-levels never turns sky into a wall or a wall into sky. The lossless edge codec uses
-``min_code = 1``.
+Below ``min_code`` lies a guard band: codes under a quarter of ``min_code`` mean sky, codes
+from a quarter to three quarters of it *peeled*, the rest the farthest geometry (with
+``min_code`` 1 there is no peeled band: sky below half a code). In the H.264
+atlas (8 bits, ``min_code`` 16) sky is 0, peeled 8 and geometry starts at 16, so coding noise
+of a few levels never turns sky, peeled pixels and walls into one another. The edge codec
+uses ``min_code = 2``: sky 0, peeled 1.
 """
 from __future__ import annotations
 
@@ -25,6 +28,7 @@ QUANTIZE = Formula(
         ("d", "near / max(r, near)"),
         ("code", "min_code + floor(d * (max_code - min_code) + 0.5)"),
         ("code", "select(r > far, 0.0, select(r <= 0.0, 0.0, code))"),
+        ("code", "select(r < 0.0, floor(0.5 * min_code), code)"),
     ),
     outputs=("code",),
 )
@@ -35,7 +39,11 @@ DEQUANTIZE = Formula(
     steps=(
         ("d", "max((code - min_code) / (max_code - min_code), 0.5 / (max_code - min_code))"),
         ("r", "min(near / d, far)"),
-        ("r", "select(code < 0.5 * min_code, 0.0, r)"),
+        # min_code 1 leaves no room for peeled: sky below half a code, as it always was
+        ("sky_below", "select(min_code < 1.5, 0.5 * min_code, 0.25 * min_code)"),
+        ("peeled_below", "select(min_code < 1.5, 0.0, 0.75 * min_code)"),
+        ("r", "select(code < peeled_below, -1.0, r)"),
+        ("r", "select(code < sky_below, 0.0, r)"),
     ),
     outputs=("r",),
 )
@@ -45,6 +53,10 @@ GLSL = (
     + QUANTIZE.glsl("float", "code")
     + DEQUANTIZE.glsl("float", "r")
 )
+
+
+#: The distance of a peeled-away pixel of the extra view (0 is sky).
+PEELED = -1.0
 
 
 @dataclass(frozen=True)
@@ -69,14 +81,15 @@ class DepthQuantizer:
         return (1 << self.bits) - 1
 
     def quantize(self, r) -> np.ndarray:
-        """Distances (any shape; 0, inf, NaN or beyond far = sky) -> codes, uint8 or uint16."""
+        """Distances (any shape; 0, inf, NaN or beyond far = sky, negative = peeled) -> codes, uint8 or
+        uint16. With ``min_code`` 1 there is no room for peeled: it is coded as sky."""
         r = np.asarray(r, dtype=np.float64)
         r = np.where(np.isfinite(r), r, 0.0)
         code = QUANTIZE.numpy(r=r, near=self.near, far=self.far, min_code=self.min_code, max_code=self.max_code)
         return code.astype(np.uint8 if self.bits <= 8 else np.uint16)
 
     def dequantize(self, code) -> np.ndarray:
-        """Codes -> distances (float32), 0 for sky."""
+        """Codes -> distances (float32), 0 for sky, :data:`PEELED` for peeled."""
         r = DEQUANTIZE.numpy(code=np.asarray(code, dtype=np.float64), near=self.near, far=self.far,
                              min_code=self.min_code, max_code=self.max_code)
         return r.astype(np.float32)

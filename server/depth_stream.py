@@ -22,8 +22,9 @@ EDGE_BITS = 12
 
 
 def edge_quantizer(near: float, far: float, bits: int = EDGE_BITS) -> DepthQuantizer:
-    """The edge codec's depth quantizer: ``bits`` of disparity, sky = code 0, surfaces from 1."""
-    return DepthQuantizer(near, far, bits=bits, min_code=1)
+    """The edge codec's depth quantizer: ``bits`` of disparity, sky = code 0, peeled (the extra
+    view's pixels the primary already shows) = 1, surfaces from 2."""
+    return DepthQuantizer(near, far, bits=bits, min_code=2)
 
 
 class EdgeDepthStream:

@@ -4,7 +4,7 @@ The paper's quadtree warping groups neighbouring pixels by their depth (the clie
 motion is unknown to the server, so Didyk et al.'s disparity criterion does not apply). Here a
 node is a leaf when its pixels form one class:
 
-* all sky (distance 0, which also marks the extra view's peeled-away pixels); or
+* all sky (distance 0, or negative: the extra view's peeled-away pixels); or
 * all geometry with a small relative range, ``max - min <= threshold * min``;
 
 a node mixing sky and geometry, or spanning a larger range, splits, down to single pixels.

@@ -103,6 +103,8 @@ uniform sampler2D u_peel_dist;    // primary view's radial distance (top row fir
 uniform mat4 u_peel_from_cam;     // this camera's space -> primary camera space
 uniform vec2 u_peel_size;         // primary view size in pixels
 uniform float u_peel_tolerance;   // relative
+const float PEELED_DEPTH = 0.99999;   // behind every kept fragment, in front of the cleared 1
+uniform vec3 u_sky_color;
 bool seen_by_primary(vec3 cam) {
     vec3 p = (u_peel_from_cam * vec4(cam, 1.0)).xyz;
     if (p.z > 0.0) return false;                  // behind the primary camera
@@ -120,7 +122,16 @@ bool seen_by_primary(vec3 cam) {
 #endif
 void main() {
 #ifdef PEEL
-    if (seen_by_primary(v_cam)) discard;
+    // A peeled fragment is not dropped: it marks its pixel (distance PEELED) from behind every
+    // kept fragment, so the view tells "nothing new here" from sky (nothing at all).
+    if (seen_by_primary(v_cam)) {
+        f_color = vec4(u_sky_color, 1.0);          // as an empty pixel: codes smoothly
+        f_dist = -1.0;
+        f_motion = vec4(0.0);
+        gl_FragDepth = PEELED_DEPTH;
+        return;
+    }
+    gl_FragDepth = gl_FragCoord.z;
 #endif
     f_color = vec4(shade(v_world, v_normal, v_uv, v_color), 1.0);
     f_dist = length(v_cam);
@@ -538,7 +549,8 @@ class Renderer:
             # this camera -> world -> primary camera, composed in float64
             from_cam = primary_pose.view_matrix() @ pose.matrix()
             uniforms.update({"u_peel_from_cam": from_cam.T, "u_peel_tolerance": float(tolerance),
-                             "u_peel_size": (float(primary_target.width), float(primary_target.height))})
+                             "u_peel_size": (float(primary_target.width), float(primary_target.height)),
+                             "u_sky_color": tuple(float(c) for c in self.scene.sky_color[:3])})
         if projection == "tess":
             self.ctx.patch_vertices = 3
             self.programs[name]["u_half_size"].value = (target.width / 2.0, target.height / 2.0)

@@ -65,18 +65,28 @@ uniform sampler2D u_refs;
 uniform vec4 u_primary_color;
 uniform vec4 u_extra_color;
 uniform mat3 u_out_to_src;   // output camera -> primary camera rotation
+uniform mat3 u_out_to_extra; // output camera -> extra camera rotation
+uniform bool u_extra_sky;    // the extra view's sky may fill in (it marks peeled pixels apart)
 uniform vec2 u_tan_half;
 uniform vec2 u_out_size;
 out vec4 f_color;
-// The primary view along this pixel's ray: the sky (alpha 1), else a rotation-only fallback
-// (alpha 0: no view vouches for it); nothing behind the primary camera.
+// Where no proxy fragment landed: the sky along this pixel's ray. Sky is at infinity, so any
+// view shows it in the same direction: the primary view's if it shows sky there, else the
+// extra view's if that one does (it saw past what blocks the primary: a lamp post in front of
+// the sky); else a rotation-only fallback from the primary (alpha 0: no view vouches for it).
 vec4 background() {
     vec2 ndc = vec2(2.0 * gl_FragCoord.x / u_out_size.x - 1.0, 1.0 - 2.0 * gl_FragCoord.y / u_out_size.y);
-    vec3 d = u_out_to_src * normalize(vec3(ndc * u_tan_half, -1.0));
-    if (d.z > 0.0) return vec4(0.0);
+    vec3 ray = normalize(vec3(ndc * u_tan_half, -1.0));
+    vec3 d = u_out_to_src * ray;
     vec2 uv = wa_uv(wa_project(d).xy);
-    bool sky = primary_distance(uv) <= 0.0;
-    return vec4(atlas_rgb(u_primary_color, uv), sky ? 1.0 : 0.0);
+    if (d.z <= 0.0 && primary_distance(uv) == 0.0) return vec4(atlas_rgb(u_primary_color, uv), 1.0);
+    if (u_extra_sky) {
+        vec3 e = u_out_to_extra * ray;
+        vec2 uv_e = wa_uv(wa_project(e).xy);
+        if (e.z <= 0.0 && extra_distance(uv_e) == 0.0) return vec4(atlas_rgb(u_extra_color, uv_e), 1.0);
+    }
+    if (d.z > 0.0) return vec4(0.0);
+    return vec4(atlas_rgb(u_primary_color, uv), 0.0);
 }
 void main() {
     vec4 ref = texelFetch(u_refs, ivec2(gl_FragCoord.xy), 0);
@@ -177,6 +187,9 @@ class ProxyIBR(Method):
         # extra_view=False ignores a transmitted extra view: what proxy IBR does without one.
         self.uses_extra_view = bool(extra_view) and has_extra_depth(config)
         self.prog["u_has_extra"].value = self.uses_extra_view
+        # Sessions whose depth codes keep peeled pixels apart from sky (min_code >= 2; see
+        # protocol/depth.py) let the extra view vouch for sky.
+        self.resolve["u_extra_sky"].value = self.uses_extra_view and config.depth_min_code >= 2
         self.prog["u_tau"].value = float(tau)
         self.resolve_vbo, self.resolve_vao = fullscreen_quad(ctx, self.resolve)
         self.near, self.far = config.near, config.far
@@ -234,6 +247,9 @@ class ProxyIBR(Method):
         self.refs.use(5)
         rot = frame.primary_pose.rotation().T @ out_pose.rotation()
         self.resolve["u_out_to_src"].write(rot.T.astype("f4").tobytes())
+        if self.uses_extra_view and frame.extra_pose is not None:
+            rot = frame.extra_pose.rotation().T @ out_pose.rotation()
+            self.resolve["u_out_to_extra"].write(rot.T.astype("f4").tobytes())
         self.resolve_vao.render(ctx.TRIANGLE_STRIP)
 
     def release(self) -> None:

@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from pibr.protocol.depth import DEQUANTIZE, GLSL, QUANTIZE, DepthQuantizer, h264_quantizer
+from pibr.protocol.depth import DEQUANTIZE, GLSL, PEELED, QUANTIZE, DepthQuantizer, h264_quantizer
 
 
 def test_codes_span_and_sky():
@@ -33,11 +33,19 @@ def test_round_trip_error_within_half_a_code():
     np.testing.assert_allclose(back[:200], r[:200], rtol=2e-3)
 
 
-def test_sky_dequantizes_to_zero_and_noise_band():
+def test_sky_peeled_and_the_guard_band():
+    """H.264: sky 0, peeled 8, geometry from 16; coding noise of 3 levels keeps each itself."""
     q = h264_quantizer(0.1, 1000.0)
-    r = q.dequantize(np.array([0, 3, 7, 8, 15, 16]))
-    assert list(r[:3]) == [0.0, 0.0, 0.0]   # coding noise around sky stays sky
-    assert np.all(r[3:] > 0)                # the guard band reads as the farthest geometry
+    assert list(q.quantize([0.0, PEELED, 1000.0])) == [0, 8, 16]
+    r = q.dequantize(np.array([0, 3, 4, 8, 11, 12, 15, 16, 19]))
+    assert list(r[:2]) == [0.0, 0.0]                    # sky and its noise
+    assert list(r[2:5]) == [PEELED] * 3                 # peeled and its noise
+    assert np.all(r[5:] > 0)                            # the farthest geometry and its noise
+    edge = DepthQuantizer(0.1, 1000.0, bits=12, min_code=2)      # the edge codec's: sky 0, peeled 1
+    assert list(edge.quantize([0.0, PEELED, 1000.0])) == [0, 1, 2]
+    assert list(edge.dequantize(np.array([0, 1, 2]))[:2]) == [0.0, PEELED]
+    plain = DepthQuantizer(0.1, 1000.0, bits=12, min_code=1)     # no room for peeled: it reads as sky
+    assert list(plain.quantize([0.0, PEELED])) == [0, 0]
 
 
 def test_near_and_bits_are_validated():
