@@ -49,3 +49,6 @@ def main(argv=None) -> int:
     except KeyboardInterrupt:
         print(f"pibr {args.command}: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:   # the reader went away ('pibr ... | head'): nothing left to say
+        sys.stderr.close()
+        return 141

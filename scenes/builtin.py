@@ -702,8 +702,9 @@ COURTYARD_COLUMN_HEIGHT = 4.5
 
 def build_courtyard() -> Scene:
     """A large open-air courtyard under open sky: paving, four colonnades 20 m out with walls
-    behind them, a fountain, a statue on a plinth, planters. Most of every view is sky -- the
-    scene for measuring what a dual view does where there is little geometry."""
+    behind them, a fountain, a statue on a plinth, planters, lamp posts and obelisks standing
+    against the sky. A third of a level view is sky -- the scene for measuring what a dual view
+    does where sky lies behind near things."""
     b = _SceneBuilder()
     half, h = COURTYARD_HALF, COURTYARD_COLUMN_HEIGHT
     paving = b.material("paving", (0.85, 0.82, 0.76), "brick")
@@ -738,6 +739,15 @@ def build_courtyard() -> Scene:
     planter = b.material("planter", (0.45, 0.5, 0.3), "grass")
     for k, (x, z) in enumerate(((-5.0, -3.0), (-5.0, 3.5), (6.0, 4.0))):
         b.add(f"planter_{k}", prim.box((1.6, 0.7, 1.6), (x, 0.35, z), 1.0), planter)
+    # Free-standing things seen against the sky: lamp posts round the middle, two obelisks.
+    iron = b.material("lamp_iron", (0.18, 0.18, 0.2))
+    glass = b.material("lamp_glass", (1.0, 0.92, 0.7))
+    for k, (x, z) in enumerate(((-2.5, -3.5), (3.0, -3.0), (-3.5, 2.5), (2.5, 3.5), (0.8, -9.5), (-7.5, -8.0))):
+        b.add(f"lamp_post_{k}", prim.cylinder(0.06, 4.2, 12, uv_scale=1.0), iron, prim.translation(x, 0.0, z))
+        b.add(f"lamp_{k}", prim.sphere(0.22, 16, 8), glass, prim.translation(x, 4.4, z))
+    obelisk = b.material("obelisk_stone", (0.78, 0.74, 0.66), "marble")
+    for k, (x, z) in enumerate(((-9.0, -12.0), (10.0, -11.0))):
+        b.add(f"obelisk_{k}", prim.cone(0.7, 9.0, 4, uv_scale=1.0), obelisk, prim.translation(x, 0.0, z))
     return Scene(
         name="courtyard",
         objects=b.objects,
@@ -761,6 +771,7 @@ BUILTIN_SCENES: dict[str, tuple[str, Callable[[], Scene]]] = {
     "sphere": ("A single test-pattern sphere (radius 0.4 m) 2.6 m in front of the viewer; no extra view needed",
                build_sphere),
     "courtyard": ("A large open-air courtyard under open sky: colonnades 20 m out, a fountain, a statue, "
-                  "planters; mostly sky (measures dual views where there is little geometry)", build_courtyard),
+                  "planters, lamp posts and obelisks against the sky (dual views where sky is behind near things)",
+                  build_courtyard),
     "empty": ("No objects: sky only (edge-case tests)", build_empty),
 }
