@@ -4,8 +4,9 @@ For a displayed pose the ground-truth renderer gives, per output pixel, the surf
 the viewer sees (or sky). A pixel is *covered* when some transmitted view shows that same
 point: its back-projection into the view lands on a texel (any of the four around it)
 whose stored distance matches the point's distance within a relative tolerance — the same
-test depth peeling uses. Sky is covered where a view shows sky in that direction: a peeled
-view marks what it peeled away apart from sky (protocol/depth.py), so it vouches for sky too.
+test depth peeling uses. Sky is covered where a view shows sky in that direction; a peeled
+view vouches for sky only when it marks what it peeled away apart from sky (protocol/depth.py;
+the server's default).
 Everything else is a hole an ideal, depth-exact warp of the transmitted views could not fill.
 
 Variants (``VARIANTS``): the primary view alone; plus an extra view at zero offset with
@@ -109,21 +110,24 @@ def displayed_points(rays: np.ndarray, pose: Pose, distance: np.ndarray):
     return pose.p + dirs * r[:, None], r == 0, dirs
 
 
-def uncovered(points, sky, dirs, views, tolerance: float = COVERAGE_TOLERANCE) -> np.ndarray:
+def uncovered(points, sky, dirs, views, tolerance: float = COVERAGE_TOLERANCE,
+              peeled_marked: bool = True) -> np.ndarray:
     """(n,) True where no transmitted view saw what the displayed pixel shows: the one
     geometric definition of a hole, the same for every method.
 
     points, dirs : (n, 3) world points and directions of the displayed pixels (ground truth);
-    sky : (n,) the pixel shows sky; views : [(pose, distance map (h, w), peeled)]. Every view
-    vouches for sky where it stores sky (distance 0): a depth-peeled view marks the pixels it
-    peeled away with a negative distance (protocol/depth.py PEELED), so its 0 is sky too."""
+    sky : (n,) the pixel shows sky; views : [(pose, distance map (h, w), peeled)]. A view
+    vouches for sky where it stores sky (distance 0); a depth-peeled view only if it marks the
+    pixels it peeled away apart (``peeled_marked``: a negative distance, protocol/depth.py
+    PEELED), else its 0 may be a surface the primary shows."""
     covered = np.zeros(len(points), bool)
     geo = ~sky
-    for pose, dist, _peeled in views:
+    for pose, dist, peeled in views:
         todo = geo & ~covered
         covered[todo] = matches_view(points[todo], pose, dist, tolerance)
-        s = sky & ~covered
-        covered[s] = sky_in_view(dirs[s], pose, dist)
+        if not peeled or peeled_marked:
+            s = sky & ~covered
+            covered[s] = sky_in_view(dirs[s], pose, dist)
     return ~covered
 
 
@@ -131,13 +135,14 @@ class CoverageProbe:
     """Renders ground truth and wide-angle views of one scene at small sizes, on this thread."""
 
     def __init__(self, scene, view_size=(512, 512), out_size=(320, 180), fov_deg=90.0, projection="vertex",
-                 tolerance=COVERAGE_TOLERANCE, ctx=None):
+                 tolerance=COVERAGE_TOLERANCE, ctx=None, mark_peeled: bool = True):
         from pibr.protocol.gl import create_context
         from pibr.server.renderer import PEEL_TOLERANCE, RenderTarget, Renderer
 
         self._own = ctx is None
         self.ctx = create_context() if ctx is None else ctx
         self.scene, self.fov_deg, self.projection, self.tolerance = scene, fov_deg, projection, tolerance
+        self.mark_peeled = mark_peeled   # peeled views mark what they peeled (as the server does by default)
         self.peel_tolerance = PEEL_TOLERANCE
         self.renderer = Renderer(self.ctx, scene, projection)
         self.primary = RenderTarget(self.ctx, *view_size)
@@ -169,14 +174,15 @@ class CoverageProbe:
         """The extra view's distance map; the primary must be the last one rendered."""
         peel_arg = (self.primary, primary_pose, self.peel_tolerance) if peel else None
         with self.ctx:
-            self.renderer.render_wide(self.extra, primary_pose.compose(offset), t, self.projection, peel=peel_arg)
+            self.renderer.render_wide(self.extra, primary_pose.compose(offset), t, self.projection, peel=peel_arg,
+                                      mark_peeled=self.mark_peeled)
             return self.extra.read_distance().copy()
 
     def missing(self, points, sky, dirs, views) -> tuple[float, float]:
         """(fraction of all pixels, fraction of pixels showing geometry) no view covers.
 
         views: [(pose, distance map, peeled)]."""
-        holes = uncovered(points, sky, dirs, views, self.tolerance)
+        holes = uncovered(points, sky, dirs, views, self.tolerance, self.mark_peeled)
         geo = ~sky
         n_geo = int(geo.sum())
         geo_missing = float((geo & holes).sum() / n_geo) if n_geo else 0.0

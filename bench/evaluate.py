@@ -227,7 +227,8 @@ class TransmittedViews:
         self.offset = config.extra_offset if config.extra is not None else None
         size = (max(1, out_size[0] // subsample), max(1, out_size[1] // subsample))
         self.probe = CoverageProbe(scene, (config.primary.width, config.primary.height), size, fov_deg,
-                                   projection=config.options.get("projection", "vertex"))
+                                   projection=config.options.get("projection", "vertex"),
+                                   mark_peeled=bool(config.options.get("peel_marker")))
         self._frame = None     # (frame_id, views)
 
     def holes(self, pose: Pose, rec: dict) -> dict:
@@ -248,7 +249,8 @@ class TransmittedViews:
         views = self._frame[1]
         points, sky, dirs = self.probe.display_points(pose, rec["scene_t"])
         out = {"primary": float(uncovered(points, sky, dirs, views[:1]).mean())}
-        out["both"] = float(uncovered(points, sky, dirs, views).mean()) if len(views) > 1 else out["primary"]
+        out["both"] = (float(uncovered(points, sky, dirs, views, peeled_marked=self.probe.mark_peeled).mean())
+                       if len(views) > 1 else out["primary"])
         return out
 
     def close(self) -> None:

@@ -123,14 +123,14 @@ class _Quality:
         return out
 
 
-def _geometric_holes(rays, pose, gt_distance, frame, distances) -> dict:
+def _geometric_holes(rays, pose, gt_distance, frame, distances, peeled_marked: bool) -> dict:
     """Geometric hole fraction of the displayed view for the primary view alone and for both."""
     points, sky, dirs = displayed_points(rays, pose, gt_distance)
     views = [(frame.primary_pose, distances["primary"], False)]
     out = {"primary": float(uncovered(points, sky, dirs, views).mean())}
     if "extra" in distances and frame.extra_pose is not None:
         views.append((frame.extra_pose, distances["extra"], True))
-        out["both"] = float(uncovered(points, sky, dirs, views).mean())
+        out["both"] = float(uncovered(points, sky, dirs, views, peeled_marked=peeled_marked).mean())
     else:
         out["both"] = out["primary"]
     return out
@@ -172,7 +172,8 @@ def measure_scene(scene, variants, windows, latency_ms=128.0, rate_hz=30.0, stri
                 frame = sim.frame_at(t_render, rendered)
                 gt = sim.ground_truth(display, t_disp)
                 uniform[window] += nearly_uniform(gt)
-                geo = _geometric_holes(rays, display, sim.ground_truth_distance(), frame, sim.distances)
+                geo = _geometric_holes(rays, display, sim.ground_truth_distance(), frame, sim.distances,
+                                       bool(sim.session.options.get("peel_marker")))
                 with_flip = flip_every > 0 and i % flip_every == 0
                 shown = []
                 for label, m in methods.items():

@@ -33,6 +33,7 @@ class ServerConfig:
     fps: float = 10.0
     view_size: tuple = (1024, 1024)     # primary view; the extra view is half of it
     extra_view: str = "auto"            # "auto" (as the scene says), "on", "off"
+    peel_marker: bool = True            # the extra view marks peeled pixels apart from sky
     extra_offset: tuple | None = None   # (forward m, up m, tilt deg); None: the scene's or the paper's
     bitrate_kbps: float = 16000.0
     keyint: int = 30

@@ -32,6 +32,7 @@ class ProducerSpec:
     extra_offset: Pose | None = None
     keep_distance: bool = False   # hand the float distance maps to the caller (edge codec)
     peel: bool = True             # depth-peel the extra view against the primary
+    mark_peeled: bool = True      # ... marking peeled pixels apart from sky (protocol/depth.py)
     peel_tolerance: float = PEEL_TOLERANCE
     motion_dt: float | None = None  # render the primary's object motion over this many seconds
     low_colour: int = 0            # hand a colour image downsampled by this factor (0: none)
@@ -71,7 +72,8 @@ class FrameProducer:
         if self.extra is not None:
             extra_pose = pose.compose(self.spec.extra_offset)
             peel = (self.primary, pose, self.spec.peel_tolerance) if self.spec.peel else None
-            self.renderer.render_wide(self.extra, extra_pose, t, self.spec.projection, peel=peel)
+            self.renderer.render_wide(self.extra, extra_pose, t, self.spec.projection, peel=peel,
+                                      mark_peeled=self.spec.mark_peeled)
         ctx.finish()
         t1 = time.perf_counter()
         sources = {"primary.color": self.primary.color, "primary.depth": self.primary.distance}

@@ -121,9 +121,10 @@ bool seen_by_primary(vec3 cam) {
 }
 #endif
 void main() {
-#ifdef PEEL
+#ifdef PEEL_MARK
     // A peeled fragment is not dropped: it marks its pixel (distance PEELED) from behind every
-    // kept fragment, so the view tells "nothing new here" from sky (nothing at all).
+    // kept fragment, so the view tells "nothing new here" from sky (nothing at all). Writing
+    // gl_FragDepth costs the early depth test: the extra view took a third longer here.
     if (seen_by_primary(v_cam)) {
         f_color = vec4(u_sky_color, 1.0);          // as an empty pixel: codes smoothly
         f_dist = -1.0;
@@ -132,6 +133,8 @@ void main() {
         return;
     }
     gl_FragDepth = gl_FragCoord.z;
+#elif defined(PEEL)
+    if (seen_by_primary(v_cam)) discard;
 #endif
     f_color = vec4(shade(v_world, v_normal, v_uv, v_color), 1.0);
     f_dist = length(v_cam);
@@ -431,19 +434,22 @@ class Renderer:
         shading = shading_glsl(scene.lights)
         fragment = _FRAGMENT % {"shading": shading, "defines": "", "projection": PROJECTION_GLSL}
         peeling = _FRAGMENT % {"shading": shading, "defines": "#define PEEL", "projection": PROJECTION_GLSL}
+        marking = _FRAGMENT % {"shading": shading, "defines": "#define PEEL\n#define PEEL_MARK",
+                               "projection": PROJECTION_GLSL}
         self.programs = {
             "perspective": ctx.program(vertex_shader=_PERSPECTIVE_VS, fragment_shader=fragment),
             "vertex": ctx.program(vertex_shader=_WIDE_VERTEX_VS, fragment_shader=fragment),
             "vertex_peel": ctx.program(vertex_shader=_WIDE_VERTEX_VS, fragment_shader=peeling),
+            "vertex_peel_mark": ctx.program(vertex_shader=_WIDE_VERTEX_VS, fragment_shader=marking),
         }
-        for name, fs in (("tess", fragment), ("tess_peel", peeling)):
+        for name, fs in (("tess", fragment), ("tess_peel", peeling), ("tess_peel_mark", marking)):
             prog = ctx.program(vertex_shader=_TESS_VS, tess_control_shader=_TESS_TCS,
                                tess_evaluation_shader=_TESS_TES, fragment_shader=fs)
             prog["u_max_angle"].value = float(self.max_edge_angle)
             prog["u_max_level"].value = float(tess_max_level)
             prog["u_max_screen_edge"].value = float(tess_max_screen_edge)
             self.programs[name] = prog
-        for name in ("vertex_peel", "tess_peel"):
+        for name in ("vertex_peel", "vertex_peel_mark", "tess_peel", "tess_peel_mark"):
             self.programs[name]["u_peel_dist"].value = 1
         region = scene.viewing_region()
         self.objects: list[_GPUObject] = []
@@ -451,13 +457,14 @@ class Renderer:
         for obj in scene.objects:
             if obj.mesh.triangle_count == 0:
                 continue
-            original = _GPUMesh(ctx, obj.mesh, {k: self.programs[k] for k in ("perspective", "tess", "tess_peel")})
+            original = _GPUMesh(ctx, obj.mesh, {k: self.programs[k] for k in ("perspective", "tess", "tess_peel",
+                                                                              "tess_peel_mark")})
             tess = None
             if wide:  # pre-tessellated copy for the vertex-projection path
                 levels = levels_for_view_region(obj.mesh, obj.transform, region, max_edge_angle_deg)
                 fine = subdivide(obj.mesh, levels) if levels.max() > 1 else obj.mesh
                 self.tessellated_triangles += fine.triangle_count
-                tess = _GPUMesh(ctx, fine, {k: self.programs[k] for k in ("vertex", "vertex_peel")})
+                tess = _GPUMesh(ctx, fine, {k: self.programs[k] for k in ("vertex", "vertex_peel", "vertex_peel_mark")})
             tex = None
             if obj.material.texture is not None:
                 img = np.ascontiguousarray(obj.material.texture[::-1])  # UV v = 0 is the bottom row
@@ -526,13 +533,15 @@ class Renderer:
         target.fbo.color_mask = [(True, True, True, True)] * n
 
     def render_wide(self, target: RenderTarget, pose: Pose, t: float, projection: str | None = None,
-                    peel: tuple | None = None, motion_dt: float | None = None) -> None:
+                    peel: tuple | None = None, motion_dt: float | None = None, mark_peeled: bool = True) -> None:
         """Wide-angle view at ``pose`` (camera-to-world) and scene time ``t`` into ``target``.
 
         ``peel = (primary_target, primary_pose, tolerance)`` depth-peels this view against a
         primary view already rendered into ``primary_target``: only surfaces the primary
         view does not show are kept (the dual view's extra view). ``motion_dt``: also write the
         motion of moving objects over the last ``motion_dt`` seconds (a target with motion).
+        ``mark_peeled``: pixels whose every surface was peeled away get distance PEELED
+        (protocol/depth.py) instead of staying 0 like sky; costs the early depth test.
         """
         projection = projection or self.projection
         if projection not in PROJECTIONS:
@@ -544,7 +553,7 @@ class Renderer:
                     "u_half_px": (target.width / 2.0, target.height / 2.0)}
         if peel is not None:
             primary_target, primary_pose, tolerance = peel
-            name = projection + "_peel"
+            name = projection + ("_peel_mark" if mark_peeled else "_peel")
             primary_target.distance.use(1)
             # this camera -> world -> primary camera, composed in float64
             from_cam = primary_pose.view_matrix() @ pose.matrix()

@@ -35,6 +35,8 @@ def plan_session(cfg: ServerConfig, scene, hello: Hello, proxies: dict | None = 
     quantizer = edge_quantizer(scene.near, scene.far) if edge else h264_quantizer(scene.near, scene.far)
     motion = edge and scene.is_dynamic   # a scene with nothing moving sends no motion at all
     options = {"projection": cfg.projection}
+    if use_extra:   # whether the extra view's sky (distance 0) is sky, not also peeled pixels
+        options["peel_marker"] = bool(cfg.peel_marker)
     quadtree = hello.quadtree_threshold > 0   # a quadtree payload in every frame, built from the float distances
     if quadtree:
         options["quadtree"] = {"threshold": hello.quadtree_threshold, "tile": QUADTREE_ROOT_TILE}
@@ -47,5 +49,5 @@ def plan_session(cfg: ServerConfig, scene, hello: Hello, proxies: dict | None = 
         motion=motion, proxies=proxies, options=options)
     spec = ProducerSpec((pw, ph), layout, None if edge else quantizer, cfg.projection, extra_size, offset,
                         keep_distance=edge or quadtree, motion_dt=1.0 / cfg.fps if motion else None,
-                        low_colour=8 if edge and cfg.edge.perceptual else 0)
+                        low_colour=8 if edge and cfg.edge.perceptual else 0, mark_peeled=bool(cfg.peel_marker))
     return config, spec

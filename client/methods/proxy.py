@@ -187,9 +187,10 @@ class ProxyIBR(Method):
         # extra_view=False ignores a transmitted extra view: what proxy IBR does without one.
         self.uses_extra_view = bool(extra_view) and has_extra_depth(config)
         self.prog["u_has_extra"].value = self.uses_extra_view
-        # Sessions whose depth codes keep peeled pixels apart from sky (min_code >= 2; see
-        # protocol/depth.py) let the extra view vouch for sky.
-        self.resolve["u_extra_sky"].value = self.uses_extra_view and config.depth_min_code >= 2
+        # Sessions whose extra view marks peeled pixels apart from sky, in depth codes that keep
+        # the mark (min_code >= 2; see protocol/depth.py), let the extra view vouch for sky.
+        self.resolve["u_extra_sky"].value = (self.uses_extra_view and bool(config.options.get("peel_marker"))
+                                             and config.depth_min_code >= 2)
         self.prog["u_tau"].value = float(tau)
         self.resolve_vbo, self.resolve_vao = fullscreen_quad(ctx, self.resolve)
         self.near, self.far = config.near, config.far

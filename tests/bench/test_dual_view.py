@@ -174,3 +174,20 @@ def test_coarse_to_fine_finds_the_exhaustive_optimum():
         assert all(full[k] == v for k, v in fast.items())  # the objective is deterministic
     finally:
         probe.close()
+
+
+def test_without_the_marker_a_peeled_view_vouches_for_no_sky():
+    """--no-peel-marker: peeled pixels stay 0 like sky, so the view cannot vouch for sky."""
+    scene = load_scene("room")
+    probe = CoverageProbe(scene, (256, 256), (96, 54), mark_peeled=False)
+    try:
+        pose = Pose.make((0.5, 1.6, -1.0), quat_from_euler([0.0, 0.25, 0.0], "yxz"))
+        probe.render_primary(pose, 0.0)
+        extra = probe.render_extra(pose, Pose.identity(), 0.0, peel=True)
+        assert extra.min() == 0.0                       # no marker anywhere
+        points, sky, dirs = probe.display_points(pose, 0.0)
+        assert sky.any()
+        everything, _ = probe.missing(points, sky, dirs, [(pose, extra, True)])
+        assert everything >= sky.mean() - 1e-9          # not one sky pixel vouched for
+    finally:
+        probe.close()

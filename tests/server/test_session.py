@@ -156,3 +156,18 @@ async def test_scene_without_disocclusions_gets_no_extra_view():
         task.cancel()
         await asyncio.gather(task, return_exceptions=True)
         await srv.close()
+
+
+def test_the_peel_marker_is_a_session_option():
+    from pibr.protocol.messages import Hello
+    from pibr.scenes.registry import load_scene
+    from pibr.server.config import ServerConfig
+    from pibr.server.session_plan import plan_session
+
+    room = load_scene("room")
+    marked, spec = plan_session(ServerConfig(view_size=(64, 64)), room, Hello())
+    assert marked.options["peel_marker"] is True and spec.mark_peeled
+    plain, spec = plan_session(ServerConfig(view_size=(64, 64), peel_marker=False), room, Hello())
+    assert plain.options["peel_marker"] is False and not spec.mark_peeled
+    single, _ = plan_session(ServerConfig(view_size=(64, 64), extra_view="off"), room, Hello())
+    assert "peel_marker" not in single.options          # no extra view, nothing to mark
