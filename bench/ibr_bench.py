@@ -70,7 +70,7 @@ class Simulation:
 
     def __init__(self, scene, view_size=(1024, 1024), out_size=(960, 540), fov_deg=90.0, fps=10.0,
                  bitrate_kbps=16000.0, extra_view="auto", proxies=None, ctx=None, depth_codec="h264",
-                 edge_kbps=0.0, keep_distances=False):
+                 edge_kbps=0.0, keep_distances=False, peel_marker=True):
         from pibr.client.frame_textures import FrameTextures
         from pibr.client.output_target import OutputTarget
         from pibr.client.video import H264Decoder
@@ -85,7 +85,7 @@ class Simulation:
         self.ctx = ctx or create_context()
         self.scene, self.fps = scene, fps
         cfg = ServerConfig(view_size=tuple(view_size), extra_view=extra_view, fps=fps, bitrate_kbps=bitrate_kbps,
-                           depth_codec=depth_codec, edge=EdgeSettings(kbps=edge_kbps))
+                           depth_codec=depth_codec, edge=EdgeSettings(kbps=edge_kbps), peel_marker=peel_marker)
         info = {"objects": len(proxies)} if proxies else None
         self.session, spec = plan_session(cfg, scene, Hello(want_proxies=bool(proxies)), info)
         if keep_distances:   # the views' true distances, for geometric holes
