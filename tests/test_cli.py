@@ -169,3 +169,17 @@ def test_bad_method_knobs_are_named(capsys, argv, message):
     with pytest.raises(SystemExit):
         build_parser().parse_args(argv)
     assert message in capsys.readouterr().err
+
+
+def test_bench_ibr_shows_its_defaults_and_takes_its_variants(capsys):
+    with pytest.raises(SystemExit):
+        build_parser().parse_args(["bench", "ibr", "--help"])
+    text = capsys.readouterr().out
+    for fragment in ("(default 2)", "(default 128)", "(default 960x540)", "(default: none)", "--speed-sizes"):
+        assert fragment in text, fragment
+    args = build_parser().parse_args(["bench", "ibr", "--lod-targets", "2,16", "--lod-levels", "proxy,box",
+                                      "--speed-sizes", "640x360"])
+    assert args.lod_targets == (2.0, 16.0) and args.lod_levels == ("proxy", "box")
+    assert args.speed_sizes == ((640, 360),)
+    assert main(["bench", "ibr", "--lod-levels", "tiny"]) == 2
+    assert "--lod-levels: unknown level(s) tiny" in capsys.readouterr().err
