@@ -129,7 +129,8 @@ def register(sub) -> None:
                    help="a built-in name, a scene description or an asset file (FILE#up=z for a Z-up asset)")
     d.add_argument("--up", choices=("y", "z", "auto"), default=None, help="an asset file's up axis (default auto)")
     d.add_argument("--trace", default="pred6dof-1")
-    d.add_argument("--start", type=_non_negative, default=10.0, help="seconds into the trace (default 10)")
+    d.add_argument("--start", type=_non_negative, default=30.0,
+                   help="seconds into the trace (default 30: an evaluation window, away from where defaults were tuned)")
     d.add_argument("--anchor", choices=("start", "origin", "none"), default="start",
                    help="how the trace is placed in the scene (see 'pibr client --help'; default start)")
     d.add_argument("--duration", type=_positive, default=6.0, help="seconds to replay (default 6)")

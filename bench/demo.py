@@ -1,6 +1,6 @@
 """``pibr demo``: server, relay and client as separate processes on loopback, then metrics.
 
-With the defaults: the built-in ``room`` scene, 6 s of the real HoloLens trace
+With the defaults: the built-in ``room`` scene, 6 s from 30 s into the real HoloLens trace
 ``pred6dof-1``, 128 ms round trip (64 ms each way), 10 server frames per second, 30 output
 frames per second, the virtual clock, methods ``none``, ``rotation`` and ``proxy``. Writes to ``out/``:
 each method's recording, ``side_by_side.mp4``, ``metrics.json``, ``metrics_frames.csv``,
@@ -31,7 +31,7 @@ def check_inputs(scene: str, trace: str, start_s: float, duration_s: float) -> N
     create_context().release()
 
 
-def run_demo(out_dir: str = "out", scene: str = "room", trace: str = "pred6dof-1", start_s: float = 10.0,
+def run_demo(out_dir: str = "out", scene: str = "room", trace: str = "pred6dof-1", start_s: float = 30.0,
              duration_s: float = 6.0, rate_hz: float = 30.0, size=(960, 540), latency_ms: float = 128.0,
              methods=DEFAULT_METHODS, clock: str = "virtual", flip_every: int = 4, server_args=(),
              progress: bool = True, anchor: str = "start") -> dict:
