@@ -387,9 +387,16 @@ class ProxyChunk(Message):
 
 # ---------------------------------------------------------------- control
 
+#: Stats key a real-clock client sends after decoding each frame: how many it has decoded. The
+#: server keeps at most a few frames ahead of it, so a slow client gets fresh frames, not a
+#: queue of stale ones.
+FRAMES_DECODED = "frames_decoded"
+
+
 @dataclass(frozen=True)
 class Stats(Message):
-    """Either way: named numbers (e.g. the client's missed deadlines, the server's drops)."""
+    """Either way: named numbers (e.g. the client's missed deadlines, the server's drops, and
+    ``FRAMES_DECODED``)."""
 
     TYPE: ClassVar[int] = 5
     NAME: ClassVar[str] = "Stats"

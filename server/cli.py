@@ -80,6 +80,9 @@ def register(sub) -> None:
                    help="edge codec: weight edges by their visibility in the colour (contrast transducer)")
     p.add_argument("--edge-no-temporal", action="store_true", help="edge codec: no temporal context")
     p.add_argument("--max-sessions", type=int, default=8)
+    p.add_argument("--max-in-flight", type=int, default=3, metavar="N",
+                   help="real clock: render a new frame only while fewer than N sent frames wait to be decoded "
+                        "by the client (default 3: enough for a 200 ms round trip at 10 fps)")
     p.set_defaults(func=cmd_serve)
 
     r = sub.add_parser("relay", help="inject latency between clients and a server",
@@ -108,6 +111,7 @@ def cmd_serve(args) -> int:
                           preset=args.preset, projection=args.projection, max_edge_deg=args.max_edge_deg,
                           server_delay_ms=args.server_delay_ms,
                           depth_codec=args.depth_codec, max_sessions=args.max_sessions,
+                          max_in_flight=args.max_in_flight,
                           edge=EdgeSettings(kbps=args.edge_kbps, temporal=not args.edge_no_temporal,
                                             perceptual=args.edge_perceptual))
     try:

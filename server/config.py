@@ -45,6 +45,7 @@ class ServerConfig:
     max_message_size: int = DEFAULT_MAX_MESSAGE_SIZE
     max_sessions: int = 8
     hello_timeout_s: float = 10.0
+    max_in_flight: int = 3              # real clock: frames sent ahead of what the client has decoded
     proxy_settings: ProxySettings = field(default_factory=ProxySettings)
     edge: EdgeSettings = field(default_factory=EdgeSettings)
 
@@ -74,6 +75,8 @@ class ServerConfig:
             raise ConfigError(f"depth codec must be h264 or edge, got {self.depth_codec!r}")
         if self.max_sessions < 1:
             raise ConfigError("max sessions must be at least 1")
+        if not (1 <= self.max_in_flight <= 1000):
+            raise ConfigError(f"frames in flight must be in 1..1000, got {self.max_in_flight}")
         if not (0 <= self.edge.kbps <= 1e6):
             raise ConfigError(f"edge codec bitrate must be in 0..1000000 kbit/s (0: a fixed threshold), "
                               f"got {self.edge.kbps}")

@@ -16,8 +16,8 @@ from collections import deque
 from pibr.protocol.connection import Connection, Envelope
 from pibr.protocol.errors import (ConfigError, ProtocolError, SceneError, UnexpectedMessage,
                                   UnsupportedVersion)
-from pibr.protocol.messages import (PROTOCOL_VERSION, Bye, Clock, Error, Frame, Hello, PayloadKind, PoseMsg,
-                                    Stats, Welcome)
+from pibr.protocol.messages import (FRAMES_DECODED, PROTOCOL_VERSION, Bye, Clock, Error, Frame, Hello, PayloadKind,
+                                    PoseMsg, Stats, Welcome)
 
 from .quadtree import quadtree_payload
 
@@ -44,6 +44,7 @@ class Session:
         self.quadtree_threshold = 0.0   # > 0: every frame carries the views' quadtrees
         self.frames_sent = 0
         self.frames_skipped = 0
+        self.frames_held = 0            # real clock: ticks not rendered while the client caught up
         self.tick_overruns = 0
         self.client_stats: dict = {}
         self._pending: deque = deque()
@@ -128,8 +129,9 @@ class Session:
             await self.server.gl.run(lambda ctx: producer.release())
         if self.encoder is not None:
             self.encoder.close()
-        log.info("session %d: closed after %d frames (%d skipped for a slow client, %d tick overruns)",
-                 self.id, self.frames_sent, self.frames_skipped, self.tick_overruns)
+        log.info("session %d: closed after %d frames (%d skipped for a slow connection, %d held while the client "
+                 "decoded, %d tick overruns)", self.id, self.frames_sent, self.frames_skipped, self.frames_held,
+                 self.tick_overruns)
 
     async def _handshake(self) -> Hello:
         env = await self._recv(timeout=self.server.config.hello_timeout_s)
@@ -232,6 +234,13 @@ class Session:
             await self._flush()
             k += 1
 
+    def _client_behind(self) -> bool:
+        """Real clock: ``max_in_flight`` frames sent are not decoded yet by a client that reports
+        what it decoded (``FRAMES_DECODED``). A new frame now would only queue behind them and
+        be stale when shown; the next tick renders the newest pose instead."""
+        decoded = self.client_stats.get(FRAMES_DECODED)
+        return decoded is not None and self.frames_sent - decoded >= self.server.config.max_in_flight
+
     async def _run_real(self) -> None:
         """Wall clock: render at the server's own rate with the newest pose received."""
         interval = 1.0 / self.config.server_fps
@@ -252,6 +261,8 @@ class Session:
                 if newest[0] is not None:
                     if self.writer.transport.get_write_buffer_size() > SLOW_CLIENT_BACKLOG:
                         self.frames_skipped += 1
+                    elif self._client_behind():
+                        self.frames_held += 1
                     else:
                         t_us = int(round((loop.time() - start) * 1e6))
                         await self._send_frame(newest[0], t_us, t_us, need_keyframe)
@@ -277,5 +288,5 @@ class Session:
 
     def stats(self) -> dict:
         return {"frames_sent": self.frames_sent, "frames_skipped": self.frames_skipped,
-                "tick_overruns": self.tick_overruns}
+                "frames_held": self.frames_held, "tick_overruns": self.tick_overruns}
 

@@ -171,3 +171,47 @@ def test_the_peel_marker_is_a_session_option():
     assert plain.options["peel_marker"] is False and not spec.mark_peeled
     single, _ = plan_session(ServerConfig(view_size=(64, 64), extra_view="off"), room, Hello())
     assert "peel_marker" not in single.options          # no extra view, nothing to mark
+
+
+async def test_real_clock_keeps_at_most_max_in_flight_frames_ahead_of_the_client():
+    """A real-clock client that reports decoding only its first frame gets max_in_flight frames
+    and then none while it lags (the server holds its ticks); once it reports more, frames flow
+    again. A client that never reports is not held back."""
+    from pibr.protocol.messages import FRAMES_DECODED, Frame, Stats
+
+    srv = Server(ServerConfig(port=0, scene="sphere", view_size=(128, 128), fps=20.0, bitrate_kbps=2000,
+                              extra_view="off", max_in_flight=2))
+    host, port = await srv.start()
+    task = asyncio.create_task(srv.serve_forever())
+    real = Hello(client="test", scene="sphere", clock="real", output=OutputConfig(160, 96, 90.0, 30.0))
+
+    async def frames_within(c, seconds: float) -> int:
+        n, end = 0, asyncio.get_running_loop().time() + seconds
+        while (left := end - asyncio.get_running_loop().time()) > 0:
+            try:
+                env = await c.recv(timeout=left)
+            except asyncio.TimeoutError:
+                break
+            n += isinstance(env.message, Frame)
+        return n
+
+    try:
+        silent = await ClientConnection.open(host, port)
+        await silent.handshake(real)
+        lagging = await ClientConnection.open(host, port)
+        cfg = await lagging.handshake(real)
+        for c in (silent, lagging):
+            await c.send(PoseMsg(0, 0, cfg.viewer_origin))
+        await lagging.send(Stats({FRAMES_DECODED: 0}))
+        assert await frames_within(lagging, 2.0) == 2          # two in flight, then held
+        assert await frames_within(silent, 0.1) >= 3           # the other session is not held
+        await lagging.send(Stats({FRAMES_DECODED: 2}))
+        assert await frames_within(lagging, 1.5) == 2          # two more, then held again
+        held = sorted(s.frames_held for s in srv.sessions.values())
+        assert held[0] == 0 and held[1] > 0                    # counted for the lagging one only
+        for c in (silent, lagging):
+            await c.close()
+    finally:
+        task.cancel()
+        await asyncio.gather(task, return_exceptions=True)
+        await srv.close()
