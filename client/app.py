@@ -31,7 +31,8 @@ import numpy as np
 
 from pibr.protocol.errors import ConfigError, UnexpectedMessage
 from pibr.protocol.gl import GLThread
-from pibr.protocol.messages import Clock, Frame, Hello, OutputConfig, PayloadKind, PoseMsg, ProxyChunk, Stats
+from pibr.protocol.messages import (FRAMES_DECODED, Clock, Frame, Hello, OutputConfig, PayloadKind, PoseMsg,
+                                    ProxyChunk, Stats)
 from pibr.protocol.pose import Pose
 
 from .connection import ClientConnection
@@ -41,6 +42,9 @@ from .recorder import POSE_FIELDS, MethodRecorder
 from .video import H264Decoder
 
 log = logging.getLogger(__name__)
+
+#: Sequence number of the poses a real-clock client sends while it warms up, before its clock.
+WARMUP_SEQ = (1 << 32) - 1
 
 
 @dataclass
@@ -63,6 +67,8 @@ class ClientConfig:
     depth_codec: str = ""
     record: bool = True
     lossless: bool = True
+    video: bool = True       # False: records only (no MP4 / lossless copy), the least work per tick
+    warmup_s: float = 60.0   # real clock: longest wait for the first frame before the clock starts
     progress: str = "bar"    # bar, lines (machine-readable on stdout), none
     tau: float = 0.1         # proxy IBR: relative depth error accepted as the same surface
     lod_pixels: float = 6.0  # proxy IBR: on-screen edge length that selects an object's LoD
@@ -118,6 +124,8 @@ class ClientResult:
     bytes_received: int
     handshake_ms: float
     summary: dict = field(default_factory=dict)
+    #: client time (s) each frame was decoded at; the real clock's warm-up ones are negative
+    frame_arrivals_s: list = field(default_factory=list)
 
 
 class _Progress:
@@ -162,6 +170,10 @@ class Client:
         self._depth_decoder = None
         #: server time = client time + this (0 on the virtual clock, estimated on the real one)
         self._server_offset_us = 0
+        #: real clock: client time 0 (tick 0) in microseconds after the receiver started; arrivals
+        #: and warm-up poses are stamped from that start, ticks' poses in client time
+        self._time_base_us = 0
+        self._arrivals_us: list[int] = []
 
     # ------------------------------------------------------------------ set-up
 
@@ -254,7 +266,7 @@ class Client:
             if cfg.record:
                 for m in cfg.methods:
                     self.recorders[m] = MethodRecorder(cfg.out_dir, m, cfg.width, cfg.height, cfg.rate_hz,
-                                                       lossless=cfg.lossless)
+                                                       lossless=cfg.lossless, video=cfg.video)
             interval_us = int(round(1e6 / cfg.rate_hz))
             n_ticks = max(1, int(math.floor(self._duration * cfg.rate_hz + 1e-9)))
             preroll = int(math.ceil(cfg.preroll_s * cfg.rate_hz))
@@ -269,7 +281,8 @@ class Client:
             await self.conn.send(Stats({"ticks": n_ticks, "missed_deadlines": self.missed,
                                         "frames_received": self.frames_received}))
             result = ClientResult(n_ticks, self.frames_received, self.missed, self.conn.bytes_received,
-                                  handshake_ms, {"proxies": self.proxy_stats or None})
+                                  handshake_ms, {"proxies": self.proxy_stats or None},
+                                  [(a - self._time_base_us) / 1e6 for a in self._arrivals_us])
             self._write_session(result, trace)
             return result
         finally:
@@ -325,6 +338,7 @@ class Client:
         image, distances = await loop.run_in_executor(self._decode_pool, decode)
         self._newest = _Decoded(frame, arrival_us, image, distances)
         self.frames_received += 1
+        self._arrivals_us.append(arrival_us)
 
     async def _display(self, tick: int, t_us: int, pose: Pose) -> None:
         """Render all methods for the tick and record them. Recorded times are in client time;
@@ -344,14 +358,17 @@ class Client:
         """One row of ``<method>.records.csv``: the tick, its pose, and the frame shown (if any)."""
         offset = self._server_offset_us
         f = decoded.frame if decoded is not None else None
+        if f is not None:
+            pose_t_us = f.pose_t_us - (self._time_base_us if f.pose_seq == WARMUP_SEQ else 0)
+            arrival_us = decoded.arrival_us - self._time_base_us
         return {
             "tick": tick, "t": t_us / 1e6, "scene_t": (t_us + offset) / 1e6,
             **dict(zip(POSE_FIELDS, pose.as_array())),
             "frame_id": -1 if f is None else f.frame_id,
             "frame_render_t": float("nan") if f is None else (f.render_t_us - offset) / 1e6,
-            "frame_pose_t": float("nan") if f is None else f.pose_t_us / 1e6,
-            "frame_arrival_t": float("nan") if f is None else decoded.arrival_us / 1e6,
-            "age_ms": float("nan") if f is None else (t_us - f.pose_t_us) / 1e3,
+            "frame_pose_t": float("nan") if f is None else pose_t_us / 1e6,
+            "frame_arrival_t": float("nan") if f is None else arrival_us / 1e6,
+            "age_ms": float("nan") if f is None else (t_us - pose_t_us) / 1e3,
             "client_ms": client_ms, "hole_fraction": hole, "missed": missed,
             "frame_scene_t": float("nan") if f is None else f.scene_t_us / 1e6,
             **dict(zip((f"frame_{k}" for k in POSE_FIELDS),
@@ -384,43 +401,67 @@ class Client:
 
     async def _run_real(self, trace, interval_us, n_ticks, preroll, progress, t_hello, t_welcome) -> None:
         loop = asyncio.get_running_loop()
-        zero = loop.time() + preroll * interval_us / 1e6   # tick 0's deadline: client time 0
-        # The server's clock starts when it sends Welcome, estimated half a network round
-        # trip (the handshake minus the server's set-up time) before we received it.
-        one_way = max(0.0, t_welcome - t_hello - self.conn.welcome.setup_us / 1e6) / 2
-        self._server_offset_us = int(round((zero - (t_welcome - one_way)) * 1e6))
-        receiver = asyncio.create_task(self._receive_real(zero), name="client-receiver")
+        origin = loop.time()
+        receiver = asyncio.create_task(self._receive_real(origin), name="client-receiver")
         try:
-            tick = -preroll
-            while tick < n_ticks:
-                deadline = zero + tick * interval_us / 1e6
-                wait = deadline - loop.time()
-                if wait > 0:
-                    await asyncio.wait({receiver}, timeout=wait)
-                if receiver.done():
-                    receiver.result()
-                    raise UnexpectedMessage("server stopped sending before the trace ended")
-                t_us = tick * interval_us
-                pose = self._pose_at(trace, t_us / 1e6)
-                await self.conn.send(PoseMsg(tick + preroll, int((loop.time() - zero) * 1e6), pose),
-                                     vtime_us=t_us)
-                if tick >= 0:
-                    await self._display(tick, t_us, pose)
-                    progress.step()
-                # Ticks whose deadline passed while we worked (the pre-roll's too, which may
-                # run into the first displayed ticks) are not displayed afresh.
-                next_tick = max(tick + 1, math.floor((loop.time() - zero) * 1e6 / interval_us) + 1)
-                for missed_tick in range(max(tick + 1, 0), min(next_tick, n_ticks)):
-                    self.missed += 1
-                    self._repeat_last(missed_tick, missed_tick * interval_us, trace)
-                    progress.step()
-                tick = next_tick
+            await self._warm_up(trace, interval_us, receiver, origin)
+            zero = loop.time() + preroll * interval_us / 1e6   # tick 0's deadline: client time 0
+            self._time_base_us = int(round((zero - origin) * 1e6))
+            # The server's clock starts when it sends Welcome, estimated half a network round
+            # trip (the handshake minus the server's set-up time) before we received it.
+            one_way = max(0.0, t_welcome - t_hello - self.conn.welcome.setup_us / 1e6) / 2
+            self._server_offset_us = int(round((zero - (t_welcome - one_way)) * 1e6))
+            await self._tick_real(trace, interval_us, n_ticks, preroll, progress, receiver, zero)
         finally:
             receiver.cancel()
             try:
                 await receiver
-            except (asyncio.CancelledError, Exception):  # its outcome was already reported above
+            except (asyncio.CancelledError, Exception):  # its outcome was already reported
                 pass
+
+    async def _warm_up(self, trace, interval_us, receiver, origin) -> None:
+        """Before the clock starts: ask for frames at the first pose until one is decoded, then
+        draw every method with it once, untimed. The first draw compiles shader variants and
+        fills caches (seconds on a software rasteriser); on the clock it would miss deadlines
+        and leave a queue of frames behind it."""
+        loop = asyncio.get_running_loop()
+        pose = self._pose_at(trace, 0.0)
+        give_up = loop.time() + self.cfg.warmup_s
+        while self._newest is None:
+            if loop.time() > give_up:
+                raise UnexpectedMessage(f"no frame from the server within {self.cfg.warmup_s:g} s")
+            await self.conn.send(PoseMsg(WARMUP_SEQ, int((loop.time() - origin) * 1e6), pose))
+            await asyncio.wait({receiver}, timeout=interval_us / 1e6)
+            if receiver.done():
+                receiver.result()
+                raise UnexpectedMessage("server stopped sending before the first frame")
+        await self.gl.run(self._gl_render, pose, self._newest, 0.0)
+
+    async def _tick_real(self, trace, interval_us, n_ticks, preroll, progress, receiver, zero) -> None:
+        loop = asyncio.get_running_loop()
+        tick = -preroll
+        while tick < n_ticks:
+            deadline = zero + tick * interval_us / 1e6
+            wait = deadline - loop.time()
+            if wait > 0:
+                await asyncio.wait({receiver}, timeout=wait)
+            if receiver.done():
+                receiver.result()
+                raise UnexpectedMessage("server stopped sending before the trace ended")
+            t_us = tick * interval_us
+            pose = self._pose_at(trace, t_us / 1e6)
+            await self.conn.send(PoseMsg(tick + preroll, int((loop.time() - zero) * 1e6), pose), vtime_us=t_us)
+            if tick >= 0:
+                await self._display(tick, t_us, pose)
+                progress.step()
+            # Ticks whose deadline passed while we worked (the pre-roll's too, which may
+            # run into the first displayed ticks) are not displayed afresh.
+            next_tick = max(tick + 1, math.floor((loop.time() - zero) * 1e6 / interval_us) + 1)
+            for missed_tick in range(max(tick + 1, 0), min(next_tick, n_ticks)):
+                self.missed += 1
+                self._repeat_last(missed_tick, missed_tick * interval_us, trace)
+                progress.step()
+            tick = next_tick
 
     def _repeat_last(self, tick: int, t_us: int, trace) -> None:
         """Record a missed tick: the display kept showing the previous image."""
@@ -436,12 +477,15 @@ class Client:
                           age_ms=age, **dict(zip(POSE_FIELDS, pose.as_array())))
             rec.submit(rgb, record)
 
-    async def _receive_real(self, zero: float) -> None:
+    async def _receive_real(self, origin: float) -> None:
+        """Decode every frame as it arrives (arrival in client time once the clock has started)
+        and tell the server how many are decoded, so it never runs far ahead (FRAMES_DECODED)."""
         loop = asyncio.get_running_loop()
         while True:
             env = await self.conn.recv()
             if isinstance(env.message, Frame):
-                await self._decode(env.message, int((loop.time() - zero) * 1e6))
+                await self._decode(env.message, int((loop.time() - origin) * 1e6))
+                await self.conn.send(Stats({FRAMES_DECODED: self.frames_received}))
             elif not isinstance(env.message, (Clock, Stats)):
                 raise UnexpectedMessage(f"unexpected {env.message.NAME} from the server")
 

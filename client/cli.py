@@ -56,6 +56,8 @@ def register(sub) -> None:
     p.add_argument("--scene", default="", help="ask the server for this scene (default: the server's)")
     p.add_argument("--depth-codec", choices=("h264", "edge"), default=None, help="ask for this depth transport")
     p.add_argument("--no-lossless", action="store_true", help="skip the lossless recording used for metrics")
+    p.add_argument("--no-video", action="store_true",
+                   help="write the per-tick records only, no video: the least work per tick (timing runs)")
     p.add_argument("--tau", type=float, default=0.1,
                    help="proxy: relative depth error still taken as the same surface (default 0.1)")
     p.add_argument("--lod-pixels", type=float, default=6.0,
@@ -144,6 +146,7 @@ def cmd_client(args) -> int:
                        fov_deg=args.fov, start_s=args.start, duration_s=args.duration, preroll_s=args.preroll,
                        anchor=args.anchor,
                        scene=args.scene, depth_codec=args.depth_codec or "", lossless=not args.no_lossless,
+                       video=not args.no_video,
                        progress=args.progress, tau=args.tau, lod_pixels=args.lod_pixels,
                        lod_level=args.lod_level, options=method_knobs(args))
     from .connection import ServerClosed

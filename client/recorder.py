@@ -33,7 +33,8 @@ RECORD_FIELDS = (
 
 class MethodRecorder:
     def __init__(self, out_dir: str, method: str, width: int, height: int, rate_hz: float,
-                 lossless: bool = True, max_pending: int = 4):
+                 lossless: bool = True, max_pending: int = 4, video: bool = True):
+        """video=False writes the records only: the least work per tick, for timing runs."""
         import av
 
         self._av = av
@@ -43,8 +44,8 @@ class MethodRecorder:
         self._containers = []
         self._streams = []
         # (file, codec, pixel format, options): for watching, and lossless for the metrics
-        outputs = [(f"{method}.mp4", "libx264", "yuv420p", {"preset": "ultrafast", "crf": "18"})]
-        if lossless:
+        outputs = [(f"{method}.mp4", "libx264", "yuv420p", {"preset": "ultrafast", "crf": "18"})] if video else []
+        if lossless and video:
             outputs.append((f"{method}.lossless.mkv", "libx264rgb", "rgb24", {"preset": "ultrafast", "qp": "0"}))
         for name, codec, pix_fmt, options in outputs:
             container = av.open(os.path.join(out_dir, name), "w")

@@ -185,3 +185,22 @@ async def test_every_method_runs_in_the_client(relay_endpoint, tmp_path):
     for m in names:
         if m not in ("none", "proxy"):
             assert distance(m, "proxy") < 0.4 * distance("none", "proxy"), (m, distance(m, "proxy"))
+
+
+async def test_real_clock_warms_up_before_its_clock_and_reports_what_it_decoded(relay_endpoint, tmp_path):
+    """The first frame arrives and every method draws it once before tick 0: from the first
+    tick on a frame is shown, its age is at least the round trip and at most the time since the
+    warm-up began; the server, told what was decoded, never ran more than its window ahead."""
+    host, port = relay_endpoint
+    result = await run_client(_cfg(host, port, tmp_path, clock="real", duration_s=1.0, rate_hz=10.0,
+                                   methods=("rotation",), video=False))
+    assert not (tmp_path / "rotation.mp4").exists()                  # records only
+    rows = read_records(tmp_path / "rotation.records.csv")
+    assert len(rows) == result.ticks == 10
+    assert rows[0]["frame_id"] >= 0                                  # warmed up: a frame from tick 0
+    arrivals = json.load(open(tmp_path / "session.json"))["result"]["frame_arrivals_s"]
+    assert len(arrivals) == result.frames_received and arrivals == sorted(arrivals)
+    assert arrivals[0] < 0                                           # the warm-up frame, before tick 0
+    for r in rows:
+        assert r["frame_arrival_t"] <= r["t"] + 1e-9
+        assert 128 <= r["age_ms"] < 128 + 1000 * (r["t"] - arrivals[0]) + 5000
