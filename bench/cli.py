@@ -50,6 +50,18 @@ def _windows(text: str) -> tuple:
         raise argparse.ArgumentTypeError(str(exc)) from None
 
 
+def _codecs(text: str) -> tuple:
+    codecs = tuple(part.strip() for part in text.split(",") if part.strip())
+    bad = [c for c in codecs if c not in ("h264", "edge")]
+    if bad or not codecs:
+        raise argparse.ArgumentTypeError(f"expected h264, edge or both, got {text!r}")
+    return codecs
+
+
+def _counts(text: str) -> tuple:
+    return tuple(_positive_int(part) for part in text.split(",") if part.strip())
+
+
 def _positive(text: str) -> float:
     v = _number(text)
     if v <= 0:
@@ -279,6 +291,31 @@ def register(sub) -> None:
     lo.add_argument("--out", default="out/bench")
     lo.set_defaults(func=cmd_bench_lod)
 
+    rt = bs.add_parser("realtime", help="server, relay and client processes on the wall clock: fps, missed "
+                                        "deadlines, frame age, CPU; and the cost per session",
+                       description="Runs each method with each depth codec as separate server, relay and client "
+                                   "processes on the real clock and reports the server's fps, the client's output "
+                                   "rate and missed deadlines, frame age p50/p99 and each process's CPU share; then "
+                                   "1, 2, 4 ... clients on one server: server CPU-ms per delivered frame (virtual "
+                                   "clock) and fps per client (real clock). Writes realtime.json.")
+    rt.add_argument("--method", type=parse_methods, default=("rotation", "proxy"))
+    rt.add_argument("--depth-codec", type=_codecs, default=("h264", "edge"), metavar="CODEC,...",
+                    help="h264, edge or both (default h264,edge)")
+    rt.add_argument("--clients", type=_counts, default=(1, 2, 4), metavar="N,...",
+                    help="session counts of the cost-per-session runs ('' for none; default 1,2,4)")
+    rt.add_argument("--duration", type=_positive, default=20.0, help="seconds of trace per real-clock run (default 20)")
+    rt.add_argument("--scaling-duration", type=_positive, default=6.0,
+                    help="seconds of trace per client of the virtual-clock cost runs (default 6)")
+    rt.add_argument("--scene", default="room")
+    rt.add_argument("--trace", default="pred6dof-1")
+    rt.add_argument("--start", type=_non_negative, default=30.0, help="seconds into the trace (default 30)")
+    rt.add_argument("--rate", type=_positive, default=30.0, help="output rate Hz (default 30)")
+    rt.add_argument("--size", type=_size, default=(960, 540), metavar="WxH", help="output size (default 960x540)")
+    rt.add_argument("--latency-ms", type=_non_negative, default=128.0, help="round trip (default 128)")
+    rt.add_argument("--server-fps", type=_positive, default=10.0, help="server frame rate asked for (default 10)")
+    rt.add_argument("--out", default="out/bench")
+    rt.set_defaults(func=cmd_bench_realtime)
+
     o = bs.add_parser("optimize-offset", help="search the extra view's offset for the fewest holes",
                       description="Exhaustive (or coarse-to-fine) search over forward offset, height and tilt of "
                                   "the extra view, minimising the mean missing-pixel fraction over traces.")
@@ -298,6 +335,20 @@ def register(sub) -> None:
     o.add_argument("--size", type=_size, default=(192, 108), metavar="WxH")
     o.add_argument("--out", default="out/bench")
     o.set_defaults(func=cmd_bench_offset)
+
+
+def cmd_bench_realtime(args) -> int:
+    from .demo import check_inputs
+    from .realtime import print_realtime, run_realtime_bench
+
+    check_inputs(args.scene, args.trace, args.start, args.duration)
+    r = run_realtime_bench(out_dir=args.out, methods=args.method, depth_codecs=args.depth_codec,
+                           clients=args.clients, duration_s=args.duration, scaling_duration_s=args.scaling_duration,
+                           scene=args.scene, trace=args.trace, start_s=args.start, rate_hz=args.rate,
+                           size=args.size, latency_ms=args.latency_ms, server_fps=args.server_fps)
+    print_realtime(r)
+    print(f"written: {args.out}/realtime.json")
+    return 0
 
 
 def cmd_bench_split(args) -> int:

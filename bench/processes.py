@@ -59,6 +59,16 @@ class PibrProcess:
                 self._listening.set()
         self._listening.set()
 
+    def cpu_seconds(self) -> float | None:
+        """CPU time the child has used so far, user + system, all its threads (None where
+        /proc is not there, or once it has exited)."""
+        try:
+            with open(f"/proc/{self.proc.pid}/stat") as f:
+                fields = f.read().rsplit(")", 1)[1].split()
+        except (OSError, IndexError):
+            return None
+        return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")   # utime, stime
+
     def tail(self) -> str:
         return "\n".join(self._tail)
 
@@ -107,11 +117,26 @@ class PibrProcess:
 def run_pipeline(out_dir: str, server_args: list[str], relay_args: list[str] | None, client_args: list[str],
                  on_progress=None, timeout: float = 1800.0) -> dict:
     """Start server (and relay), run the client to completion, stop the rest. -> timings in seconds."""
+    return run_sessions(out_dir, server_args, relay_args, [client_args], on_progress=on_progress, timeout=timeout)
+
+
+def run_sessions(out_dir: str, server_args: list[str], relay_args: list[str] | None, clients: list[list[str]],
+                 on_progress=None, timeout: float = 1800.0, on_started=None, before_stop=None,
+                 verbose_server: bool = False) -> dict:
+    """Start a server (and a relay in front of it), run every client (each a list of extra
+    arguments) at once to completion, stop the rest. -> timings in seconds.
+
+    A single client writes to ``out_dir``, several to ``out_dir/client-K``; logs go to
+    ``out_dir/logs``. ``on_progress(done, total)`` hears the first client's ticks;
+    ``on_started(processes)`` is called once every process runs, ``before_stop(processes)`` once
+    the clients have ended and before the server and relay are stopped (processes: name ->
+    PibrProcess). ``verbose_server`` logs the server's sessions (INFO) to its log."""
     logs = os.path.join(out_dir, "logs")
     t0 = time.perf_counter()
     procs = []
     try:
-        server = PibrProcess("server", ["serve", "--port", "0", *server_args], os.path.join(logs, "server.log"))
+        server = PibrProcess("server", ["-v"] * verbose_server + ["serve", "--port", "0", *server_args],
+                             os.path.join(logs, "server.log"))
         procs.append(server)
         host, port = server.wait_listening()
         t_server = time.perf_counter()
@@ -122,16 +147,27 @@ def run_pipeline(out_dir: str, server_args: list[str], relay_args: list[str] | N
             procs.append(relay)
             rh, rp = relay.wait_listening(30)
             target = f"{rh}:{rp}"
-        client = PibrProcess("client", ["client", "--connect", target, "--out", out_dir, "--progress", "lines",
-                                        *client_args], os.path.join(logs, "client.log"), on_progress=on_progress)
-        procs.append(client)
-        code = client.wait(timeout)
-        if code != 0:
-            raise ProcessFailed(f"client exited with code {code}; its last output:\n{client.tail()}\n"
-                                f"server's last output:\n{server.tail()}")
-        for p in procs[:-1]:
+        runners = []
+        for k, client_args in enumerate(clients):
+            name = "client" if len(clients) == 1 else f"client-{k + 1}"
+            out = out_dir if len(clients) == 1 else os.path.join(out_dir, name)
+            runners.append(PibrProcess(name, ["client", "--connect", target, "--out", out, "--progress", "lines",
+                                              *client_args], os.path.join(logs, f"{name}.log"),
+                                       on_progress=on_progress if k == 0 else None))
+        procs += runners
+        if on_started is not None:
+            on_started({p.name: p for p in procs})
+        deadline = time.perf_counter() + timeout
+        for client in runners:
+            code = client.wait(max(1.0, deadline - time.perf_counter()))
+            if code != 0:
+                raise ProcessFailed(f"{client.name} exited with code {code}; its last output:\n{client.tail()}\n"
+                                    f"server's last output:\n{server.tail()}")
+        for p in procs[:len(procs) - len(runners)]:
             if p.proc.poll() is not None:
                 raise ProcessFailed(f"{p.name} exited early with code {p.proc.returncode}:\n{p.tail()}")
+        if before_stop is not None:
+            before_stop({p.name: p for p in procs})
         return {"server_start_s": t_server - t0, "total_s": time.perf_counter() - t0}
     finally:
         for p in reversed(procs):

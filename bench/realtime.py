@@ -1,0 +1,225 @@
+"""``pibr bench realtime``: server, relay and client as separate processes on the wall clock.
+
+Each run starts a server, a relay (the round trip split evenly between the two directions)
+and one or more clients on the real clock, replays a trace window at the output rate and
+reports what a user of the system would feel:
+
+* server fps: frames each client received per second of its clock;
+* output rate: ticks displayed afresh per second (a tick whose deadline passed while the
+  client still worked on an earlier one is a missed deadline, shown as a repeat);
+* frame age p50 / p99: display time minus the client time of the pose the shown frame was
+  rendered for (the round trip, the server's frame time, decoding and any queue);
+* CPU share of each process over the client's clock (user + system, all threads; 1.0 is one
+  core busy), sampled from /proc.
+
+``cost per session`` runs 1, 2, 4 ... clients against one server: on the virtual clock, the
+server's CPU-ms per delivered frame (the clients cannot starve it of time: it is CPU time);
+on the real clock, the fps each client gets.
+
+Clients write records only (``--no-video``): the timing is the display loop's, not the
+recorder's. Timings depend on the machine and on whatever else runs: compare rows of one run.
+"""
+from __future__ import annotations
+
+import json
+import os
+import re
+import sys
+import threading
+import time
+
+import numpy as np
+
+from .processes import run_sessions
+from .results import write_result
+
+_SESSION_CLOSED = re.compile(r"closed after (\d+) frames \((\d+) skipped .*?, (\d+) held .*?, (\d+) tick overruns\)")
+
+
+class CpuSampler:
+    """Samples every process's CPU seconds every ``period`` seconds on a thread.
+
+    samples: name -> [(wall time, cpu seconds)]"""
+
+    def __init__(self, period: float = 0.2):
+        self.period = period
+        self.samples: dict[str, list] = {}
+        self._procs: dict = {}
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="cpu-sampler", daemon=True)
+
+    def start(self, procs: dict) -> None:
+        self._procs = dict(procs)
+        self._thread.start()
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            now = time.perf_counter()
+            for name, p in self._procs.items():
+                cpu = p.cpu_seconds()
+                if cpu is not None:
+                    self.samples.setdefault(name, []).append((now, cpu))
+            self._stop.wait(self.period)
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread.is_alive():
+            self._thread.join(2)
+
+    def share(self, name: str, t0: float, t1: float) -> float | None:
+        """Cores' worth of CPU the process used between wall times t0 and t1 (samples nearest)."""
+        s = self.samples.get(name, [])
+        inside = [x for x in s if t0 <= x[0] <= t1]
+        if len(inside) < 2 or inside[-1][0] <= inside[0][0]:
+            return None
+        return (inside[-1][1] - inside[0][1]) / (inside[-1][0] - inside[0][0])
+
+
+class _Ticks:
+    """When the first client's clock ran (its progress lines), in wall time."""
+
+    def __init__(self):
+        self.first = self.last = None
+
+    def __call__(self, done: int, total: int) -> None:
+        now = time.perf_counter()
+        if self.first is None:
+            self.first = now
+        self.last = now
+
+
+def _client_summary(out: str, method: str, duration_s: float, rate_hz: float) -> dict:
+    from pibr.client.recorder import read_records
+
+    with open(os.path.join(out, "session.json")) as f:
+        session = json.load(f)
+    rows = read_records(os.path.join(out, f"{method}.records.csv"))
+    ticks = len(rows)
+    missed = sum(r["missed"] for r in rows)
+    ages = np.array([r["age_ms"] for r in rows], float)
+    ages = ages[np.isfinite(ages)]
+    fresh = [r["client_ms"] for r in rows if not r["missed"] and r["frame_id"] >= 0]
+    arrivals = np.array(session["result"].get("frame_arrivals_s", []), float)
+    on_clock = int(np.count_nonzero((arrivals >= 0) & (arrivals <= duration_s)))
+    # after the client's first progress line (tick 10), where the server's CPU is measured from
+    after_first_line = int(np.count_nonzero(arrivals >= 10 / rate_hz))
+    return {
+        "ticks": ticks, "missed_deadlines": int(missed), "missed_fraction": missed / ticks if ticks else None,
+        "output_hz": (ticks - missed) / duration_s,
+        "frames_received": on_clock, "server_fps": on_clock / duration_s,
+        "age_ms_p50": float(np.percentile(ages, 50)) if len(ages) else None,
+        "age_ms_p99": float(np.percentile(ages, 99)) if len(ages) else None,
+        "client_ms_median": float(np.median(fresh)) if fresh else None,
+        "frames_before_clock": int(np.count_nonzero(arrivals < 0)),
+        "frames_after_first_progress": after_first_line,
+    }
+
+
+def _server_sessions(log_path: str) -> list[dict]:
+    out = []
+    with open(log_path) as f:
+        for line in f:
+            m = _SESSION_CLOSED.search(line)
+            if m:
+                sent, skipped, held, overruns = (int(x) for x in m.groups())
+                out.append({"frames_sent": sent, "skipped_slow_connection": skipped, "held_for_client": held,
+                            "tick_overruns": overruns})
+    return out
+
+
+def run_one(out_dir: str, method: str, depth_codec: str, clients: int = 1, clock: str = "real",
+            scene: str = "room", trace: str = "pred6dof-1", start_s: float = 30.0, duration_s: float = 20.0,
+            rate_hz: float = 30.0, size=(960, 540), latency_ms: float = 128.0, server_fps: float = 10.0,
+            server_args=()) -> dict:
+    """One run: a server, a relay and ``clients`` clients replaying the same window at once."""
+    half = latency_ms / 2.0
+    client_args = ["--trace", trace, "--start", str(start_s), "--duration", str(duration_s), "--rate", str(rate_hz),
+                   "--size", f"{size[0]}x{size[1]}", "--clock", clock, "--method", method,
+                   "--depth-codec", depth_codec, "--no-video"]
+    sampler = CpuSampler()
+    ticks = _Ticks()
+    cpu_end: dict = {}
+
+    def before_stop(procs):
+        cpu_end.update({name: p.cpu_seconds() for name, p in procs.items()})
+
+    t0 = time.perf_counter()
+    try:
+        run_sessions(out_dir, ["--scene", scene, "--fps", str(server_fps), "--depth-codec", depth_codec,
+                               *server_args],
+                     ["--up-ms", str(half), "--down-ms", str(half)], [client_args] * clients,
+                     on_progress=ticks, on_started=sampler.start, before_stop=before_stop, verbose_server=True)
+    finally:
+        sampler.stop()
+    wall = time.perf_counter() - t0
+    outs = [out_dir] if clients == 1 else [os.path.join(out_dir, f"client-{k + 1}") for k in range(clients)]
+    per_client = [_client_summary(o, method, duration_s, rate_hz) for o in outs]
+    result = {"method": method, "depth_codec": depth_codec, "clients": clients, "clock": clock,
+              "wall_s": wall, "per_client": per_client, "server": _server_sessions(
+                  os.path.join(out_dir, "logs", "server.log"))}
+    if ticks.first is not None and ticks.last is not None:
+        names = ["server", "relay"] + (["client"] if clients == 1 else [f"client-{k + 1}" for k in range(clients)])
+        result["cpu_share"] = {n: sampler.share(n, ticks.first, ticks.last) for n in names}
+    # The server's CPU from the first client's first progress line (sessions set up, frames
+    # flowing) to the clients' end, over the frames delivered meanwhile.
+    server_cpu = cpu_end.get("server")
+    at_first = [c for t, c in sampler.samples.get("server", []) if ticks.first is not None and t >= ticks.first]
+    delivered = sum(c["frames_after_first_progress"] for c in per_client)
+    if server_cpu is not None and at_first and delivered:
+        result["server_cpu_ms_per_frame"] = (server_cpu - at_first[0]) * 1e3 / delivered
+    return result
+
+
+def run_realtime_bench(out_dir="out/bench", methods=("rotation", "proxy"), depth_codecs=("h264", "edge"),
+                       clients=(1, 2, 4), duration_s: float = 20.0, scaling_duration_s: float = 6.0,
+                       scene="room", trace="pred6dof-1", start_s: float = 30.0, rate_hz: float = 30.0,
+                       size=(960, 540), latency_ms: float = 128.0, server_fps: float = 10.0,
+                       scaling_method: str = "rotation", progress=True) -> dict:
+    """Every method x depth codec on the real clock, then the cost per session. Writes
+    ``out_dir/realtime.json`` and returns the result."""
+    import platform
+
+    root = os.path.join(out_dir, "realtime")
+    common = dict(scene=scene, trace=trace, start_s=start_s, rate_hz=rate_hz, size=size, latency_ms=latency_ms,
+                  server_fps=server_fps)
+    result = {"benchmark": "realtime", "machine": {"cpus": os.cpu_count(), "platform": platform.platform()},
+              "settings": {**common, "size": list(size), "duration_s": duration_s,
+                           "scaling_duration_s": scaling_duration_s, "scaling_method": scaling_method,
+                           "window": f"{trace} from {start_s:g} s (speed only: no default is fitted here)"},
+              "runs": [], "scaling": []}
+    plan = [("runs", m, d, 1, "real", duration_s) for m in methods for d in depth_codecs]
+    plan += [("scaling", scaling_method, "h264", n, clock, scaling_duration_s if clock == "virtual" else duration_s)
+             for clock in ("virtual", "real") for n in clients]
+    for k, (kind, method, codec, n, clock, dur) in enumerate(plan):
+        label = f"{kind}-{method}-{codec}-{n}x-{clock}"
+        if progress:
+            print(f"[{k + 1}/{len(plan)}] {label} ...", file=sys.stderr, flush=True)
+        r = run_one(os.path.join(root, label), method, codec, clients=n, clock=clock, duration_s=dur, **common)
+        result[kind].append(r)
+    write_result(out_dir, "realtime.json", result)
+    return result
+
+
+def _fmt(x, spec):
+    return "-" if x is None else format(x, spec)
+
+
+def print_realtime(result: dict) -> None:
+    s = result["settings"]
+    print(f"\nreal clock, {s['scene']}, {s['window']}, {s['duration_s']:g} s, output {s['size'][0]}x{s['size'][1]} "
+          f"at {s['rate_hz']:g} Hz, server asked for {s['server_fps']:g} fps, {s['latency_ms']:g} ms round trip")
+    print(f"{'method':>9} {'depth':>5} {'server fps':>10} {'output Hz':>9} {'missed %':>8} {'age p50':>8} "
+          f"{'age p99':>8} {'client ms':>9}   CPU share: server relay client")
+    for r in result["runs"]:
+        c = r["per_client"][0]
+        cpu = r.get("cpu_share", {})
+        print(f"{r['method']:>9} {r['depth_codec']:>5} {c['server_fps']:>10.1f} {c['output_hz']:>9.1f} "
+              f"{100 * c['missed_fraction']:>8.1f} {_fmt(c['age_ms_p50'], '8.0f')} {_fmt(c['age_ms_p99'], '8.0f')} "
+              f"{_fmt(c['client_ms_median'], '9.1f')}   {_fmt(cpu.get('server'), '6.2f')} "
+              f"{_fmt(cpu.get('relay'), '5.2f')} {_fmt(cpu.get('client'), '6.2f')}")
+    if result["scaling"]:
+        print(f"\ncost per session ({s['scaling_method']}, h264 depth): clients on one server")
+        print(f"{'clock':>8} {'clients':>7} {'server CPU-ms/frame':>19} {'fps per client':>24}")
+        for r in result["scaling"]:
+            fps = ", ".join(f"{c['server_fps']:.1f}" for c in r["per_client"]) if r["clock"] == "real" else "-"
+            print(f"{r['clock']:>8} {r['clients']:>7} {_fmt(r.get('server_cpu_ms_per_frame'), '19.0f')} {fps:>24}")
