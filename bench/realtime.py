@@ -41,7 +41,7 @@ class CpuSampler:
 
     samples: name -> [(wall time, cpu seconds)]"""
 
-    def __init__(self, period: float = 0.2):
+    def __init__(self, period: float = 0.1):
         self.period = period
         self.samples: dict[str, list] = {}
         self._procs: dict = {}
@@ -163,10 +163,10 @@ def run_one(out_dir: str, method: str, depth_codec: str, clients: int = 1, clock
     # The server's CPU from the first client's first progress line (sessions set up, frames
     # flowing) to the clients' end, over the frames delivered meanwhile.
     server_cpu = cpu_end.get("server")
-    at_first = [c for t, c in sampler.samples.get("server", []) if ticks.first is not None and t >= ticks.first]
+    before_first = [c for t, c in sampler.samples.get("server", []) if ticks.first is not None and t <= ticks.first]
     delivered = sum(c["frames_after_first_progress"] for c in per_client)
-    if server_cpu is not None and at_first and delivered:
-        result["server_cpu_ms_per_frame"] = (server_cpu - at_first[0]) * 1e3 / delivered
+    if server_cpu is not None and before_first and delivered:
+        result["server_cpu_ms_per_frame"] = (server_cpu - before_first[-1]) * 1e3 / delivered
     return result
 
 
@@ -174,7 +174,7 @@ def run_realtime_bench(out_dir="out/bench", methods=("rotation", "proxy"), depth
                        clients=(1, 2, 4), duration_s: float = 20.0, scaling_duration_s: float = 6.0,
                        scene="room", trace="pred6dof-1", start_s: float = 30.0, rate_hz: float = 30.0,
                        size=(960, 540), latency_ms: float = 128.0, server_fps: float = 10.0,
-                       scaling_method: str = "rotation", progress=True) -> dict:
+                       scaling_method: str = "rotation", progress=True, server_args=()) -> dict:
     """Every method x depth codec on the real clock, then the cost per session. Writes
     ``out_dir/realtime.json`` and returns the result."""
     import platform
@@ -182,8 +182,9 @@ def run_realtime_bench(out_dir="out/bench", methods=("rotation", "proxy"), depth
     root = os.path.join(out_dir, "realtime")
     common = dict(scene=scene, trace=trace, start_s=start_s, rate_hz=rate_hz, size=size, latency_ms=latency_ms,
                   server_fps=server_fps)
+    run_args = dict(common, server_args=tuple(server_args))
     result = {"benchmark": "realtime", "machine": {"cpus": os.cpu_count(), "platform": platform.platform()},
-              "settings": {**common, "size": list(size), "duration_s": duration_s,
+              "settings": {**common, "size": list(size), "duration_s": duration_s, "server_args": list(server_args),
                            "scaling_duration_s": scaling_duration_s, "scaling_method": scaling_method,
                            "window": f"{trace} from {start_s:g} s (speed only: no default is fitted here)"},
               "runs": [], "scaling": []}
@@ -194,7 +195,7 @@ def run_realtime_bench(out_dir="out/bench", methods=("rotation", "proxy"), depth
         label = f"{kind}-{method}-{codec}-{n}x-{clock}"
         if progress:
             print(f"[{k + 1}/{len(plan)}] {label} ...", file=sys.stderr, flush=True)
-        r = run_one(os.path.join(root, label), method, codec, clients=n, clock=clock, duration_s=dur, **common)
+        r = run_one(os.path.join(root, label), method, codec, clients=n, clock=clock, duration_s=dur, **run_args)
         result[kind].append(r)
     write_result(out_dir, "realtime.json", result)
     return result
