@@ -29,7 +29,8 @@ say what happened and why; ``enclosed_fraction`` and ``max_outside_distance`` ar
 measured on the proxy returned.
 
 Everything is numpy/scipy (trimesh's ``contains`` needs rtree or embree, neither installed), but for
-the point-mesh queries that encaging repeats: numba kernels in :mod:`.mesh_queries`.
+the point-mesh queries that encaging repeats and the surface voxelization: numba kernels in
+:mod:`.mesh_queries` and :mod:`.voxelize`.
 """
 from __future__ import annotations
 
@@ -45,12 +46,11 @@ from pibr.protocol.errors import SceneError
 
 from .mesh_queries import closest_points_on_mesh, winding_numbers
 from .scene import Mesh
+from .voxelize import CLOSING_VOXELS, voxel_hull
 
 #: Default encaging tolerance, in voxels: an original vertex at most this far outside the proxy
 #: counts as enclosed. A tenth of a voxel is far below what the voxel hull resolves anyway.
 DEFAULT_TOLERANCE_VOXELS = 0.1
-#: Morphological closing radius, voxels.
-CLOSING_VOXELS = 1
 #: Empty voxels around the object's grid: the closing's dilation must not reach the border,
 #: and marching cubes needs an empty layer to close the surface.
 PADDING_VOXELS = CLOSING_VOXELS + 1
@@ -153,54 +153,6 @@ def signed_volume(vertices: np.ndarray, faces: np.ndarray) -> float:
 
 
 # ----------------------------------------------------------------------------- pipeline stages
-
-def surface_samples(vertices: np.ndarray, faces: np.ndarray, spacing: float,
-                    max_points_per_chunk: int = 2_000_000):
-    """Yield (k, 3) float64 points covering every triangle with at most ``spacing`` between
-    neighbours (a barycentric grid per triangle; degenerate triangles give points on their edges)."""
-    v = np.asarray(vertices, dtype=np.float64)
-    tri = v[np.asarray(faces, dtype=np.int64)]
-    longest = np.sqrt(np.max(np.stack([np.sum((tri[:, i] - tri[:, j]) ** 2, axis=1)
-                                       for i, j in ((0, 1), (1, 2), (2, 0))]), axis=0))
-    divisions = np.maximum(1, np.ceil(longest / spacing)).astype(np.int64)
-    for n in np.unique(divisions):
-        i, j = np.meshgrid(np.arange(n + 1), np.arange(n + 1), indexing="ij")
-        keep = (i + j) <= n
-        w1, w2 = i[keep] / n, j[keep] / n
-        w0 = 1.0 - w1 - w2
-        group = tri[divisions == n]
-        per_chunk = max(1, max_points_per_chunk // len(w0))
-        for s in range(0, len(group), per_chunk):
-            g = group[s:s + per_chunk]
-            pts = (g[:, None, 0] * w0[None, :, None] + g[:, None, 1] * w1[None, :, None]
-                   + g[:, None, 2] * w2[None, :, None])
-            yield pts.reshape(-1, 3)
-
-
-def voxel_hull(vertices: np.ndarray, faces: np.ndarray, lo: np.ndarray, voxel: float,
-               dims: np.ndarray) -> np.ndarray:
-    """Solid (dims) bool grid of the surface's voxels, gaps closed, inside filled.
-
-    Voxel (i, j, k) covers ``lo + [i, i + 1) * voxel`` (per axis), ``lo`` including the padding.
-    """
-    from scipy import ndimage
-
-    occupied = np.zeros(tuple(int(d) for d in dims), dtype=bool)
-    for pts in surface_samples(vertices, faces, 0.5 * voxel):
-        idx = np.floor((pts - lo) / voxel).astype(np.int64)
-        np.clip(idx, 0, dims - 1, out=idx)
-        occupied[idx[:, 0], idx[:, 1], idx[:, 2]] = True
-    # Closing, not a plain dilation: dilate-then-erode by one voxel bridges gaps up to two voxels
-    # wide (cracks between samples of a coarse sampling, small holes of open meshes, seams between
-    # touching parts) that would let the flood fill leak inside, yet leaves the outer surface where
-    # it was. A dilation would also close them but would inflate the whole proxy by a voxel; the
-    # encaging pass already guarantees enclosure, so the hull need not be conservative.
-    cube = np.ones((3, 3, 3), dtype=bool)
-    closed = ndimage.binary_closing(occupied, structure=cube, iterations=CLOSING_VOXELS)
-    # Flood the empty space from outside (6-connected, the complement of a 26-connected solid)
-    # and invert: binary_fill_holes does exactly that, so internal cavities become solid.
-    return ndimage.binary_fill_holes(closed)
-
 
 def hull_surface(solid: np.ndarray, lo: np.ndarray, voxel: float) -> tuple[np.ndarray, np.ndarray]:
     """Marching cubes of a padded solid grid: ((n, 3) float64 vertices, (m, 3) int64 faces), outward."""

@@ -1,6 +1,7 @@
-"""The numpy broadcasts that computed winding numbers and closest points before the numba kernels
-of :mod:`pibr.scenes.mesh_queries` (main at 2aab3c5, ``scenes/lod.py``), kept verbatim as the
-reference the kernels must reproduce bit for bit (``test_mesh_queries.py``)."""
+"""The numpy / scipy code that computed winding numbers, closest points and voxel hulls before the
+numba kernels of :mod:`pibr.scenes.mesh_queries` and :mod:`pibr.scenes.voxelize` (main at
+2aab3c5, ``scenes/lod.py``), kept verbatim as the reference they must reproduce bit for bit
+(``test_lod_kernels.py``)."""
 from __future__ import annotations
 
 import numpy as np
@@ -140,3 +141,54 @@ def _closest_on_triangles(p: np.ndarray, tri: np.ndarray) -> np.ndarray:
                 best_d2 = np.where(closer, d2_, best_d2)
         out[:, degenerate] = best
     return out
+
+
+CLOSING_VOXELS = 1
+
+
+def surface_samples(vertices: np.ndarray, faces: np.ndarray, spacing: float,
+                    max_points_per_chunk: int = 2_000_000):
+    """Yield (k, 3) float64 points covering every triangle with at most ``spacing`` between
+    neighbours (a barycentric grid per triangle; degenerate triangles give points on their edges)."""
+    v = np.asarray(vertices, dtype=np.float64)
+    tri = v[np.asarray(faces, dtype=np.int64)]
+    longest = np.sqrt(np.max(np.stack([np.sum((tri[:, i] - tri[:, j]) ** 2, axis=1)
+                                       for i, j in ((0, 1), (1, 2), (2, 0))]), axis=0))
+    divisions = np.maximum(1, np.ceil(longest / spacing)).astype(np.int64)
+    for n in np.unique(divisions):
+        i, j = np.meshgrid(np.arange(n + 1), np.arange(n + 1), indexing="ij")
+        keep = (i + j) <= n
+        w1, w2 = i[keep] / n, j[keep] / n
+        w0 = 1.0 - w1 - w2
+        group = tri[divisions == n]
+        per_chunk = max(1, max_points_per_chunk // len(w0))
+        for s in range(0, len(group), per_chunk):
+            g = group[s:s + per_chunk]
+            pts = (g[:, None, 0] * w0[None, :, None] + g[:, None, 1] * w1[None, :, None]
+                   + g[:, None, 2] * w2[None, :, None])
+            yield pts.reshape(-1, 3)
+
+
+def voxel_hull(vertices: np.ndarray, faces: np.ndarray, lo: np.ndarray, voxel: float,
+               dims: np.ndarray) -> np.ndarray:
+    """Solid (dims) bool grid of the surface's voxels, gaps closed, inside filled.
+
+    Voxel (i, j, k) covers ``lo + [i, i + 1) * voxel`` (per axis), ``lo`` including the padding.
+    """
+    from scipy import ndimage
+
+    occupied = np.zeros(tuple(int(d) for d in dims), dtype=bool)
+    for pts in surface_samples(vertices, faces, 0.5 * voxel):
+        idx = np.floor((pts - lo) / voxel).astype(np.int64)
+        np.clip(idx, 0, dims - 1, out=idx)
+        occupied[idx[:, 0], idx[:, 1], idx[:, 2]] = True
+    # Closing, not a plain dilation: dilate-then-erode by one voxel bridges gaps up to two voxels
+    # wide (cracks between samples of a coarse sampling, small holes of open meshes, seams between
+    # touching parts) that would let the flood fill leak inside, yet leaves the outer surface where
+    # it was. A dilation would also close them but would inflate the whole proxy by a voxel; the
+    # encaging pass already guarantees enclosure, so the hull need not be conservative.
+    cube = np.ones((3, 3, 3), dtype=bool)
+    closed = ndimage.binary_closing(occupied, structure=cube, iterations=CLOSING_VOXELS)
+    # Flood the empty space from outside (6-connected, the complement of a 26-connected solid)
+    # and invert: binary_fill_holes does exactly that, so internal cavities become solid.
+    return ndimage.binary_fill_holes(closed)
