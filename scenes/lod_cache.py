@@ -218,14 +218,6 @@ def lods_for_scene(scene, resolution: int = 128, target_fraction: float = 0.005,
     return {obj.name: by_name[obj.name] for obj in scene.objects}
 
 
-def _one_thread() -> None:
-    """Worker initializer: the workers already take a core each, so their numba kernels run
-    single-threaded rather than oversubscribing the cores."""
-    import numba
-
-    numba.set_num_threads(1)
-
-
 def _generate_in_parallel(by_key: dict, todo: list, workers: int, directory: Path, params: dict, bar) -> dict:
     """Generate the meshes of ``todo`` (cache keys) in ``workers`` processes -> key -> LodResult.
     Each worker writes its cache file; the counters of this process count what they made."""
@@ -234,7 +226,7 @@ def _generate_in_parallel(by_key: dict, todo: list, workers: int, directory: Pat
 
     out = {}
     context = multiprocessing.get_context("spawn")   # no fork of a process that may hold GL or threads
-    with concurrent.futures.ProcessPoolExecutor(workers, mp_context=context, initializer=_one_thread) as pool:
+    with concurrent.futures.ProcessPoolExecutor(workers, mp_context=context) as pool:
         # largest meshes first, so that no big one starts last while the other workers idle
         order = sorted(todo, key=lambda k: -by_key[k][0].mesh.triangle_count)
         futures = {pool.submit(cached_lod, by_key[k][0].mesh, directory=directory, **params): k for k in order}

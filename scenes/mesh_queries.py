@@ -1,31 +1,28 @@
 """Point-versus-triangle-mesh queries of the LoD generator (:mod:`.lod`): winding numbers, closest points.
 
 Both are O(points x triangles); encaging asks them dozens of times per object, so they are
-numba kernels, parallel over points (``prange``). They give *the same bits* as the numpy
-broadcasts they replace (kept as the reference in ``tests/scenes/lod_reference.py``): every
+numba kernels, one fused loop over points and triangles each. They give *the same bits* as the
+numpy broadcasts they replace (kept as the reference in ``tests/scenes/lod_reference.py``): every
 quantity is formed by the same IEEE operations in the same order (no FMA contraction, no
-reassociation; three-term sums grouped as numpy's reductions and ``einsum`` group them). The winding number's
-arctangents and their sum over triangles stay with numpy -- its ``arctan2`` (a SIMD
-implementation on AVX-512 machines) differs from libm's in the last bit for a few per cent of
-arguments, and its row sum is pairwise -- so the kernel fills the two arctangent arguments and
-numpy finishes the row, on chunks of the same shape as before.
+reassociation; three-term sums grouped as numpy's reductions and ``einsum`` group them). The
+winding number's arctangents and their sum over triangles stay with numpy -- its ``arctan2`` (a
+SIMD implementation on AVX-512 machines) differs from libm's in the last bit for a few per cent
+of arguments, and its row sum is pairwise -- so the kernel fills the two arctangent arguments
+and numpy finishes the rows, on chunks of the same shape as before.
+
+The kernels run on one thread. Variants parallel over points (``prange``), bit-identical too,
+were slower at every size measured on the 2-core machine shared with other jobs (the torus
+knot's whole build 1.56 s instead of 0.92 s wall): a parallel launch waits for a busy core, and
+the slowest thread sets the pace. The LoD cache already generates meshes in one process per
+core (:func:`pibr.scenes.lod_cache.lods_for_scene`).
 """
 from __future__ import annotations
 
-import numba
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
-#: Queries of fewer point-triangle pairs run on one thread: waking the others costs more than
-#: they save (on a loaded machine a parallel launch can wait milliseconds for a core).
-PARALLEL_MIN_PAIRS = 1_000_000
 #: Point-triangle pairs per winding-number chunk (the (k, m) argument arrays of one chunk).
 WINDING_CHUNK_PAIRS = 500_000
-
-
-def _parallel(pairs: int) -> bool:
-    """Whether a query of this many point-triangle pairs should use the parallel kernel."""
-    return pairs >= PARALLEL_MIN_PAIRS and numba.get_num_threads() > 1
 
 
 def _triangles(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
@@ -47,12 +44,11 @@ def winding_numbers(points: np.ndarray, vertices: np.ndarray, faces: np.ndarray,
     if len(tri) == 0 or len(p) == 0:
         return out
     step = max(1, chunk_pairs // len(tri))
-    kernel = _solid_angle_arguments_parallel if _parallel(len(p) * len(tri)) else _solid_angle_arguments
     det = np.empty((min(step, len(p)), len(tri)))
     denom = np.empty_like(det)
     for s in range(0, len(p), step):
         k = min(step, len(p) - s)
-        kernel(p[s:s + k], tri, det[:k], denom[:k])
+        _solid_angle_arguments(p[s:s + k], tri, det[:k], denom[:k])
         out[s:s + k] = np.arctan2(det[:k], denom[:k]).sum(axis=1) / (2.0 * np.pi)
     return out
 
@@ -65,35 +61,24 @@ def _dot(x0, x1, x2, y0, y1, y2):
 
 
 @njit(cache=True)
-def _solid_angle_row(p, i, tri, det, denom):
-    """Fill row i of (k, m) ``det`` and ``denom``: the solid angle of triangle j seen from point i
-    of p (k, 3) is 2 atan2(det, denom) (Van Oosterom and Strackee); tri (m, 3, 3)."""
-    px, py, pz = p[i, 0], p[i, 1], p[i, 2]
-    for j in range(tri.shape[0]):
-        ax, ay, az = tri[j, 0, 0] - px, tri[j, 0, 1] - py, tri[j, 0, 2] - pz
-        bx, by, bz = tri[j, 1, 0] - px, tri[j, 1, 1] - py, tri[j, 1, 2] - pz
-        cx, cy, cz = tri[j, 2, 0] - px, tri[j, 2, 1] - py, tri[j, 2, 2] - pz
-        la = np.sqrt(0.0 + ax * ax + ay * ay + az * az)
-        lb = np.sqrt(0.0 + bx * bx + by * by + bz * bz)
-        lc = np.sqrt(0.0 + cx * cx + cy * cy + cz * cz)
-        # a . (b x c), the cross product's terms as numpy.cross forms them
-        det[i, j] = _dot(ax, ay, az, by * cz - bz * cy, bz * cx - bx * cz, bx * cy - by * cx)
-        ab = _dot(ax, ay, az, bx, by, bz)
-        bc = _dot(bx, by, bz, cx, cy, cz)
-        ca = _dot(cx, cy, cz, ax, ay, az)
-        denom[i, j] = la * lb * lc + ab * lc + bc * la + ca * lb
-
-
-@njit(cache=True)
 def _solid_angle_arguments(p, tri, det, denom):
+    """Fill (k, m) ``det`` and ``denom``: the solid angle of triangle j of ``tri`` (m, 3, 3) seen
+    from point i of p (k, 3) is 2 atan2(det, denom) (Van Oosterom and Strackee)."""
     for i in range(p.shape[0]):
-        _solid_angle_row(p, i, tri, det, denom)
-
-
-@njit(cache=True, parallel=True)
-def _solid_angle_arguments_parallel(p, tri, det, denom):
-    for i in prange(p.shape[0]):
-        _solid_angle_row(p, i, tri, det, denom)
+        px, py, pz = p[i, 0], p[i, 1], p[i, 2]
+        for j in range(tri.shape[0]):
+            ax, ay, az = tri[j, 0, 0] - px, tri[j, 0, 1] - py, tri[j, 0, 2] - pz
+            bx, by, bz = tri[j, 1, 0] - px, tri[j, 1, 1] - py, tri[j, 1, 2] - pz
+            cx, cy, cz = tri[j, 2, 0] - px, tri[j, 2, 1] - py, tri[j, 2, 2] - pz
+            la = np.sqrt(0.0 + ax * ax + ay * ay + az * az)
+            lb = np.sqrt(0.0 + bx * bx + by * by + bz * bz)
+            lc = np.sqrt(0.0 + cx * cx + cy * cy + cz * cz)
+            # a . (b x c), the cross product's terms as numpy.cross forms them
+            det[i, j] = _dot(ax, ay, az, by * cz - bz * cy, bz * cx - bx * cz, bx * cy - by * cx)
+            ab = _dot(ax, ay, az, bx, by, bz)
+            bc = _dot(bx, by, bz, cx, cy, cz)
+            ca = _dot(cx, cy, cz, ax, ay, az)
+            denom[i, j] = la * lb * lc + ab * lc + bc * la + ca * lb
 
 
 def closest_points_on_mesh(points: np.ndarray, vertices: np.ndarray, faces: np.ndarray,
@@ -120,9 +105,8 @@ def closest_points_on_mesh(points: np.ndarray, vertices: np.ndarray, faces: np.n
     scale2 = np.max(np.stack([np.sum((tri[:, i] - tri[:, j]) ** 2, axis=1)
                               for i, j in ((0, 1), (1, 2), (2, 0))]), axis=0)
     degenerate = area2 <= 1e-12 * np.maximum(scale2, 1e-300)
-    kernel = _closest_points_parallel if _parallel(n * len(tri)) else _closest_points
-    kernel(p, tri, np.ascontiguousarray(normals), degenerate, facing_slack is not None,
-           0.0 if facing_slack is None else float(facing_slack), best_d, best_q, best_t)
+    _closest_points(p, tri, np.ascontiguousarray(normals), degenerate, facing_slack is not None,
+                    0.0 if facing_slack is None else float(facing_slack), best_d, best_q, best_t)
     return best_d, best_q, best_t
 
 
@@ -197,36 +181,25 @@ def _closest_on_triangle(px, py, pz, tri, j, degenerate):
 
 
 @njit(cache=True)
-def _closest_point_row(p, i, tri, normals, degenerate, prefer_facing, facing_slack, best_d, best_q, best_t):
-    """Fill best_d[i], best_q[i], best_t[i] for point i of p (n, 3) against tri (m, 3, 3) with
-    normals (m, 3) and degenerate (m,) bool. The score is the distance, plus ``facing_slack`` for
-    a triangle showing the point its back when ``prefer_facing``; the lowest score wins, the
-    first on a tie (a NaN score wins at once, as in numpy.argmin)."""
-    px, py, pz = p[i, 0], p[i, 1], p[i, 2]
-    best_score = np.inf
-    for j in range(tri.shape[0]):
-        qx, qy, qz = _closest_on_triangle(px, py, pz, tri, j, degenerate[j])
-        dist = np.sqrt(0.0 + (qx - px) * (qx - px) + (qy - py) * (qy - py) + (qz - pz) * (qz - pz))
-        score = dist
-        if prefer_facing:
-            facing = _dot(px - qx, py - qy, pz - qz, normals[j, 0], normals[j, 1], normals[j, 2])
-            if facing < 0.0:
-                score = dist + facing_slack
-        if j == 0 or score < best_score or (np.isnan(score) and not np.isnan(best_score)):
-            best_score = score
-            best_d[i], best_t[i] = dist, j
-            best_q[i, 0], best_q[i, 1], best_q[i, 2] = qx, qy, qz
-        if np.isnan(best_score):
-            break
-
-
-@njit(cache=True)
 def _closest_points(p, tri, normals, degenerate, prefer_facing, facing_slack, best_d, best_q, best_t):
+    """Fill best_d (n,), best_q (n, 3), best_t (n,) for the points p (n, 3) against tri (m, 3, 3)
+    with normals (m, 3) and degenerate (m,) bool. The score is the distance, plus ``facing_slack``
+    for a triangle showing the point its back when ``prefer_facing``; the lowest score wins, the
+    first on a tie (a NaN score wins at once, as in numpy.argmin)."""
     for i in range(p.shape[0]):
-        _closest_point_row(p, i, tri, normals, degenerate, prefer_facing, facing_slack, best_d, best_q, best_t)
-
-
-@njit(cache=True, parallel=True)
-def _closest_points_parallel(p, tri, normals, degenerate, prefer_facing, facing_slack, best_d, best_q, best_t):
-    for i in prange(p.shape[0]):
-        _closest_point_row(p, i, tri, normals, degenerate, prefer_facing, facing_slack, best_d, best_q, best_t)
+        px, py, pz = p[i, 0], p[i, 1], p[i, 2]
+        best_score = np.inf
+        for j in range(tri.shape[0]):
+            qx, qy, qz = _closest_on_triangle(px, py, pz, tri, j, degenerate[j])
+            dist = np.sqrt(0.0 + (qx - px) * (qx - px) + (qy - py) * (qy - py) + (qz - pz) * (qz - pz))
+            score = dist
+            if prefer_facing:
+                facing = _dot(px - qx, py - qy, pz - qz, normals[j, 0], normals[j, 1], normals[j, 2])
+                if facing < 0.0:
+                    score = dist + facing_slack
+            if j == 0 or score < best_score or (np.isnan(score) and not np.isnan(best_score)):
+                best_score = score
+                best_d[i], best_t[i] = dist, j
+                best_q[i, 0], best_q[i, 1], best_q[i, 2] = qx, qy, qz
+            if np.isnan(best_score):
+                break

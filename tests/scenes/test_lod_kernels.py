@@ -21,13 +21,6 @@ def room():
     return load_scene("room")
 
 
-@pytest.fixture(params=["serial", "parallel"])
-def kernels(request, monkeypatch):
-    """Run the queries with the serial or (from the first pair on) the parallel kernels."""
-    monkeypatch.setattr(mesh_queries, "PARALLEL_MIN_PAIRS", 10 ** 18 if request.param == "serial" else 0)
-    return request.param
-
-
 def _sphere_with_slivers():
     """A tessellated unit sphere plus a collinear, a collapsed and an edge-like triangle."""
     mesh = prim.sphere(1.0, 24, 12)
@@ -48,7 +41,7 @@ def _query_points(v):
     }
 
 
-def test_winding_numbers_are_bit_identical_to_the_numpy_reference(kernels):
+def test_winding_numbers_are_bit_identical_to_the_numpy_reference():
     v, f = _sphere_with_slivers()
     for name, pts in _query_points(v).items():
         for faces in (f, f[:-3]):
@@ -63,7 +56,7 @@ def test_winding_numbers_are_bit_identical_to_the_numpy_reference(kernels):
 
 
 @pytest.mark.parametrize("facing_slack", [None, 0.0, 0.05])
-def test_closest_points_are_bit_identical_to_the_numpy_reference(kernels, facing_slack):
+def test_closest_points_are_bit_identical_to_the_numpy_reference(facing_slack):
     v, f = _sphere_with_slivers()
     for name, pts in _query_points(v).items():
         got = mesh_queries.closest_points_on_mesh(pts, v, f, facing_slack=facing_slack)
