@@ -227,7 +227,9 @@ def _generate_in_parallel(by_key: dict, todo: list, workers: int, directory: Pat
     out = {}
     context = multiprocessing.get_context("spawn")   # no fork of a process that may hold GL or threads
     with concurrent.futures.ProcessPoolExecutor(workers, mp_context=context) as pool:
-        futures = {pool.submit(cached_lod, by_key[k][0].mesh, directory=directory, **params): k for k in todo}
+        # largest meshes first, so that no big one starts last while the other workers idle
+        order = sorted(todo, key=lambda k: -by_key[k][0].mesh.triangle_count)
+        futures = {pool.submit(cached_lod, by_key[k][0].mesh, directory=directory, **params): k for k in order}
         for future in concurrent.futures.as_completed(futures):
             key = futures[future]
             out[key] = future.result()
