@@ -15,7 +15,7 @@ framebuffer read returns rows in image order.
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -37,6 +37,13 @@ DECAL_OFFSET_UNITS = 4.0
 GL_CLIP_DISTANCE0 = 0x3000  # moderngl has no name for it; see moderngl issue #620
 _VERTEX_FORMAT = "3f 3f 2f 4f1"
 _VERTEX_ATTRS = ("in_position", "in_normal", "in_uv", "in_color")
+
+def edge_angle_for_width(angle_deg: float, reference_width: int, width: int) -> float:
+    """Edge angle giving a view ``width`` pixels wide the same bend in pixels as ``angle_deg`` gives
+    one ``reference_width`` wide: a chord spanning angle a strays from the projected curve by
+    about a^2 / 8 radians, so a half-size view takes sqrt(2) times longer edges."""
+    return float(angle_deg) * float(np.sqrt(reference_width / width))
+
 
 def _vec3(v) -> str:
     return "vec3(%s)" % ", ".join(repr(float(x)) for x in v)
@@ -357,11 +364,51 @@ def _interleave(mesh) -> np.ndarray:
     return rec
 
 
+#: Triangles per culling chunk: runs of consecutive faces whose bounding boxes are tested
+#: against each wide view's hemisphere every frame. Smaller chunks cull more precisely but
+#: cost more draw calls.
+CHUNK_TRIANGLES = 2048
+#: A chunk is culled when every corner of its box lies this far behind the camera plane
+#: (p_z > margin, metres): float32 rounding on the GPU must not bring a vertex forward.
+CULL_MARGIN = 1e-4
+
+
+def chunk_boxes(mesh, chunk: int = CHUNK_TRIANGLES) -> np.ndarray:
+    """Object-space corners (k, 8, 3) float64 of the boxes around faces [i * chunk, (i + 1) * chunk)."""
+    tri = mesh.vertices[mesh.faces].astype(np.float64)          # (m, 3, 3)
+    k = -(-len(tri) // chunk)
+    lo = np.empty((k, 3))
+    hi = np.empty((k, 3))
+    for i in range(k):
+        part = tri[i * chunk:(i + 1) * chunk].reshape(-1, 3)
+        lo[i], hi[i] = part.min(0), part.max(0)
+    pick = np.array([[i, j, l] for i in (0, 1) for j in (0, 1) for l in (0, 1)])   # (8, 3) 0 = lo, 1 = hi
+    return np.where(pick[None, :, :] == 0, lo[:, None, :], hi[:, None, :])
+
+
+def visible_runs(corners: np.ndarray, model_view: np.ndarray, chunk: int, faces: int) -> list[tuple[int, int]]:
+    """(first face, face count) runs of the chunks not wholly behind a camera (p_z > 0 is behind).
+
+    corners : (k, 8, 3) object-space chunk boxes; model_view : (4, 4) object -> camera. A wide
+    view rasterises nothing of a triangle whose vertices all lie behind its camera (they land
+    at |t'_x| >= 1, see protocol/projection.py), so dropping such chunks leaves every pixel as
+    it was; runs keep the faces' order, so depth ties resolve as before.
+    """
+    z = corners @ model_view[2, :3] + model_view[2, 3]            # (k, 8)
+    keep = z.min(axis=1) <= CULL_MARGIN
+    if keep.all():
+        return [(0, faces)]
+    edges = np.flatnonzero(np.diff(np.concatenate(([False], keep, [False])).astype(np.int8)))
+    return [(int(a) * chunk, min(int(b) * chunk, faces) - int(a) * chunk) for a, b in zip(edges[::2], edges[1::2])]
+
+
 class _GPUMesh:
     def __init__(self, ctx, mesh, programs: dict):
         self.vbo = ctx.buffer(_interleave(mesh).tobytes())
         self.ibo = ctx.buffer(mesh.faces.astype(np.uint32).tobytes())
         self.count = mesh.faces.size
+        self.faces = len(mesh.faces)
+        self.chunk_corners = chunk_boxes(mesh)
         self.vaos = {name: ctx.vertex_array(prog, [(self.vbo, _VERTEX_FORMAT, *_VERTEX_ATTRS)],
                                             index_buffer=self.ibo, index_element_size=4,
                                             skip_errors=True)
@@ -378,8 +425,10 @@ class _GPUMesh:
 class _GPUObject:
     obj: object
     original: _GPUMesh
-    tessellated: _GPUMesh | None
+    tessellated: _GPUMesh | None   # at the renderer's edge angle
     texture: object | None
+    #: further pre-tessellated copies by edge angle (degrees), for views of other sizes
+    coarser: dict = field(default_factory=dict)
 
 
 class RenderTarget:
@@ -425,11 +474,15 @@ class Renderer:
 
     def __init__(self, ctx, scene: Scene, projection: str = DEFAULT_PROJECTION,
                  max_edge_angle_deg: float = MAX_EDGE_ANGLE_DEG, tess_max_level: int = 64,
-                 tess_max_screen_edge: float = 48.0, wide: bool = True):
+                 tess_max_screen_edge: float = 48.0, wide: bool = True, cull: bool = True):
         if projection not in PROJECTIONS:
             raise ValueError(f"projection must be one of {', '.join(PROJECTIONS)}, got {projection!r}")
         self.ctx, self.scene, self.projection = ctx, scene, projection
+        #: Wide views skip chunks of triangles wholly behind their camera (same pixels, less work).
+        self.cull = cull
+        self.drawn_triangles = 0   # triangles sent by the last culled draw (diagnostics)
         self.max_edge_angle = np.radians(max_edge_angle_deg)
+        self.max_edge_angle_deg = float(max_edge_angle_deg)
         self.tess_max_level = tess_max_level
         shading = shading_glsl(scene.lights)
         fragment = _FRAGMENT % {"shading": shading, "defines": "", "projection": PROJECTION_GLSL}
@@ -451,7 +504,6 @@ class Renderer:
             self.programs[name] = prog
         for name in ("vertex_peel", "vertex_peel_mark", "tess_peel", "tess_peel_mark"):
             self.programs[name]["u_peel_dist"].value = 1
-        region = scene.viewing_region()
         self.objects: list[_GPUObject] = []
         self.tessellated_triangles = 0
         for obj in scene.objects:
@@ -461,10 +513,8 @@ class Renderer:
                                                                               "tess_peel_mark")})
             tess = None
             if wide:  # pre-tessellated copy for the vertex-projection path
-                levels = levels_for_view_region(obj.mesh, obj.transform, region, max_edge_angle_deg)
-                fine = subdivide(obj.mesh, levels) if levels.max() > 1 else obj.mesh
-                self.tessellated_triangles += fine.triangle_count
-                tess = _GPUMesh(ctx, fine, {k: self.programs[k] for k in ("vertex", "vertex_peel", "vertex_peel_mark")})
+                tess = self._tessellate(obj, max_edge_angle_deg)
+                self.tessellated_triangles += tess.faces
             tex = None
             if obj.material.texture is not None:
                 img = np.ascontiguousarray(obj.material.texture[::-1])  # UV v = 0 is the bottom row
@@ -476,8 +526,43 @@ class Renderer:
         log.debug("renderer: %d objects, %d triangles (%d pre-tessellated)", len(self.objects),
                   scene.triangle_count, self.tessellated_triangles)
 
+    def _tessellate(self, obj, angle_deg: float) -> _GPUMesh:
+        levels = levels_for_view_region(obj.mesh, obj.transform, self.scene.viewing_region(), angle_deg)
+        fine = subdivide(obj.mesh, levels) if levels.max() > 1 else obj.mesh
+        return _GPUMesh(self.ctx, fine, {k: self.programs[k] for k in ("vertex", "vertex_peel", "vertex_peel_mark")})
+
+    def prepare_edge_angle(self, angle_deg: float) -> int:
+        """Build the pre-tessellated copies for views drawn with ``max_edge_deg=angle_deg`` (at the
+        renderer's own angle they exist already); returns their triangle count. Takes a second or
+        so for a room: call it when a session starts, not mid-stream."""
+        if abs(angle_deg - self.max_edge_angle_deg) < 1e-9 or self.objects and self.objects[0].tessellated is None:
+            return self.tessellated_triangles
+        key = round(float(angle_deg), 6)
+        for g in self.objects:
+            if key not in g.coarser:
+                g.coarser[key] = self._tessellate(g.obj, key)
+        return sum(g.coarser[key].faces for g in self.objects)
+
+    def _tessellated(self, g: _GPUObject, angle_deg: float | None) -> _GPUMesh:
+        if angle_deg is None or abs(angle_deg - self.max_edge_angle_deg) < 1e-9:
+            return g.tessellated
+        key = round(float(angle_deg), 6)
+        if key not in g.coarser:
+            self.prepare_edge_angle(key)
+        return g.coarser[key]
+
+    def _render_mesh(self, mesh: _GPUMesh, prog_name: str, mode, model_view: np.ndarray, cull: bool) -> None:
+        vao = mesh.vaos[prog_name]
+        if not cull:
+            vao.render(mode)
+            self.drawn_triangles += mesh.faces
+            return
+        for first, count in visible_runs(mesh.chunk_corners, model_view, CHUNK_TRIANGLES, mesh.faces):
+            vao.render(mode, vertices=3 * count, first=3 * first)
+            self.drawn_triangles += count
+
     def _draw(self, prog_name: str, view: np.ndarray, eye: np.ndarray, t: float, extra_uniforms: dict,
-              motion_dt: float | None = None):
+              motion_dt: float | None = None, cull: bool = False, edge_deg: float | None = None):
         prog = self.programs[prog_name]
         if "u_eye" in prog:
             prog["u_eye"].value = tuple(float(x) for x in eye)
@@ -486,6 +571,7 @@ class Renderer:
                 prog[name].write(np.ascontiguousarray(value, dtype=np.float32).tobytes()) \
                     if isinstance(value, np.ndarray) else setattr(prog[name], "value", value)
         members = set(prog)  # the compiler drops uniforms a shader does not use
+        self.drawn_triangles = 0
         layer = 0
         for g in self.objects:
             if g.obj.layer != layer:   # decals: in front of the coplanar surfaces they lie on
@@ -512,9 +598,9 @@ class Renderer:
             if "u_moving" in members:
                 prog["u_moving"].value = moving
             if prog_name.startswith("vertex"):
-                g.tessellated.vaos[prog_name].render(self.ctx.TRIANGLES)
+                self._render_mesh(self._tessellated(g, edge_deg), prog_name, self.ctx.TRIANGLES, mv, cull)
             elif prog_name.startswith("tess"):
-                g.original.vaos[prog_name].render(self.ctx.PATCHES)
+                self._render_mesh(g.original, prog_name, self.ctx.PATCHES, mv, cull)
             else:
                 g.original.vaos["perspective"].render(self.ctx.TRIANGLES)
         if layer:
@@ -533,7 +619,8 @@ class Renderer:
         target.fbo.color_mask = [(True, True, True, True)] * n
 
     def render_wide(self, target: RenderTarget, pose: Pose, t: float, projection: str | None = None,
-                    peel: tuple | None = None, motion_dt: float | None = None, mark_peeled: bool = True) -> None:
+                    peel: tuple | None = None, motion_dt: float | None = None, mark_peeled: bool = True,
+                    max_edge_deg: float | None = None) -> None:
         """Wide-angle view at ``pose`` (camera-to-world) and scene time ``t`` into ``target``.
 
         ``peel = (primary_target, primary_pose, tolerance)`` depth-peels this view against a
@@ -542,6 +629,8 @@ class Renderer:
         motion of moving objects over the last ``motion_dt`` seconds (a target with motion).
         ``mark_peeled``: pixels whose every surface was peeled away get distance PEELED
         (protocol/depth.py) instead of staying 0 like sky; costs the early depth test.
+        ``max_edge_deg``: longest edge (view angle) rasterised straight, if not the renderer's own
+        (see :func:`edge_angle_for_width`); the first view at a new angle builds its tessellation.
         """
         projection = projection or self.projection
         if projection not in PROJECTIONS:
@@ -563,8 +652,11 @@ class Renderer:
         if projection == "tess":
             self.ctx.patch_vertices = 3
             self.programs[name]["u_half_size"].value = (target.width / 2.0, target.height / 2.0)
+            angle = self.max_edge_angle if max_edge_deg is None else np.radians(max_edge_deg)
+            self.programs[name]["u_max_angle"].value = float(angle)
         try:
-            self._draw(name, pose.view_matrix(), pose.p, t, uniforms, motion_dt)
+            self._draw(name, pose.view_matrix(), pose.p, t, uniforms, motion_dt, cull=self.cull,
+                       edge_deg=max_edge_deg)
         finally:  # shaders that never write gl_ClipDistance must not run with it enabled
             self.ctx.disable_direct(GL_CLIP_DISTANCE0)
 
@@ -579,6 +671,8 @@ class Renderer:
             g.original.release()
             if g.tessellated is not None:
                 g.tessellated.release()
+            for m in g.coarser.values():
+                m.release()
             if g.texture is not None:
                 g.texture.release()
         for p in self.programs.values():

@@ -1,0 +1,79 @@
+"""The renderer's wide views: culling is exact, chunks cover every face."""
+import numpy as np
+import pytest
+
+from pibr.protocol.pose import Pose, quat_from_euler
+from pibr.scenes.registry import load_scene
+from pibr.scenes.scene import Mesh
+from pibr.server.config import extra_offset_pose
+from pibr.server.renderer import PEEL_TOLERANCE, chunk_boxes, visible_runs
+
+
+def _poses(scene, n, seed):
+    """Random eye positions in the viewing region, looking anywhere horizontally, a little up or down."""
+    rng = np.random.default_rng(seed)
+    lo, hi = scene.viewing_region()
+    for _ in range(n):
+        q = quat_from_euler([rng.uniform(-np.pi, np.pi), rng.uniform(-0.8, 0.8), rng.uniform(-0.3, 0.3)], "yxz")
+        yield Pose.make(rng.uniform(lo, hi), q)
+
+
+def test_chunk_boxes_contain_their_faces_and_runs_keep_order():
+    rng = np.random.default_rng(0)
+    v = rng.normal(size=(300, 3)).astype(np.float32)
+    f = rng.integers(0, 300, size=(1000, 3))
+    mesh = Mesh(v, f)
+    corners = chunk_boxes(mesh, 128)
+    assert corners.shape == (8, 8, 3)
+    tri = v[f].astype(np.float64)
+    for i in range(8):
+        part = tri[i * 128:(i + 1) * 128].reshape(-1, 3)
+        assert np.allclose(corners[i].min(0), part.min(0)) and np.allclose(corners[i].max(0), part.max(0))
+    # A camera at +10 z looking down -z sees everything; turned around, nothing; runs are ordered.
+    view = np.eye(4)
+    view[2, 3] = -10.0
+    assert visible_runs(corners, view, 128, 1000) == [(0, 1000)]
+    back = np.diag([-1.0, 1.0, -1.0, 1.0]) @ view
+    assert visible_runs(corners, back, 128, 1000) == []
+    # half space through the middle: runs are sorted, disjoint, within the faces, last one clipped at 1000
+    mid = np.eye(4)
+    mid[2, :3] = [1.0, 0.0, 0.0]
+    runs = visible_runs(corners, mid, 128, 1000)
+    assert all(a + n <= b for (a, n), (b, _) in zip(runs, runs[1:]))
+    assert all(n > 0 and a + n <= 1000 for a, n in runs)
+
+
+@pytest.mark.gl
+def test_culling_changes_no_pixel():
+    """Primary (with motion) and peeled extra view, with and without culling: identical bytes."""
+    from pibr.protocol.gl import create_context
+    from pibr.server.renderer import RenderTarget, Renderer
+
+    scene = load_scene("room")
+    ctx = create_context()
+    try:
+        renderer = Renderer(ctx, scene, "vertex")
+        primary = RenderTarget(ctx, 256, 256, motion=True)
+        extra = RenderTarget(ctx, 128, 128)
+        offset = extra_offset_pose(1.5, 1.8, 15.0)
+        culled_some = 0
+        for k, pose in enumerate(_poses(scene, 6, seed=2)):
+            t = 0.37 * k   # the fan and the pendulum move
+            out = {}
+            for cull in (False, True):
+                renderer.cull = cull
+                renderer.render_wide(primary, pose, t, motion_dt=0.1)
+                drawn = renderer.drawn_triangles
+                renderer.render_wide(extra, pose.compose(offset), t, peel=(primary, pose, PEEL_TOLERANCE))
+                out[cull] = (primary.read_color().copy(), primary.read_distance().copy(),
+                             primary.read_motion()[0].copy(), extra.read_color().copy(),
+                             extra.read_distance().copy(), drawn)
+            for a, b in zip(out[False][:5], out[True][:5]):
+                assert np.array_equal(a, b)
+            culled_some += out[True][5] < out[False][5]
+        assert culled_some == 6   # culling really dropped triangles in every pose
+        renderer.release()
+        primary.release()
+        extra.release()
+    finally:
+        ctx.release()
