@@ -8,7 +8,10 @@ Wide-angle views are drawn in a single pass, in one of two ways (``projection``)
               span, so near triangles get many pieces and far ones none.
 
 ``pibr bench server --projection vertex|tess`` measures both; the default is the faster
-one here. Every render target stores colour (RGBA8) and radial distance (R32F, 0 = sky).
+one here. Each object has several pre-tessellated copies (``LOD_BANDS``): a wide view draws
+the coarsest whose edges still span at most the edge angle from its eye, and skips chunks
+of triangles wholly behind its camera (exact). A smaller view (the extra view) may ask for
+longer edges (``edge_angle_for_width``). Every render target stores colour (RGBA8) and radial distance (R32F, 0 = sky).
 Images are top-row-first everywhere (see protocol/projection.py): passes flip NDC y, so a
 framebuffer read returns rows in image order.
 """
@@ -425,10 +428,20 @@ class _GPUMesh:
 class _GPUObject:
     obj: object
     original: _GPUMesh
-    tessellated: _GPUMesh | None   # at the renderer's edge angle
     texture: object | None
-    #: further pre-tessellated copies by edge angle (degrees), for views of other sizes
-    coarser: dict = field(default_factory=dict)
+    #: pre-tessellated copies: edge angle (degrees) -> [(band distance m, mesh)], bands ascending
+    tessellations: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        self.static_box = self.obj.world_bounds(0.0)   # (2, 3) world box at rest
+
+    def meshes(self):
+        return [m for bands in self.tessellations.values() for _, m in bands]
+
+
+#: Distances (m) from a view's eye to an object's box above which a coarser pre-tessellated copy
+#: is drawn: every edge still spans at most the edge angle from that eye (see _tessellate).
+LOD_BANDS = (0.0, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0, 32.0)
 
 
 class RenderTarget:
@@ -474,13 +487,17 @@ class Renderer:
 
     def __init__(self, ctx, scene: Scene, projection: str = DEFAULT_PROJECTION,
                  max_edge_angle_deg: float = MAX_EDGE_ANGLE_DEG, tess_max_level: int = 64,
-                 tess_max_screen_edge: float = 48.0, wide: bool = True, cull: bool = True):
+                 tess_max_screen_edge: float = 48.0, wide: bool = True, cull: bool = True,
+                 lod: bool = True):
         if projection not in PROJECTIONS:
             raise ValueError(f"projection must be one of {', '.join(PROJECTIONS)}, got {projection!r}")
         self.ctx, self.scene, self.projection = ctx, scene, projection
         #: Wide views skip chunks of triangles wholly behind their camera (same pixels, less work).
         self.cull = cull
         self.drawn_triangles = 0   # triangles sent by the last culled draw (diagnostics)
+        #: Wide views draw each object's coarsest pre-tessellated copy that still keeps every edge
+        #: within the edge angle seen from their eye (LOD_BANDS); off: the copy for the whole region.
+        self.lod = lod
         self.max_edge_angle = np.radians(max_edge_angle_deg)
         self.max_edge_angle_deg = float(max_edge_angle_deg)
         self.tess_max_level = tess_max_level
@@ -511,10 +528,6 @@ class Renderer:
                 continue
             original = _GPUMesh(ctx, obj.mesh, {k: self.programs[k] for k in ("perspective", "tess", "tess_peel",
                                                                               "tess_peel_mark")})
-            tess = None
-            if wide:  # pre-tessellated copy for the vertex-projection path
-                tess = self._tessellate(obj, max_edge_angle_deg)
-                self.tessellated_triangles += tess.faces
             tex = None
             if obj.material.texture is not None:
                 img = np.ascontiguousarray(obj.material.texture[::-1])  # UV v = 0 is the bottom row
@@ -522,34 +535,56 @@ class Renderer:
                 tex.build_mipmaps()
                 tex.filter = (ctx.LINEAR_MIPMAP_LINEAR, ctx.LINEAR)
                 # No anisotropic filtering: on llvmpipe it costs more than the rest of the pass.
-            self.objects.append(_GPUObject(obj, original, tess, tex))
+            self.objects.append(_GPUObject(obj, original, tex))
+        self.wide = wide
+        if wide:  # pre-tessellated copies for the vertex-projection path
+            self.tessellated_triangles = self.prepare_edge_angle(max_edge_angle_deg)
         log.debug("renderer: %d objects, %d triangles (%d pre-tessellated)", len(self.objects),
                   scene.triangle_count, self.tessellated_triangles)
 
-    def _tessellate(self, obj, angle_deg: float) -> _GPUMesh:
-        levels = levels_for_view_region(obj.mesh, obj.transform, self.scene.viewing_region(), angle_deg)
-        fine = subdivide(obj.mesh, levels) if levels.max() > 1 else obj.mesh
-        return _GPUMesh(self.ctx, fine, {k: self.programs[k] for k in ("vertex", "vertex_peel", "vertex_peel_mark")})
+    def _tessellate(self, obj, angle_deg: float) -> list:
+        """[(band distance, mesh)]: the object split for eyes anywhere in the viewing region (band 0),
+        and coarser for eyes at least each band's distance from its box (a face is no nearer to
+        the eye than the box is); bands whose split equals the previous one's are left out."""
+        region = self.scene.viewing_region()
+        bands, previous = [], None
+        for d in LOD_BANDS:
+            levels = levels_for_view_region(obj.mesh, obj.transform, region, angle_deg, min_distance=d)
+            if previous is not None and np.array_equal(levels, previous):
+                continue
+            previous = levels
+            fine = subdivide(obj.mesh, levels) if levels.max() > 1 else obj.mesh
+            bands.append((d, _GPUMesh(self.ctx, fine, {k: self.programs[k] for k in
+                                                       ("vertex", "vertex_peel", "vertex_peel_mark")})))
+        return bands
 
     def prepare_edge_angle(self, angle_deg: float) -> int:
-        """Build the pre-tessellated copies for views drawn with ``max_edge_deg=angle_deg`` (at the
-        renderer's own angle they exist already); returns their triangle count. Takes a second or
-        so for a room: call it when a session starts, not mid-stream."""
-        if abs(angle_deg - self.max_edge_angle_deg) < 1e-9 or self.objects and self.objects[0].tessellated is None:
-            return self.tessellated_triangles
+        """Build the pre-tessellated copies for views drawn with ``max_edge_deg=angle_deg``; returns
+        the triangle count of the finest (an eye anywhere in the viewing region). Takes a second
+        or so for a room: call it when a session starts, not mid-stream."""
+        if not self.wide:
+            return 0
         key = round(float(angle_deg), 6)
         for g in self.objects:
-            if key not in g.coarser:
-                g.coarser[key] = self._tessellate(g.obj, key)
-        return sum(g.coarser[key].faces for g in self.objects)
+            if key not in g.tessellations:
+                g.tessellations[key] = self._tessellate(g.obj, key)
+        return sum(g.tessellations[key][0][1].faces for g in self.objects)
 
-    def _tessellated(self, g: _GPUObject, angle_deg: float | None) -> _GPUMesh:
-        if angle_deg is None or abs(angle_deg - self.max_edge_angle_deg) < 1e-9:
-            return g.tessellated
-        key = round(float(angle_deg), 6)
-        if key not in g.coarser:
+    def _tessellated(self, g: _GPUObject, angle_deg: float | None, eye: np.ndarray, t: float) -> _GPUMesh:
+        """The coarsest copy whose band the eye's distance to the object's box reaches."""
+        key = round(float(self.max_edge_angle_deg if angle_deg is None else angle_deg), 6)
+        if key not in g.tessellations:
             self.prepare_edge_angle(key)
-        return g.coarser[key]
+        bands = g.tessellations[key]
+        if len(bands) == 1 or not self.lod:
+            return bands[0][1]
+        box = g.obj.world_bounds(t) if g.obj.is_dynamic else g.static_box
+        distance = float(np.linalg.norm(np.maximum(0.0, np.maximum(box[0] - eye, eye - box[1]))))
+        mesh = bands[0][1]
+        for d, m in bands:
+            if d <= distance:
+                mesh = m
+        return mesh
 
     def _render_mesh(self, mesh: _GPUMesh, prog_name: str, mode, model_view: np.ndarray, cull: bool) -> None:
         vao = mesh.vaos[prog_name]
@@ -598,7 +633,7 @@ class Renderer:
             if "u_moving" in members:
                 prog["u_moving"].value = moving
             if prog_name.startswith("vertex"):
-                self._render_mesh(self._tessellated(g, edge_deg), prog_name, self.ctx.TRIANGLES, mv, cull)
+                self._render_mesh(self._tessellated(g, edge_deg, eye, t), prog_name, self.ctx.TRIANGLES, mv, cull)
             elif prog_name.startswith("tess"):
                 self._render_mesh(g.original, prog_name, self.ctx.PATCHES, mv, cull)
             else:
@@ -669,9 +704,7 @@ class Renderer:
     def release(self) -> None:
         for g in self.objects:
             g.original.release()
-            if g.tessellated is not None:
-                g.tessellated.release()
-            for m in g.coarser.values():
+            for m in g.meshes():
                 m.release()
             if g.texture is not None:
                 g.texture.release()

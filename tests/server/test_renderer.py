@@ -77,3 +77,48 @@ def test_culling_changes_no_pixel():
         extra.release()
     finally:
         ctx.release()
+
+
+@pytest.mark.gl
+def test_lod_copy_keeps_every_edge_within_the_angle_from_the_eye():
+    """The copy drawn for an eye spans at most the edge angle per edge, seen from that eye, and gets
+    coarser (fewer triangles) as the eye moves away."""
+    from pibr.protocol.gl import create_context
+    from pibr.scenes.scene import Scene, SceneObject
+    from pibr.server.renderer import Renderer
+
+    quad = Mesh(np.array([[0, 0, 0], [0.6, 0, 0], [0.6, 0.6, 0], [0, 0.6, 0]], np.float32),
+                np.array([[0, 1, 2], [0, 2, 3]]))
+    place = np.eye(4)
+    place[:3, 3] = [-0.3, 1.0, -2.0]
+    scene = Scene("quad", [SceneObject("quad", quad, transform=place)],
+                  view_region=np.array([[-1.0, 0.5, -1.0], [1.0, 1.5, 6.0]]))
+    ctx = create_context()
+    try:
+        renderer = Renderer(ctx, scene, "vertex", max_edge_angle_deg=6.0)
+        g = renderer.objects[0]
+        assert len(g.tessellations[6.0]) > 2          # several bands
+        rng = np.random.default_rng(1)
+        faces = []
+        for z in (-1.0, 0.0, 1.0, 3.0, 6.0):
+            eye = np.array([rng.uniform(-1, 1), rng.uniform(0.5, 1.5), z])
+            mesh = renderer._tessellated(g, None, eye, 0.0)
+            faces.append(mesh.faces)
+            fine = _copy_faces(renderer, g, mesh) @ place[:3, :3].T + place[:3, 3]   # (m, 3, 3) world
+            lo, hi = fine.min(axis=1), fine.max(axis=1)
+            dist = np.linalg.norm(np.maximum(0.0, np.maximum(lo - eye, eye - hi)), axis=1)
+            edge = np.linalg.norm(fine - np.roll(fine, 1, axis=1), axis=2).max(axis=1)
+            assert np.all(edge <= np.maximum(dist * np.tan(np.radians(6.0)), 0.02) * 1.001)
+        assert faces[0] > faces[-1]                    # far eye: coarser copy
+        renderer.release()
+    finally:
+        ctx.release()
+
+
+def _copy_faces(renderer, g, mesh) -> np.ndarray:
+    """Object-space triangles (m, 3, 3) of a pre-tessellated GPU copy, read back from its buffers."""
+    from pibr.server.renderer import _VERTEX_DTYPE
+
+    verts = np.frombuffer(mesh.vbo.read(), _VERTEX_DTYPE)["p"].astype(np.float64)
+    faces = np.frombuffer(mesh.ibo.read(), np.uint32).reshape(-1, 3)
+    return verts[faces]
