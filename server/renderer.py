@@ -119,15 +119,10 @@ bool seen_by_primary(vec3 cam) {
     vec3 p = (u_peel_from_cam * vec4(cam, 1.0)).xyz;
     if (p.z > 0.0) return false;                  // behind the primary camera
     vec3 t = wa_project(p);
-    vec2 texel = wa_uv(t.xy) * u_peel_size - 0.5;
-    ivec2 base = ivec2(floor(texel));
-    ivec2 hi = ivec2(u_peel_size) - 1;
-    for (int k = 0; k < 4; ++k) {
-        ivec2 q = clamp(base + ivec2(k & 1, k >> 1), ivec2(0), hi);
-        float d = texelFetch(u_peel_dist, q, 0).r;
-        if (d > 0.0 && abs(d - t.z) < u_peel_tolerance * t.z) return true;
-    }
-    return false;
+    // the 2x2 texels bilinear filtering would read, clamped at the edges (one fetch)
+    vec4 d = textureGather(u_peel_dist, wa_uv(t.xy), 0);
+    vec4 hit = vec4(greaterThan(d, vec4(0.0))) * vec4(lessThan(abs(d - t.z), vec4(u_peel_tolerance * t.z)));
+    return dot(hit, hit) > 0.0;
 }
 #endif
 void main() {

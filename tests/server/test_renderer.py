@@ -122,3 +122,54 @@ def _copy_faces(renderer, g, mesh) -> np.ndarray:
     verts = np.frombuffer(mesh.vbo.read(), _VERTEX_DTYPE)["p"].astype(np.float64)
     faces = np.frombuffer(mesh.ibo.read(), np.uint32).reshape(-1, 3)
     return verts[faces]
+
+
+#: The peel test as it was before it used textureGather: four clamped texelFetch calls.
+_PEEL_BY_FETCHES = """    vec3 t = wa_project(p);
+    vec2 texel = wa_uv(t.xy) * u_peel_size - 0.5;
+    ivec2 base = ivec2(floor(texel));
+    ivec2 hi = ivec2(u_peel_size) - 1;
+    for (int k = 0; k < 4; ++k) {
+        ivec2 q = clamp(base + ivec2(k & 1, k >> 1), ivec2(0), hi);
+        float d = texelFetch(u_peel_dist, q, 0).r;
+        if (d > 0.0 && abs(d - t.z) < u_peel_tolerance * t.z) return true;
+    }
+    return false;
+}"""
+
+
+@pytest.mark.gl
+@pytest.mark.parametrize("mark_peeled", [True, False])
+def test_peeling_by_gather_equals_peeling_by_four_fetches(monkeypatch, mark_peeled):
+    import pibr.server.renderer as R
+    from pibr.protocol.gl import create_context
+
+    start = R._FRAGMENT.index("    vec3 t = wa_project(p);\n    // the 2x2")
+    end = R._FRAGMENT.index("}\n#endif", start) + 1
+    scene = load_scene("room")
+    ctx = create_context()
+    try:
+        gather = R.Renderer(ctx, scene, "vertex")
+        monkeypatch.setattr(R, "_FRAGMENT", R._FRAGMENT[:start] + _PEEL_BY_FETCHES + R._FRAGMENT[end:])
+        fetches = R.Renderer(ctx, scene, "vertex")
+        primary = R.RenderTarget(ctx, 256, 256)
+        extra = R.RenderTarget(ctx, 128, 128)
+        offset = extra_offset_pose(1.5, 1.8, 15.0)
+        peeled = 0
+        for pose in _poses(scene, 5, seed=4):
+            gather.render_wide(primary, pose, 0.0)
+            out = []
+            for r in (gather, fetches):
+                r.render_wide(extra, pose.compose(offset), 0.0, peel=(primary, pose, PEEL_TOLERANCE),
+                              mark_peeled=mark_peeled)
+                out.append((extra.read_color().copy(), extra.read_distance().copy()))
+            assert np.array_equal(out[0][0], out[1][0]) and np.array_equal(out[0][1], out[1][1])
+            gather.render_wide(extra, pose.compose(offset), 0.0)
+            peeled += int(np.sum(extra.read_distance() != out[0][1]))
+        assert peeled > 1000   # peeling really removed surfaces
+        for r in (gather, fetches):
+            r.release()
+        primary.release()
+        extra.release()
+    finally:
+        ctx.release()
