@@ -163,7 +163,10 @@ def register(sub) -> None:
     s.add_argument("--trace", default="pred6dof-1")
     s.add_argument("--frames", type=_positive_int, default=40)
     s.add_argument("--view-size", type=_size, default=(1024, 1024), metavar="WxH")
-    s.add_argument("--projection", type=_names, default=("vertex", "tess"), help="which to measure (default both)")
+    s.add_argument("--projection", type=_names, default=("vertex", "tess"),
+                   help="which to measure: vertex, tess, cube (default vertex,tess)")
+    s.add_argument("--cube-scale", type=_positive, default=0.75,
+                   help="projection cube: face size as a fraction of the view width (default 0.75)")
     s.add_argument("--max-edge-deg", type=_angles, default=None, metavar="DEG[,DEG...]",
                    help="edge angles to measure (default: the server's); several, or one that is not the "
                         "default, also compare each with a finer reference render")
@@ -358,7 +361,7 @@ def cmd_bench_server(args) -> int:
                           projections=args.projection, extra_view=args.extra_view, bitrate_kbps=args.bitrate_kbps,
                           edge_angles=args.max_edge_deg, out_dir=args.out,
                           lod={"on": (True,), "off": (False,), "both": (False, True)}[args.lod],
-                          accuracy=args.accuracy)
+                          accuracy=args.accuracy, cube_scale=args.cube_scale)
     print_server_table(result)
     return 0
 

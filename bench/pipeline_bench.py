@@ -48,7 +48,7 @@ REFERENCE_EDGE_DEG = 2.0
 
 def bench_server(scene_spec="room", trace="pred6dof-1", frames=40, view_size=(1024, 1024),
                  projections=("vertex", "tess"), extra_view="auto", bitrate_kbps=16000.0, out_dir="out/bench",
-                 fps=10.0, edge_angles=None, lod=(True,), accuracy=False) -> dict:
+                 fps=10.0, edge_angles=None, lod=(True,), accuracy=False, cube_scale=0.75) -> dict:
     """Server ms per frame by stage and bitrate, per projection, edge angle, LOD and extra view.
 
     ``lod``: draw each object's pre-tessellated copy for the eye's distance (True) or the copy for
@@ -56,7 +56,8 @@ def bench_server(scene_spec="room", trace="pred6dof-1", frames=40, view_size=(10
     ``edge_angles`` or ``lod`` settings, or an edge angle that is not the default, each variant's
     primary view is also compared with a vertex-projection render at :data:`REFERENCE_EDGE_DEG`
     (whole-region copies): colour PSNR and the fraction of pixels whose distance is more than
-    1 % off (or sky on one side only).
+    1 % off (or sky on one side only). ``cube_scale``: face size of projection "cube" as a
+    fraction of the view width (server/cube_faces.py).
     """
     from pibr.protocol.gl import create_context
     from pibr.scenes.registry import load_scene
@@ -80,7 +81,7 @@ def bench_server(scene_spec="room", trace="pred6dof-1", frames=40, view_size=(10
     rows = []
     for projection, angle in ((p, a) for p in projections for a in edge_angles):
         t0 = time.perf_counter()
-        renderer = Renderer(ctx, scene, projection, max_edge_angle_deg=angle)
+        renderer = Renderer(ctx, scene, projection, max_edge_angle_deg=angle, cube_scale=cube_scale)
         setup_s = time.perf_counter() - t0
         for use_lod, extra in ((u, e) for u in lod for e in extras):
             renderer.lod = use_lod
@@ -115,6 +116,7 @@ def bench_server(scene_spec="room", trace="pred6dof-1", frames=40, view_size=(10
             total = [sum(v) for v in zip(*stages.values())]
             rows.append({
                 "projection": projection, "max_edge_deg": angle, "lod": use_lod,
+                "cube_scale": cube_scale if projection == "cube" else None,
                 "extra_view": spec.extra_size is not None,
                 "psnr_vs_reference_db": _median(accuracy["psnr"]) if accuracy["psnr"] else None,
                 "distance_off_fraction": float(np.mean(accuracy["off"])) if accuracy["off"] else None,
@@ -148,7 +150,8 @@ def print_server_table(result: dict) -> None:
     print(head)
     print("-" * len(head))
     for r in result["rows"]:
-        line = (f"{r['projection']:>10} {r.get('max_edge_deg', 0):4g}° {('on' if r.get('lod') else 'off'):>3} "
+        name = r["projection"] + (f"@{r['cube_scale']:g}" if r.get("cube_scale") else "")
+        line = (f"{name:>10} {r.get('max_edge_deg', 0):4g}° {('on' if r.get('lod') else 'off'):>3} "
                 f"{('on' if r['extra_view'] else 'off'):>5} "
                 f"{r['atlas'][0]:>4}x{r['atlas'][1]:<4} {r['render_ms']:7.1f} {r['readback_ms']:8.1f} "
                 f"{r['pack_ms']:6.1f} {r['encode_ms']:7.1f} {r['total_ms']:7.1f} {r['kbps']:8.0f} "

@@ -27,9 +27,11 @@ from pibr.protocol.projection import GLSL as PROJECTION_GLSL
 from pibr.scenes.scene import MAX_LIGHTS, Scene
 from pibr.scenes.tessellate import levels_for_view_region, subdivide
 
+from . import cube_faces
+
 log = logging.getLogger(__name__)
 
-PROJECTIONS = ("vertex", "tess")
+PROJECTIONS = ("vertex", "tess", "cube")
 DEFAULT_PROJECTION = "vertex"
 #: Largest angle one rasterised edge may span in the wide-angle projection. At 1024 px over
 #: 180 degrees a 6 degree chord bends by 0.08 degrees, under half a pixel.
@@ -384,16 +386,24 @@ def chunk_boxes(mesh, chunk: int = CHUNK_TRIANGLES) -> np.ndarray:
     return np.where(pick[None, :, :] == 0, lo[:, None, :], hi[:, None, :])
 
 
-def visible_runs(corners: np.ndarray, model_view: np.ndarray, chunk: int, faces: int) -> list[tuple[int, int]]:
-    """(first face, face count) runs of the chunks not wholly behind a camera (p_z > 0 is behind).
+#: The wide views' culling plane, (normal, offset) in camera space: inside where -p_z + margin >= 0.
+HEMISPHERE = np.array([[0.0, 0.0, -1.0, CULL_MARGIN]])
 
-    corners : (k, 8, 3) object-space chunk boxes; model_view : (4, 4) object -> camera. A wide
-    view rasterises nothing of a triangle whose vertices all lie behind its camera (they land
-    at |t'_x| >= 1, see protocol/projection.py), so dropping such chunks leaves every pixel as
-    it was; runs keep the faces' order, so depth ties resolve as before.
+
+def visible_runs(corners: np.ndarray, model_view: np.ndarray, chunk: int, faces: int,
+                 planes: np.ndarray = HEMISPHERE) -> list[tuple[int, int]]:
+    """(first face, face count) runs of the chunks not wholly outside any of ``planes``.
+
+    corners : (k, 8, 3) object-space chunk boxes; model_view : (4, 4) object -> camera; planes :
+    (p, 4) camera-space (normal, offset), inside where n . p + d >= 0. With the default, chunks
+    wholly behind the camera (p_z > 0) go: a wide view rasterises nothing of a triangle whose
+    vertices all lie behind its camera (they land at |t'_x| >= 1, see protocol/projection.py),
+    so dropping them leaves every pixel as it was; runs keep the faces' order, so depth ties
+    resolve as before.
     """
-    z = corners @ model_view[2, :3] + model_view[2, 3]            # (k, 8)
-    keep = z.min(axis=1) <= CULL_MARGIN
+    cam = corners @ model_view[:3, :3].T + model_view[:3, 3]      # (k, 8, 3)
+    side = cam @ planes[:, :3].T + planes[:, 3]                   # (k, 8, p)
+    keep = (side.max(axis=1) >= 0.0).all(axis=1)
     if keep.all():
         return [(0, faces)]
     edges = np.flatnonzero(np.diff(np.concatenate(([False], keep, [False])).astype(np.int8)))
@@ -483,7 +493,7 @@ class Renderer:
     def __init__(self, ctx, scene: Scene, projection: str = DEFAULT_PROJECTION,
                  max_edge_angle_deg: float = MAX_EDGE_ANGLE_DEG, tess_max_level: int = 64,
                  tess_max_screen_edge: float = 48.0, wide: bool = True, cull: bool = True,
-                 lod: bool = True):
+                 lod: bool = True, cube_scale: float = 0.75):
         if projection not in PROJECTIONS:
             raise ValueError(f"projection must be one of {', '.join(PROJECTIONS)}, got {projection!r}")
         self.ctx, self.scene, self.projection = ctx, scene, projection
@@ -516,13 +526,26 @@ class Renderer:
             self.programs[name] = prog
         for name in ("vertex_peel", "vertex_peel_mark", "tess_peel", "tess_peel_mark"):
             self.programs[name]["u_peel_dist"].value = 1
+        self.programs["cube"] = ctx.program(vertex_shader=cube_faces.CUBE_VS % {"uniforms": _COMMON_VS_UNIFORMS},
+                                            fragment_shader=fragment)
+        resample = ctx.program(vertex_shader=cube_faces.RESAMPLE_VS,
+                               fragment_shader=cube_faces.RESAMPLE_FS % {"projection": PROJECTION_GLSL})
+        for unit, name in enumerate(("u_cube_color", "u_cube_dist", "u_cube_motion")):
+            if name in resample:
+                resample[name].value = unit
+        self.programs["cube_resample"] = resample
+        self._quad = ctx.buffer(np.array([-1, -1, 1, -1, -1, 1, 1, 1], dtype="f4").tobytes())
+        self._resample_vao = ctx.vertex_array(resample, [(self._quad, "2f", "in_pos")])
+        #: projection "cube": face size as a fraction of the wide view's width (see cube_faces.py)
+        self.cube_scale = cube_scale
+        self._cube_targets: dict = {}
         self.objects: list[_GPUObject] = []
         self.tessellated_triangles = 0
         for obj in scene.objects:
             if obj.mesh.triangle_count == 0:
                 continue
             original = _GPUMesh(ctx, obj.mesh, {k: self.programs[k] for k in ("perspective", "tess", "tess_peel",
-                                                                              "tess_peel_mark")})
+                                                                              "tess_peel_mark", "cube")})
             tex = None
             if obj.material.texture is not None:
                 img = np.ascontiguousarray(obj.material.texture[::-1])  # UV v = 0 is the bottom row
@@ -581,18 +604,20 @@ class Renderer:
                 mesh = m
         return mesh
 
-    def _render_mesh(self, mesh: _GPUMesh, prog_name: str, mode, model_view: np.ndarray, cull: bool) -> None:
+    def _render_mesh(self, mesh: _GPUMesh, prog_name: str, mode, model_view: np.ndarray, cull: bool,
+                     planes: np.ndarray = HEMISPHERE) -> None:
         vao = mesh.vaos[prog_name]
         if not cull:
             vao.render(mode)
             self.drawn_triangles += mesh.faces
             return
-        for first, count in visible_runs(mesh.chunk_corners, model_view, CHUNK_TRIANGLES, mesh.faces):
+        for first, count in visible_runs(mesh.chunk_corners, model_view, CHUNK_TRIANGLES, mesh.faces, planes):
             vao.render(mode, vertices=3 * count, first=3 * first)
             self.drawn_triangles += count
 
     def _draw(self, prog_name: str, view: np.ndarray, eye: np.ndarray, t: float, extra_uniforms: dict,
-              motion_dt: float | None = None, cull: bool = False, edge_deg: float | None = None):
+              motion_dt: float | None = None, cull: bool = False, edge_deg: float | None = None,
+              planes: np.ndarray = HEMISPHERE):
         prog = self.programs[prog_name]
         if "u_eye" in prog:
             prog["u_eye"].value = tuple(float(x) for x in eye)
@@ -631,6 +656,8 @@ class Renderer:
                 self._render_mesh(self._tessellated(g, edge_deg, eye, t), prog_name, self.ctx.TRIANGLES, mv, cull)
             elif prog_name.startswith("tess"):
                 self._render_mesh(g.original, prog_name, self.ctx.PATCHES, mv, cull)
+            elif prog_name == "cube":
+                self._render_mesh(g.original, prog_name, self.ctx.TRIANGLES, mv, True, planes)
             else:
                 g.original.vaos["perspective"].render(self.ctx.TRIANGLES)
         if layer:
@@ -665,6 +692,11 @@ class Renderer:
         projection = projection or self.projection
         if projection not in PROJECTIONS:
             raise ValueError(f"projection must be one of {', '.join(PROJECTIONS)}, got {projection!r}")
+        if projection == "cube":
+            if peel is None:
+                self._render_cube(target, pose, t, motion_dt)
+                return
+            projection = "vertex"   # peeled views (the extra view) are drawn in one pass
         self._begin(target)
         self.ctx.enable_direct(GL_CLIP_DISTANCE0)
         name = projection
@@ -690,6 +722,36 @@ class Renderer:
         finally:  # shaders that never write gl_ClipDistance must not run with it enabled
             self.ctx.disable_direct(GL_CLIP_DISTANCE0)
 
+    def _render_cube(self, target: RenderTarget, pose: Pose, t: float, motion_dt: float | None) -> None:
+        """The wide view as five perspective faces of the original meshes, resampled (cube_faces.py)."""
+        ctx = self.ctx
+        n = max(2, 2 * int(round(self.cube_scale * target.width / 2)))
+        key = (n, target.motion is not None)
+        cube = self._cube_targets.get(key)
+        if cube is None:
+            cube = self._cube_targets[key] = RenderTarget(ctx, 2 * n, 2 * n, motion=target.motion is not None)
+            cube.color.filter = (ctx.LINEAR, ctx.LINEAR)
+        self._begin(cube)
+        near, far = float(self.scene.near), float(self.scene.far)
+        view = pose.view_matrix()
+        for name, (x, y, w, h) in cube_faces.face_rects(n).items():
+            ctx.viewport = (x, y, w, h)
+            self._draw("cube", view, pose.p, t, {"u_face": cube_faces.face_matrix(name, near, far).T,
+                                                 "u_half_px": (target.width / 2.0, target.height / 2.0)},
+                       motion_dt, planes=cube_faces.face_planes(name, near))
+        target.fbo.use()
+        ctx.viewport = (0, 0, target.width, target.height)
+        ctx.disable(ctx.DEPTH_TEST)
+        cube.color.use(0)
+        cube.distance.use(1)
+        if cube.motion is not None:
+            cube.motion.use(2)
+        prog = self.programs["cube_resample"]
+        prog["u_n"].value = float(n)
+        prog["u_size"].value = (float(target.width), float(target.height))
+        self._resample_vao.render(ctx.TRIANGLE_STRIP)
+        ctx.enable(ctx.DEPTH_TEST)
+
     def render_perspective(self, target: RenderTarget, pose: Pose, t: float, fov_x_deg: float) -> None:
         """Perspective view (ground truth) at ``pose`` and scene time ``t``, horizontal FOV ``fov_x_deg``."""
         self._begin(target)
@@ -703,5 +765,9 @@ class Renderer:
                 m.release()
             if g.texture is not None:
                 g.texture.release()
+        for c in self._cube_targets.values():
+            c.release()
+        self._resample_vao.release()
+        self._quad.release()
         for p in self.programs.values():
             p.release()
