@@ -231,3 +231,34 @@ def test_cube_projection_matches_the_vertex_projection():
         b.release()
     finally:
         ctx.release()
+
+
+@pytest.mark.gl
+def test_wide_views_sample_the_nearest_mip_and_leave_perspective_views_trilinear():
+    from pibr.bench.metrics import psnr
+    from pibr.protocol.gl import create_context
+    from pibr.server.renderer import RenderTarget, Renderer
+
+    scene = load_scene("room")
+    ctx = create_context()
+    try:
+        renderer = Renderer(ctx, scene, "vertex")
+        wide = RenderTarget(ctx, 256, 256)
+        gt = RenderTarget(ctx, 128, 96)
+        pose = next(_poses(scene, 1, seed=11))
+        renderer.render_perspective(gt, pose, 0.0, 90.0)
+        before = gt.read_color().copy()
+        images = {}
+        for trilinear in (False, True):
+            renderer.wide_trilinear = trilinear
+            renderer.render_wide(wide, pose, 0.0)
+            images[trilinear] = wide.read_color().copy()
+        renderer.render_perspective(gt, pose, 0.0, 90.0)
+        assert np.array_equal(before, gt.read_color())      # ground truth keeps trilinear filtering
+        assert not np.array_equal(images[False], images[True])
+        assert psnr(images[True], images[False]) > 40.0
+        renderer.release()
+        wide.release()
+        gt.release()
+    finally:
+        ctx.release()
