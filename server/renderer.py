@@ -1,17 +1,20 @@
 """Rendering a scene with moderngl: wide-angle views (the server's) and perspective views
 (ground truth), sharing one shading model so both see exactly the same colours.
 
-Wide-angle views are drawn in a single pass, in one of two ways (``projection``):
+Wide-angle views are drawn in one of three ways (``projection``):
 
 ``"vertex"``  the vertex shader projects pre-tessellated meshes (see scenes/tessellate.py);
 ``"tess"``    a tessellation shader splits each triangle on the fly by the angle its edges
-              span, so near triangles get many pieces and far ones none.
+              span, so near triangles get many pieces and far ones none;
+``"cube"``    five perspective cube faces of the original meshes, resampled (cube_faces.py;
+              unpeeled views only).
 
-``pibr bench server --projection vertex|tess`` measures both; the default is the faster
-one here. Each object has several pre-tessellated copies (``LOD_BANDS``): a wide view draws
-the coarsest whose edges still span at most the edge angle from its eye, and skips chunks
-of triangles wholly behind its camera (exact). A smaller view (the extra view) may ask for
-longer edges (``edge_angle_for_width``). Every render target stores colour (RGBA8) and radial distance (R32F, 0 = sky).
+``pibr bench server --projection vertex,tess,cube`` measures them; the default is the
+fastest at full quality here. Each object has several pre-tessellated copies
+(``LOD_BANDS``): a wide view draws the coarsest whose edges still span at most the edge
+angle from its eye, and skips chunks of triangles wholly behind its camera (exact). A
+smaller view (the extra view) may ask for longer edges (``edge_angle_for_width``).
+Every render target stores colour (RGBA8) and radial distance (R32F, 0 = sky).
 Images are top-row-first everywhere (see protocol/projection.py): passes flip NDC y, so a
 framebuffer read returns rows in image order.
 """
@@ -499,7 +502,7 @@ class Renderer:
         self.ctx, self.scene, self.projection = ctx, scene, projection
         #: Wide views skip chunks of triangles wholly behind their camera (same pixels, less work).
         self.cull = cull
-        self.drawn_triangles = 0   # triangles sent by the last culled draw (diagnostics)
+        self.drawn_triangles = 0   # triangles sent by the last wide view (diagnostics)
         #: Wide views draw each object's coarsest pre-tessellated copy that still keeps every edge
         #: within the edge angle seen from their eye (LOD_BANDS); off: the copy for the whole region.
         self.lod = lod
@@ -540,7 +543,7 @@ class Renderer:
         self.cube_scale = cube_scale
         self._cube_targets: dict = {}
         #: Wide views sample textures bilinearly from the nearest mip level rather than blending
-        #: two (trilinear, which perspective views keep): a tenth of the primary's cost, and the
+        #: two (trilinear, which perspective views keep): a tenth of the primary's time, and the
         #: images differ by about 51 dB PSNR. True: trilinear everywhere.
         self.wide_trilinear = wide_trilinear
         self._mip_nearest = ctx.sampler(filter=(ctx.LINEAR_MIPMAP_NEAREST, ctx.LINEAR))
@@ -631,7 +634,6 @@ class Renderer:
                 prog[name].write(np.ascontiguousarray(value, dtype=np.float32).tobytes()) \
                     if isinstance(value, np.ndarray) else setattr(prog[name], "value", value)
         members = set(prog)  # the compiler drops uniforms a shader does not use
-        self.drawn_triangles = 0
         layer = 0
         for g in self.objects:
             if g.obj.layer != layer:   # decals: in front of the coplanar surfaces they lie on
@@ -697,6 +699,7 @@ class Renderer:
         projection = projection or self.projection
         if projection not in PROJECTIONS:
             raise ValueError(f"projection must be one of {', '.join(PROJECTIONS)}, got {projection!r}")
+        self.drawn_triangles = 0
         if projection == "cube":
             if peel is None:
                 self._render_cube(target, pose, t, motion_dt)
