@@ -175,11 +175,19 @@ def register(sub) -> None:
     s.add_argument("--trace", default="pred6dof-1")
     s.add_argument("--frames", type=_positive_int, default=40)
     s.add_argument("--view-size", type=_size, default=(1024, 1024), metavar="WxH")
-    s.add_argument("--projection", type=_names, default=("vertex", "tess"), help="which to measure (default both)")
+    s.add_argument("--projection", type=_names, default=("vertex", "tess"),
+                   help="which to measure: vertex, tess, cube (default vertex,tess)")
+    s.add_argument("--cube-scale", type=_positive, default=0.75,
+                   help="projection cube: face size as a fraction of the view width (default 0.75)")
     s.add_argument("--max-edge-deg", type=_angles, default=None, metavar="DEG[,DEG...]",
                    help="edge angles to measure (default: the server's); several, or one that is not the "
                         "default, also compare each with a finer reference render")
     s.add_argument("--extra-view", choices=("auto", "on", "off", "both"), default="auto")
+    s.add_argument("--lod", choices=("on", "off", "both"), default="on",
+                   help="pre-tessellated copies chosen by the eye's distance (on, the server's), one copy for "
+                        "the whole viewing region (off), or both; both also compare with the reference")
+    s.add_argument("--accuracy", action="store_true",
+                   help="compare every variant's primary view with a 2-degree reference render")
     s.add_argument("--bitrate-kbps", type=_positive, default=16000.0)
     s.add_argument("--out", default="out/bench")
     s.set_defaults(func=cmd_bench_server)
@@ -402,7 +410,9 @@ def cmd_bench_server(args) -> int:
 
     result = bench_server(scene_spec=args.scene, trace=args.trace, frames=args.frames, view_size=args.view_size,
                           projections=args.projection, extra_view=args.extra_view, bitrate_kbps=args.bitrate_kbps,
-                          edge_angles=args.max_edge_deg, out_dir=args.out)
+                          edge_angles=args.max_edge_deg, out_dir=args.out,
+                          lod={"on": (True,), "off": (False,), "both": (False, True)}[args.lod],
+                          accuracy=args.accuracy, cube_scale=args.cube_scale)
     print_server_table(result)
     return 0
 

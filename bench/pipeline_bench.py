@@ -48,12 +48,16 @@ REFERENCE_EDGE_DEG = 2.0
 
 def bench_server(scene_spec="room", trace="pred6dof-1", frames=40, view_size=(1024, 1024),
                  projections=("vertex", "tess"), extra_view="auto", bitrate_kbps=16000.0, out_dir="out/bench",
-                 fps=10.0, edge_angles=None) -> dict:
-    """Server ms per frame by stage and bitrate, per projection, extra view and edge angle.
+                 fps=10.0, edge_angles=None, lod=(True,), accuracy=False, cube_scale=0.75) -> dict:
+    """Server ms per frame by stage and bitrate, per projection, edge angle, LOD and extra view.
 
-    With several ``edge_angles`` (or one that is not the default), each variant's primary view is
-    also compared with a vertex-projection render at :data:`REFERENCE_EDGE_DEG`: colour PSNR and
-    the fraction of pixels whose distance is more than 1 % off (or sky on one side only).
+    ``lod``: draw each object's pre-tessellated copy for the eye's distance (True) or the copy for
+    the whole viewing region (False); several to compare. With ``accuracy``, several
+    ``edge_angles`` or ``lod`` settings, or an edge angle that is not the default, each variant's
+    primary view is also compared with a vertex-projection render at :data:`REFERENCE_EDGE_DEG`
+    (whole-region copies): colour PSNR and the fraction of pixels whose distance is more than
+    1 % off (or sky on one side only). ``cube_scale``: face size of projection "cube" as a
+    fraction of the view width (server/cube_faces.py).
     """
     from pibr.protocol.gl import create_context
     from pibr.scenes.registry import load_scene
@@ -70,15 +74,17 @@ def bench_server(scene_spec="room", trace="pred6dof-1", frames=40, view_size=(10
     extras = ["off", "on"] if extra_view == "both" else [extra_view]
     edge_angles = tuple(edge_angles or (MAX_EDGE_ANGLE_DEG,))
     reference = None
-    if edge_angles != (MAX_EDGE_ANGLE_DEG,):
-        reference = (Renderer(ctx, scene, "vertex", max_edge_angle_deg=REFERENCE_EDGE_DEG),
+    lod = tuple(lod)
+    if accuracy or edge_angles != (MAX_EDGE_ANGLE_DEG,) or len(lod) > 1:
+        reference = (Renderer(ctx, scene, "vertex", max_edge_angle_deg=REFERENCE_EDGE_DEG, lod=False),
                      RenderTarget(ctx, *view_size))
     rows = []
     for projection, angle in ((p, a) for p in projections for a in edge_angles):
         t0 = time.perf_counter()
-        renderer = Renderer(ctx, scene, projection, max_edge_angle_deg=angle)
+        renderer = Renderer(ctx, scene, projection, max_edge_angle_deg=angle, cube_scale=cube_scale)
         setup_s = time.perf_counter() - t0
-        for extra in extras:
+        for use_lod, extra in ((u, e) for u in lod for e in extras):
+            renderer.lod = use_lod
             cfg = _server_cfg(scene=scene_spec, view_size=tuple(view_size), extra_view=extra, projection=projection,
                               bitrate_kbps=bitrate_kbps, fps=fps, max_edge_deg=angle)
             session, spec = plan_session(cfg, scene, Hello())
@@ -109,7 +115,9 @@ def bench_server(scene_spec="room", trace="pred6dof-1", frames=40, view_size=(10
             producer.release()
             total = [sum(v) for v in zip(*stages.values())]
             rows.append({
-                "projection": projection, "max_edge_deg": angle, "extra_view": spec.extra_size is not None,
+                "projection": projection, "max_edge_deg": angle, "lod": use_lod,
+                "cube_scale": cube_scale if projection == "cube" else None,
+                "extra_view": spec.extra_size is not None,
                 "psnr_vs_reference_db": _median(accuracy["psnr"]) if accuracy["psnr"] else None,
                 "distance_off_fraction": float(np.mean(accuracy["off"])) if accuracy["off"] else None,
                 "view_size": list(view_size), "atlas": [spec.layout.width, spec.layout.height],
@@ -135,14 +143,16 @@ def print_server_table(result: dict) -> None:
     print(f"pibr bench server: scene {result['scene']}, {result['fps']:g} fps, target "
           f"{result['bitrate_target_kbps']:g} kbit/s (median ms per frame)")
     accuracy = result.get("reference_edge_deg") is not None
-    head = f"{'projection':>10} {'edge':>5} {'extra':>5} {'atlas':>9} {'render':>7} {'readback':>8} {'pack':>6} " \
+    head = f"{'projection':>10} {'edge':>5} {'lod':>3} {'extra':>5} {'atlas':>9} {'render':>7} {'readback':>8} {'pack':>6} " \
            f"{'encode':>7} {'total':>7} {'kbit/s':>8} {'triangles':>10}"
     if accuracy:
         head += f" {'PSNR ref':>8} {'>1% off':>8}"
     print(head)
     print("-" * len(head))
     for r in result["rows"]:
-        line = (f"{r['projection']:>10} {r.get('max_edge_deg', 0):4g}° {('on' if r['extra_view'] else 'off'):>5} "
+        name = r["projection"] + (f"@{r['cube_scale']:g}" if r.get("cube_scale") else "")
+        line = (f"{name:>10} {r.get('max_edge_deg', 0):4g}° {('on' if r.get('lod') else 'off'):>3} "
+                f"{('on' if r['extra_view'] else 'off'):>5} "
                 f"{r['atlas'][0]:>4}x{r['atlas'][1]:<4} {r['render_ms']:7.1f} {r['readback_ms']:8.1f} "
                 f"{r['pack_ms']:6.1f} {r['encode_ms']:7.1f} {r['total_ms']:7.1f} {r['kbps']:8.0f} "
                 f"{r['rasterised_triangles']:>10}")
@@ -152,6 +162,8 @@ def print_server_table(result: dict) -> None:
     if accuracy:
         print(f"PSNR ref, >1% off: primary view against a vertex-projection render with "
               f"{result['reference_edge_deg']:g}° edges (colour PSNR; pixels whose distance is more than 1 % off)")
+    print("triangles: pre-tessellated for an eye anywhere in the viewing region; with lod on, each object "
+          "is drawn from a coarser copy when the eye is farther from it")
 
 
 def bench_client(scene_spec="room", trace="pred6dof-1", frames=40, view_size=(1024, 1024), out_size=(960, 540),

@@ -80,9 +80,11 @@ def subdivide(mesh: Mesh, levels) -> Mesh:
 
 
 def levels_for_view_region(mesh: Mesh, world_matrix: np.ndarray, region: np.ndarray,
-                           max_angle_deg: float = 3.0, min_edge: float = 0.02, max_level: int = 32) -> np.ndarray:
+                           max_angle_deg: float = 3.0, min_edge: float = 0.02, max_level: int = 32,
+                           min_distance: float = 0.0) -> np.ndarray:
     """Per-face subdivision level so every edge spans at most ``max_angle_deg`` seen from
-    anywhere in ``region`` ((2, 3) world box where viewers go).
+    anywhere in ``region`` ((2, 3) world box where viewers go) that is at least ``min_distance``
+    from the mesh's box (a coarser copy for viewers known to stand that far off).
 
     An edge of length L at distance d from the region subtends about L / d radians, so the
     target length is ``d * tan(angle)``, never below ``min_edge``.
@@ -97,6 +99,6 @@ def levels_for_view_region(mesh: Mesh, world_matrix: np.ndarray, region: np.ndar
     # Distance from the region to the nearest point of the face's bounding box.
     lo, hi = tri.min(axis=1), tri.max(axis=1)
     gap = np.maximum(0.0, np.maximum(region[0] - hi, lo - region[1]))
-    dist = np.linalg.norm(gap, axis=1)
+    dist = np.maximum(np.linalg.norm(gap, axis=1), min_distance)
     target = np.maximum(dist * np.tan(np.radians(max_angle_deg)), min_edge)
     return np.clip(np.ceil(edge / target), 1, max_level).astype(np.int64)

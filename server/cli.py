@@ -63,8 +63,9 @@ def register(sub) -> None:
     p.add_argument("--keyint", type=int, default=30, help="H.264 keyframe interval in frames (default 30)")
     p.add_argument("--preset", default="ultrafast", help="x264 preset (default ultrafast)")
     p.add_argument("--projection", choices=PROJECTIONS, default=DEFAULT_PROJECTION,
-                   help=f"wide-angle rasterisation: pre-tessellated vertex projection or tessellation shader "
-                        f"(default {DEFAULT_PROJECTION}; 'pibr bench server' measures both)")
+                   help=f"wide-angle rasterisation: pre-tessellated vertex projection, tessellation shader or "
+                        f"cube faces resampled (the primary view only) "
+                        f"(default {DEFAULT_PROJECTION}; 'pibr bench server' measures them)")
     p.add_argument("--max-edge-deg", type=float, default=MAX_EDGE_ANGLE_DEG, metavar="DEG",
                    help=f"longest triangle edge, as a view angle, drawn straight in the wide-angle projection: "
                         f"smaller follows its curves more closely and costs more triangles (default "

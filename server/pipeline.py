@@ -17,7 +17,7 @@ from pibr.protocol.depth import DepthQuantizer
 from pibr.protocol.pose import Pose
 
 from .packer import AtlasPacker
-from .renderer import PEEL_TOLERANCE, RenderTarget, Renderer
+from .renderer import PEEL_TOLERANCE, RenderTarget, Renderer, edge_angle_for_width
 
 
 @dataclass
@@ -36,6 +36,9 @@ class ProducerSpec:
     peel_tolerance: float = PEEL_TOLERANCE
     motion_dt: float | None = None  # render the primary's object motion over this many seconds
     low_colour: int = 0            # hand a colour image downsampled by this factor (0: none)
+    #: rasterise the smaller extra view with edges as much longer as keeps their bend in pixels
+    #: (renderer.edge_angle_for_width): fewer triangles for the same accuracy in its own pixels
+    extra_edges_by_size: bool = True
 
 
 @dataclass
@@ -63,6 +66,11 @@ class FrameProducer:
         self.primary = RenderTarget(ctx, *spec.primary_size, motion=spec.motion_dt is not None)
         self.extra = RenderTarget(ctx, *spec.extra_size) if spec.extra_size else None
         self.packer = AtlasPacker(ctx, spec.layout, spec.quantizer)
+        self.extra_edge_deg = None
+        if spec.extra_size and spec.extra_edges_by_size:
+            self.extra_edge_deg = edge_angle_for_width(renderer.max_edge_angle_deg, spec.primary_size[0],
+                                                       spec.extra_size[0])
+            renderer.prepare_edge_angle(self.extra_edge_deg)
 
     def produce(self, pose: Pose, t: float) -> ProducedFrame:
         ctx = self.ctx
@@ -73,7 +81,7 @@ class FrameProducer:
             extra_pose = pose.compose(self.spec.extra_offset)
             peel = (self.primary, pose, self.spec.peel_tolerance) if self.spec.peel else None
             self.renderer.render_wide(self.extra, extra_pose, t, self.spec.projection, peel=peel,
-                                      mark_peeled=self.spec.mark_peeled)
+                                      mark_peeled=self.spec.mark_peeled, max_edge_deg=self.extra_edge_deg)
         ctx.finish()
         t1 = time.perf_counter()
         sources = {"primary.color": self.primary.color, "primary.depth": self.primary.distance}

@@ -1,21 +1,27 @@
 """Rendering a scene with moderngl: wide-angle views (the server's) and perspective views
 (ground truth), sharing one shading model so both see exactly the same colours.
 
-Wide-angle views are drawn in a single pass, in one of two ways (``projection``):
+Wide-angle views are drawn in one of three ways (``projection``):
 
 ``"vertex"``  the vertex shader projects pre-tessellated meshes (see scenes/tessellate.py);
 ``"tess"``    a tessellation shader splits each triangle on the fly by the angle its edges
-              span, so near triangles get many pieces and far ones none.
+              span, so near triangles get many pieces and far ones none;
+``"cube"``    five perspective cube faces of the original meshes, resampled (cube_faces.py;
+              unpeeled views only).
 
-``pibr bench server --projection vertex|tess`` measures both; the default is the faster
-one here. Every render target stores colour (RGBA8) and radial distance (R32F, 0 = sky).
+``pibr bench server --projection vertex,tess,cube`` measures them; the default is the
+fastest at full quality here. Each object has several pre-tessellated copies
+(``LOD_BANDS``): a wide view draws the coarsest whose edges still span at most the edge
+angle from its eye, and skips chunks of triangles wholly behind its camera (exact). A
+smaller view (the extra view) may ask for longer edges (``edge_angle_for_width``).
+Every render target stores colour (RGBA8) and radial distance (R32F, 0 = sky).
 Images are top-row-first everywhere (see protocol/projection.py): passes flip NDC y, so a
 framebuffer read returns rows in image order.
 """
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -24,9 +30,11 @@ from pibr.protocol.projection import GLSL as PROJECTION_GLSL
 from pibr.scenes.scene import MAX_LIGHTS, Scene
 from pibr.scenes.tessellate import levels_for_view_region, subdivide
 
+from . import cube_faces
+
 log = logging.getLogger(__name__)
 
-PROJECTIONS = ("vertex", "tess")
+PROJECTIONS = ("vertex", "tess", "cube")
 DEFAULT_PROJECTION = "vertex"
 #: Largest angle one rasterised edge may span in the wide-angle projection. At 1024 px over
 #: 180 degrees a 6 degree chord bends by 0.08 degrees, under half a pixel.
@@ -37,6 +45,13 @@ DECAL_OFFSET_UNITS = 4.0
 GL_CLIP_DISTANCE0 = 0x3000  # moderngl has no name for it; see moderngl issue #620
 _VERTEX_FORMAT = "3f 3f 2f 4f1"
 _VERTEX_ATTRS = ("in_position", "in_normal", "in_uv", "in_color")
+
+def edge_angle_for_width(angle_deg: float, reference_width: int, width: int) -> float:
+    """Edge angle giving a view ``width`` pixels wide the same bend in pixels as ``angle_deg`` gives
+    one ``reference_width`` wide: a chord spanning angle a strays from the projected curve by
+    about a^2 / 8 radians, so a half-size view takes sqrt(2) times longer edges."""
+    return float(angle_deg) * float(np.sqrt(reference_width / width))
+
 
 def _vec3(v) -> str:
     return "vec3(%s)" % ", ".join(repr(float(x)) for x in v)
@@ -109,15 +124,10 @@ bool seen_by_primary(vec3 cam) {
     vec3 p = (u_peel_from_cam * vec4(cam, 1.0)).xyz;
     if (p.z > 0.0) return false;                  // behind the primary camera
     vec3 t = wa_project(p);
-    vec2 texel = wa_uv(t.xy) * u_peel_size - 0.5;
-    ivec2 base = ivec2(floor(texel));
-    ivec2 hi = ivec2(u_peel_size) - 1;
-    for (int k = 0; k < 4; ++k) {
-        ivec2 q = clamp(base + ivec2(k & 1, k >> 1), ivec2(0), hi);
-        float d = texelFetch(u_peel_dist, q, 0).r;
-        if (d > 0.0 && abs(d - t.z) < u_peel_tolerance * t.z) return true;
-    }
-    return false;
+    // the 2x2 texels bilinear filtering would read, clamped at the edges (one fetch)
+    vec4 d = textureGather(u_peel_dist, wa_uv(t.xy), 0);
+    vec4 hit = vec4(greaterThan(d, vec4(0.0))) * vec4(lessThan(abs(d - t.z), vec4(u_peel_tolerance * t.z)));
+    return dot(hit, hit) > 0.0;
 }
 #endif
 void main() {
@@ -357,11 +367,59 @@ def _interleave(mesh) -> np.ndarray:
     return rec
 
 
+#: Triangles per culling chunk: runs of consecutive faces whose bounding boxes are tested
+#: against each wide view's hemisphere every frame. Smaller chunks cull more precisely but
+#: cost more draw calls.
+CHUNK_TRIANGLES = 2048
+#: A chunk is culled when every corner of its box lies this far behind the camera plane
+#: (p_z > margin, metres): float32 rounding on the GPU must not bring a vertex forward.
+CULL_MARGIN = 1e-4
+
+
+def chunk_boxes(mesh, chunk: int = CHUNK_TRIANGLES) -> np.ndarray:
+    """Object-space corners (k, 8, 3) float64 of the boxes around faces [i * chunk, (i + 1) * chunk)."""
+    tri = mesh.vertices[mesh.faces].astype(np.float64)          # (m, 3, 3)
+    k = -(-len(tri) // chunk)
+    lo = np.empty((k, 3))
+    hi = np.empty((k, 3))
+    for i in range(k):
+        part = tri[i * chunk:(i + 1) * chunk].reshape(-1, 3)
+        lo[i], hi[i] = part.min(0), part.max(0)
+    pick = np.array([[i, j, l] for i in (0, 1) for j in (0, 1) for l in (0, 1)])   # (8, 3) 0 = lo, 1 = hi
+    return np.where(pick[None, :, :] == 0, lo[:, None, :], hi[:, None, :])
+
+
+#: The wide views' culling plane, (normal, offset) in camera space: inside where -p_z + margin >= 0.
+HEMISPHERE = np.array([[0.0, 0.0, -1.0, CULL_MARGIN]])
+
+
+def visible_runs(corners: np.ndarray, model_view: np.ndarray, chunk: int, faces: int,
+                 planes: np.ndarray = HEMISPHERE) -> list[tuple[int, int]]:
+    """(first face, face count) runs of the chunks not wholly outside any of ``planes``.
+
+    corners : (k, 8, 3) object-space chunk boxes; model_view : (4, 4) object -> camera; planes :
+    (p, 4) camera-space (normal, offset), inside where n . p + d >= 0. With the default, chunks
+    wholly behind the camera (p_z > 0) go: a wide view rasterises nothing of a triangle whose
+    vertices all lie behind its camera (they land at |t'_x| >= 1, see protocol/projection.py),
+    so dropping them leaves every pixel as it was; runs keep the faces' order, so depth ties
+    resolve as before.
+    """
+    cam = corners @ model_view[:3, :3].T + model_view[:3, 3]      # (k, 8, 3)
+    side = cam @ planes[:, :3].T + planes[:, 3]                   # (k, 8, p)
+    keep = (side.max(axis=1) >= 0.0).all(axis=1)
+    if keep.all():
+        return [(0, faces)]
+    edges = np.flatnonzero(np.diff(np.concatenate(([False], keep, [False])).astype(np.int8)))
+    return [(int(a) * chunk, min(int(b) * chunk, faces) - int(a) * chunk) for a, b in zip(edges[::2], edges[1::2])]
+
+
 class _GPUMesh:
     def __init__(self, ctx, mesh, programs: dict):
         self.vbo = ctx.buffer(_interleave(mesh).tobytes())
         self.ibo = ctx.buffer(mesh.faces.astype(np.uint32).tobytes())
         self.count = mesh.faces.size
+        self.faces = len(mesh.faces)
+        self.chunk_corners = chunk_boxes(mesh)
         self.vaos = {name: ctx.vertex_array(prog, [(self.vbo, _VERTEX_FORMAT, *_VERTEX_ATTRS)],
                                             index_buffer=self.ibo, index_element_size=4,
                                             skip_errors=True)
@@ -378,8 +436,20 @@ class _GPUMesh:
 class _GPUObject:
     obj: object
     original: _GPUMesh
-    tessellated: _GPUMesh | None
     texture: object | None
+    #: pre-tessellated copies: edge angle (degrees) -> [(band distance m, mesh)], bands ascending
+    tessellations: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        self.static_box = self.obj.world_bounds(0.0)   # (2, 3) world box at rest
+
+    def meshes(self):
+        return [m for bands in self.tessellations.values() for _, m in bands]
+
+
+#: Distances (m) from a view's eye to an object's box above which a coarser pre-tessellated copy
+#: is drawn: every edge still spans at most the edge angle from that eye (see _tessellate).
+LOD_BANDS = (0.0, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0, 32.0)
 
 
 class RenderTarget:
@@ -425,11 +495,19 @@ class Renderer:
 
     def __init__(self, ctx, scene: Scene, projection: str = DEFAULT_PROJECTION,
                  max_edge_angle_deg: float = MAX_EDGE_ANGLE_DEG, tess_max_level: int = 64,
-                 tess_max_screen_edge: float = 48.0, wide: bool = True):
+                 tess_max_screen_edge: float = 48.0, wide: bool = True, cull: bool = True,
+                 lod: bool = True, cube_scale: float = 0.75, wide_trilinear: bool = False):
         if projection not in PROJECTIONS:
             raise ValueError(f"projection must be one of {', '.join(PROJECTIONS)}, got {projection!r}")
         self.ctx, self.scene, self.projection = ctx, scene, projection
+        #: Wide views skip chunks of triangles wholly behind their camera (same pixels, less work).
+        self.cull = cull
+        self.drawn_triangles = 0   # triangles sent by the last wide view (diagnostics)
+        #: Wide views draw each object's coarsest pre-tessellated copy that still keeps every edge
+        #: within the edge angle seen from their eye (LOD_BANDS); off: the copy for the whole region.
+        self.lod = lod
         self.max_edge_angle = np.radians(max_edge_angle_deg)
+        self.max_edge_angle_deg = float(max_edge_angle_deg)
         self.tess_max_level = tess_max_level
         shading = shading_glsl(scene.lights)
         fragment = _FRAGMENT % {"shading": shading, "defines": "", "projection": PROJECTION_GLSL}
@@ -451,20 +529,31 @@ class Renderer:
             self.programs[name] = prog
         for name in ("vertex_peel", "vertex_peel_mark", "tess_peel", "tess_peel_mark"):
             self.programs[name]["u_peel_dist"].value = 1
-        region = scene.viewing_region()
+        self.programs["cube"] = ctx.program(vertex_shader=cube_faces.CUBE_VS % {"uniforms": _COMMON_VS_UNIFORMS},
+                                            fragment_shader=fragment)
+        resample = ctx.program(vertex_shader=cube_faces.RESAMPLE_VS,
+                               fragment_shader=cube_faces.RESAMPLE_FS % {"projection": PROJECTION_GLSL})
+        for unit, name in enumerate(("u_cube_color", "u_cube_dist", "u_cube_motion")):
+            if name in resample:
+                resample[name].value = unit
+        self.programs["cube_resample"] = resample
+        self._quad = ctx.buffer(np.array([-1, -1, 1, -1, -1, 1, 1, 1], dtype="f4").tobytes())
+        self._resample_vao = ctx.vertex_array(resample, [(self._quad, "2f", "in_pos")])
+        #: projection "cube": face size as a fraction of the wide view's width (see cube_faces.py)
+        self.cube_scale = cube_scale
+        self._cube_targets: dict = {}
+        #: Wide views sample textures bilinearly from the nearest mip level rather than blending
+        #: two (trilinear, which perspective views keep): a tenth of the primary's time, and the
+        #: images differ by about 51 dB PSNR. True: trilinear everywhere.
+        self.wide_trilinear = wide_trilinear
+        self._mip_nearest = ctx.sampler(filter=(ctx.LINEAR_MIPMAP_NEAREST, ctx.LINEAR))
         self.objects: list[_GPUObject] = []
         self.tessellated_triangles = 0
         for obj in scene.objects:
             if obj.mesh.triangle_count == 0:
                 continue
             original = _GPUMesh(ctx, obj.mesh, {k: self.programs[k] for k in ("perspective", "tess", "tess_peel",
-                                                                              "tess_peel_mark")})
-            tess = None
-            if wide:  # pre-tessellated copy for the vertex-projection path
-                levels = levels_for_view_region(obj.mesh, obj.transform, region, max_edge_angle_deg)
-                fine = subdivide(obj.mesh, levels) if levels.max() > 1 else obj.mesh
-                self.tessellated_triangles += fine.triangle_count
-                tess = _GPUMesh(ctx, fine, {k: self.programs[k] for k in ("vertex", "vertex_peel", "vertex_peel_mark")})
+                                                                              "tess_peel_mark", "cube")})
             tex = None
             if obj.material.texture is not None:
                 img = np.ascontiguousarray(obj.material.texture[::-1])  # UV v = 0 is the bottom row
@@ -472,12 +561,71 @@ class Renderer:
                 tex.build_mipmaps()
                 tex.filter = (ctx.LINEAR_MIPMAP_LINEAR, ctx.LINEAR)
                 # No anisotropic filtering: on llvmpipe it costs more than the rest of the pass.
-            self.objects.append(_GPUObject(obj, original, tess, tex))
+            self.objects.append(_GPUObject(obj, original, tex))
+        self.wide = wide
+        if wide:  # pre-tessellated copies for the vertex-projection path
+            self.tessellated_triangles = self.prepare_edge_angle(max_edge_angle_deg)
         log.debug("renderer: %d objects, %d triangles (%d pre-tessellated)", len(self.objects),
                   scene.triangle_count, self.tessellated_triangles)
 
+    def _tessellate(self, obj, angle_deg: float) -> list:
+        """[(band distance, mesh)]: the object split for eyes anywhere in the viewing region (band 0),
+        and coarser for eyes at least each band's distance from its box (a face is no nearer to
+        the eye than the box is); bands whose split equals the previous one's are left out."""
+        region = self.scene.viewing_region()
+        bands, previous = [], None
+        for d in LOD_BANDS:
+            levels = levels_for_view_region(obj.mesh, obj.transform, region, angle_deg, min_distance=d)
+            if previous is not None and np.array_equal(levels, previous):
+                continue
+            previous = levels
+            fine = subdivide(obj.mesh, levels) if levels.max() > 1 else obj.mesh
+            bands.append((d, _GPUMesh(self.ctx, fine, {k: self.programs[k] for k in
+                                                       ("vertex", "vertex_peel", "vertex_peel_mark")})))
+        return bands
+
+    def prepare_edge_angle(self, angle_deg: float) -> int:
+        """Build the pre-tessellated copies for views drawn with ``max_edge_deg=angle_deg``; returns
+        the triangle count of the finest (an eye anywhere in the viewing region). Takes a second
+        or so for a room: call it when a session starts, not mid-stream."""
+        if not self.wide:
+            return 0
+        key = round(float(angle_deg), 6)
+        for g in self.objects:
+            if key not in g.tessellations:
+                g.tessellations[key] = self._tessellate(g.obj, key)
+        return sum(g.tessellations[key][0][1].faces for g in self.objects)
+
+    def _tessellated(self, g: _GPUObject, angle_deg: float | None, eye: np.ndarray, t: float) -> _GPUMesh:
+        """The coarsest copy whose band the eye's distance to the object's box reaches."""
+        key = round(float(self.max_edge_angle_deg if angle_deg is None else angle_deg), 6)
+        if key not in g.tessellations:
+            self.prepare_edge_angle(key)
+        bands = g.tessellations[key]
+        if len(bands) == 1 or not self.lod:
+            return bands[0][1]
+        box = g.obj.world_bounds(t) if g.obj.is_dynamic else g.static_box
+        distance = float(np.linalg.norm(np.maximum(0.0, np.maximum(box[0] - eye, eye - box[1]))))
+        mesh = bands[0][1]
+        for d, m in bands:
+            if d <= distance:
+                mesh = m
+        return mesh
+
+    def _render_mesh(self, mesh: _GPUMesh, prog_name: str, mode, model_view: np.ndarray, cull: bool,
+                     planes: np.ndarray = HEMISPHERE) -> None:
+        vao = mesh.vaos[prog_name]
+        if not cull:
+            vao.render(mode)
+            self.drawn_triangles += mesh.faces
+            return
+        for first, count in visible_runs(mesh.chunk_corners, model_view, CHUNK_TRIANGLES, mesh.faces, planes):
+            vao.render(mode, vertices=3 * count, first=3 * first)
+            self.drawn_triangles += count
+
     def _draw(self, prog_name: str, view: np.ndarray, eye: np.ndarray, t: float, extra_uniforms: dict,
-              motion_dt: float | None = None):
+              motion_dt: float | None = None, cull: bool = False, edge_deg: float | None = None,
+              planes: np.ndarray = HEMISPHERE):
         prog = self.programs[prog_name]
         if "u_eye" in prog:
             prog["u_eye"].value = tuple(float(x) for x in eye)
@@ -512,9 +660,11 @@ class Renderer:
             if "u_moving" in members:
                 prog["u_moving"].value = moving
             if prog_name.startswith("vertex"):
-                g.tessellated.vaos[prog_name].render(self.ctx.TRIANGLES)
+                self._render_mesh(self._tessellated(g, edge_deg, eye, t), prog_name, self.ctx.TRIANGLES, mv, cull)
             elif prog_name.startswith("tess"):
-                g.original.vaos[prog_name].render(self.ctx.PATCHES)
+                self._render_mesh(g.original, prog_name, self.ctx.PATCHES, mv, cull)
+            elif prog_name == "cube":
+                self._render_mesh(g.original, prog_name, self.ctx.TRIANGLES, mv, True, planes)
             else:
                 g.original.vaos["perspective"].render(self.ctx.TRIANGLES)
         if layer:
@@ -533,7 +683,8 @@ class Renderer:
         target.fbo.color_mask = [(True, True, True, True)] * n
 
     def render_wide(self, target: RenderTarget, pose: Pose, t: float, projection: str | None = None,
-                    peel: tuple | None = None, motion_dt: float | None = None, mark_peeled: bool = True) -> None:
+                    peel: tuple | None = None, motion_dt: float | None = None, mark_peeled: bool = True,
+                    max_edge_deg: float | None = None) -> None:
         """Wide-angle view at ``pose`` (camera-to-world) and scene time ``t`` into ``target``.
 
         ``peel = (primary_target, primary_pose, tolerance)`` depth-peels this view against a
@@ -542,10 +693,18 @@ class Renderer:
         motion of moving objects over the last ``motion_dt`` seconds (a target with motion).
         ``mark_peeled``: pixels whose every surface was peeled away get distance PEELED
         (protocol/depth.py) instead of staying 0 like sky; costs the early depth test.
+        ``max_edge_deg``: longest edge (view angle) rasterised straight, if not the renderer's own
+        (see :func:`edge_angle_for_width`); the first view at a new angle builds its tessellation.
         """
         projection = projection or self.projection
         if projection not in PROJECTIONS:
             raise ValueError(f"projection must be one of {', '.join(PROJECTIONS)}, got {projection!r}")
+        self.drawn_triangles = 0
+        if projection == "cube":
+            if peel is None:
+                self._render_cube(target, pose, t, motion_dt)
+                return
+            projection = "vertex"   # peeled views (the extra view) are drawn in one pass
         self._begin(target)
         self.ctx.enable_direct(GL_CLIP_DISTANCE0)
         name = projection
@@ -563,10 +722,49 @@ class Renderer:
         if projection == "tess":
             self.ctx.patch_vertices = 3
             self.programs[name]["u_half_size"].value = (target.width / 2.0, target.height / 2.0)
+            angle = self.max_edge_angle if max_edge_deg is None else np.radians(max_edge_deg)
+            self.programs[name]["u_max_angle"].value = float(angle)
+        if not self.wide_trilinear:
+            self._mip_nearest.use(0)
         try:
-            self._draw(name, pose.view_matrix(), pose.p, t, uniforms, motion_dt)
+            self._draw(name, pose.view_matrix(), pose.p, t, uniforms, motion_dt, cull=self.cull,
+                       edge_deg=max_edge_deg)
         finally:  # shaders that never write gl_ClipDistance must not run with it enabled
             self.ctx.disable_direct(GL_CLIP_DISTANCE0)
+            self._mip_nearest.clear(0)
+
+    def _render_cube(self, target: RenderTarget, pose: Pose, t: float, motion_dt: float | None) -> None:
+        """The wide view as five perspective faces of the original meshes, resampled (cube_faces.py)."""
+        ctx = self.ctx
+        n = max(2, 2 * int(round(self.cube_scale * target.width / 2)))
+        key = (n, target.motion is not None)
+        cube = self._cube_targets.get(key)
+        if cube is None:
+            cube = self._cube_targets[key] = RenderTarget(ctx, 2 * n, 2 * n, motion=target.motion is not None)
+            cube.color.filter = (ctx.LINEAR, ctx.LINEAR)
+        self._begin(cube)
+        near, far = float(self.scene.near), float(self.scene.far)
+        view = pose.view_matrix()
+        if not self.wide_trilinear:
+            self._mip_nearest.use(0)
+        for name, (x, y, w, h) in cube_faces.face_rects(n).items():
+            ctx.viewport = (x, y, w, h)
+            self._draw("cube", view, pose.p, t, {"u_face": cube_faces.face_matrix(name, near, far).T,
+                                                 "u_half_px": (target.width / 2.0, target.height / 2.0)},
+                       motion_dt, planes=cube_faces.face_planes(name, near))
+        self._mip_nearest.clear(0)
+        target.fbo.use()
+        ctx.viewport = (0, 0, target.width, target.height)
+        ctx.disable(ctx.DEPTH_TEST)
+        cube.color.use(0)
+        cube.distance.use(1)
+        if cube.motion is not None:
+            cube.motion.use(2)
+        prog = self.programs["cube_resample"]
+        prog["u_n"].value = float(n)
+        prog["u_size"].value = (float(target.width), float(target.height))
+        self._resample_vao.render(ctx.TRIANGLE_STRIP)
+        ctx.enable(ctx.DEPTH_TEST)
 
     def render_perspective(self, target: RenderTarget, pose: Pose, t: float, fov_x_deg: float) -> None:
         """Perspective view (ground truth) at ``pose`` and scene time ``t``, horizontal FOV ``fov_x_deg``."""
@@ -577,9 +775,14 @@ class Renderer:
     def release(self) -> None:
         for g in self.objects:
             g.original.release()
-            if g.tessellated is not None:
-                g.tessellated.release()
+            for m in g.meshes():
+                m.release()
             if g.texture is not None:
                 g.texture.release()
+        for c in self._cube_targets.values():
+            c.release()
+        self._resample_vao.release()
+        self._quad.release()
+        self._mip_nearest.release()
         for p in self.programs.values():
             p.release()

@@ -45,7 +45,7 @@ def _random_poses(scene, n, seed):
 def test_peeling_keeps_no_point_the_primary_shows(room_probe):
     scene = room_probe.scene
     rng = np.random.default_rng(5)
-    kept_total = 0
+    kept_total = seen_total = 0
     for pose in _random_poses(scene, 12, seed=1):
         offset = extra_offset_pose(rng.uniform(-1, 2), rng.uniform(0, 2), rng.uniform(-30, 45))
         primary = room_probe.render_primary(pose, 0.0)
@@ -57,14 +57,19 @@ def test_peeling_keeps_no_point_the_primary_shows(room_probe):
         # The shader's own test, redone in float64 from the stored texels. A point rebuilt from a
         # texel centre differs from the fragment the shader tested by float32 rounding and by
         # interpolation across a fraction of a texel; that can shift the 2x2 neighbourhood by a
-        # texel or flip the hemisphere test at the view's rim, so a few strays are allowed.
+        # texel or flip the hemisphere test at the view's rim, so a few strays are allowed. The two
+        # views may also draw an object from different pre-tessellated copies (chosen by each eye's
+        # distance), whose chords differ by a fraction of a pixel: measured over these poses, the
+        # worst pose went from 0.46 % to 0.51 % strays and all poses together from 0.21 % to 0.24 %.
         seen = matches_view(pts, pose, primary, PEEL_TOLERANCE)
-        assert seen.mean() < 5e-3, f"{seen.sum()} of {len(pts)} kept points are visible in the primary"
+        seen_total += seen.sum()
+        assert seen.mean() < 6e-3, f"{seen.sum()} of {len(pts)} kept points are visible in the primary"
         assert (extra > 0).sum() <= (unpeeled > 0).sum()
         # Peeled pixels are marked apart from sky: the peeled view's sky is exactly the unpeeled one's.
         assert np.array_equal(extra == 0, unpeeled == 0)
         assert set(np.unique(extra[extra < 0]).tolist()) <= {PEELED}
     assert kept_total > 1000  # peeling kept real content, not nothing
+    assert seen_total < 3e-3 * kept_total
 
 
 def test_peeling_without_offset_is_a_second_depth_layer(room_probe):
