@@ -130,6 +130,9 @@ def add_method_knobs(parser) -> None:
                            help="gridwarp: no depth-aware hole filling")
     group.add_argument("--no-extra-view", dest="knob_extra_view", action="store_const", const=False, default=None,
                        help="proxy: ignore the transmitted extra view")
+    group.add_argument("--no-carve", dest="knob_carve", action="store_const", const=False, default=None,
+                       help="proxy: test only the nearest proxy fragment of each pixel (one cheaper pass; proxy "
+                            "surfaces no view confirms then hide what lies behind them)")
 
 
 def method_knobs(args) -> dict:

@@ -67,12 +67,8 @@ void main() {
 }
 """
 
-# Colour is fetched once per pixel, after the depth test picked the fragment, from the one view
-# and place the pixel's record (or, where no proxy was drawn, its background) chose.
-_RESOLVE_FS = """
-#version 410
-%(frame)s
-uniform sampler2D u_refs;
+# What both resolves share: the views' colour rectangles and the background of a pixel.
+_BACKGROUND_GLSL = """
 uniform vec4 u_primary_color;
 uniform vec4 u_extra_color;
 uniform mat3 u_out_to_src;   // output camera -> primary camera rotation
@@ -106,6 +102,15 @@ bool background(out vec4 rect, out vec2 uv, out float alpha) {
     alpha = 0.0;
     return d.z <= 0.0;
 }
+"""
+
+# Colour is fetched once per pixel, after the depth test picked the fragment, from the one view
+# and place the pixel's record (or, where no proxy was drawn, its background) chose.
+_RESOLVE_FS = """
+#version 410
+%(frame)s
+uniform sampler2D u_refs;
+%(background)s
 void main() {
     vec2 ref = texelFetch(u_refs, ivec2(gl_FragCoord.xy), 0).xy;
     float view = floor(0.5 * ref.x);
@@ -126,19 +131,9 @@ void main() {
 _NO_PROXY = (6.0, 0.0)
 
 _VIEW_ERROR_GLSL = """
-#version 410
-%(frame)s
 uniform bool u_has_extra;
 uniform float u_tau;
-in vec3 v_p;
-in vec3 v_e;
-out vec2 f_ref;   // the pixel's record, see record()
 const float NO_MATCH = 1e30;
-// A pixel's record, two floats: where to fetch its colour (uv in [0, 1]^2) and from which view
-// (0 primary, 1 extra, 2 none: black; 3, the clear value: no proxy fragment here), in the
-// integer parts: u + 2 view, v + 2 accepted. 8 bytes, not 16, to clear and write; the uv keep
-// 2^-22 of precision, a quarter of a thousandth of a pixel.
-vec2 record(vec2 uv, float view, bool accepted) { return vec2(uv.x + 2.0 * view, uv.y + (accepted ? 2.0 : 0.0)); }
 // Relative error between a view's stored distance d and the fragment's f; NO_MATCH behind
 // the camera, at its centre, or where the view stores sky (then 'sky' is set). 'past': the
 // view saw beyond the fragment (d > f).
@@ -161,7 +156,15 @@ float view_error(vec3 c, bool extra, out vec2 uv, out bool sky, out bool past) {
 # One program, two passes over the proxies (u_fallback), so that no fragment writes gl_FragDepth:
 # on a software rasteriser that rules out early depth tests, and every overlapping fragment
 # would run the shader.
-_PROXY_FS = _VIEW_ERROR_GLSL + """
+_PROXY_FS = "#version 410\n%(frame)s\n" + _VIEW_ERROR_GLSL + """
+in vec3 v_p;
+in vec3 v_e;
+out vec2 f_ref;   // the pixel's record, see record()
+// A pixel's record, two floats: where to fetch its colour (uv in [0, 1]^2) and from which view
+// (0 primary, 1 extra, 2 none: black; 3, the clear value: no proxy fragment here), in the
+// integer parts: u + 2 view, v + 2 accepted. 8 bytes, not 16, to clear and write; the uv keep
+// 2^-22 of precision, a quarter of a thousandth of a pixel.
+vec2 record(vec2 uv, float view, bool accepted) { return vec2(uv.x + 2.0 * view, uv.y + (accepted ? 2.0 : 0.0)); }
 uniform bool u_fallback;
 // Pass 1, accepted fragments only, depth in [0, 0.5): fragments behind an accepted one already
 // drawn fail the depth test before the shader runs (objects are drawn nearest first).
@@ -201,6 +204,75 @@ void main() {
 """
 
 
+# carve=False: one geometry pass, no test in it: each pixel keeps the nearest proxy fragment's
+# position where the views saw it (world space, at the frame's time), and the resolve tests
+# that fragment alone. Cheap where the depth test runs before the shader; but a proxy fragment
+# no view confirms is not carved away any more: the surface behind it cannot show through.
+_NEAREST_VS = """
+#version 410
+uniform mat4 u_mvp;          // object -> clip space of the output camera
+uniform mat4 u_seen;         // object -> world, where the views saw it
+in vec3 in_position;
+out vec3 v_w;
+void main() {
+    vec4 p = vec4(in_position, 1.0);
+    v_w = (u_seen * p).xyz;
+    gl_Position = u_mvp * p;
+    gl_Position.y = -gl_Position.y;   // top-row-first images
+}
+"""
+
+_NEAREST_FS = """
+#version 410
+in vec3 v_w;
+out vec4 f_pos;
+void main() { f_pos = vec4(v_w, 1.0); }
+"""
+
+_NEAREST_RESOLVE_FS = "#version 410\n%(frame)s\n" + _VIEW_ERROR_GLSL + """
+uniform sampler2D u_pos;
+uniform mat4 u_world_to_primary;
+uniform mat4 u_world_to_extra;
+%(background)s
+void main() {
+    vec4 w = texelFetch(u_pos, ivec2(gl_FragCoord.xy), 0);
+    vec4 rect = u_primary_color;
+    vec2 uv;
+    float alpha = 1.0;
+    bool show_background = w.w == 0.0;
+    if (!show_background) {
+        vec3 vp = (u_world_to_primary * vec4(w.xyz, 1.0)).xyz;
+        vec2 uv_p, uv_e;
+        bool sky_p, sky_e, past_p, past_e;
+        float e_p = view_error(vp, false, uv_p, sky_p, past_p);
+        uv = uv_p;
+        if (e_p >= u_tau) {   // as the accept and fallback passes decide, for this fragment only
+            float e_e = NO_MATCH;
+            if (u_has_extra && !(past_p || sky_p))
+                e_e = view_error((u_world_to_extra * vec4(w.xyz, 1.0)).xyz, true, uv_e, sky_e, past_e);
+            if (e_e < u_tau) {
+                rect = u_extra_color;
+                uv = uv_e;
+            } else if (sky_p) {
+                show_background = true;
+            } else {
+                alpha = 0.0;
+                if (e_e < e_p) {
+                    rect = u_extra_color;
+                    uv = uv_e;
+                } else if (vp.z > 0.0) {
+                    f_color = vec4(0.0);
+                    return;
+                }
+            }
+        }
+    }
+    if (show_background && !background(rect, uv, alpha)) { f_color = vec4(0.0); return; }
+    f_color = vec4(atlas_rgb(rect, uv), alpha);
+}
+"""
+
+
 def _front_to_back(sel) -> tuple:
     """Sort key: nearest object first, and those whose box holds the camera (the walls of the room
     it stands in, usually behind everything else) last."""
@@ -208,29 +280,42 @@ def _front_to_back(sel) -> tuple:
 
 
 class ProxyIBR(Method):
+    """Proxy IBR; ``carve`` (default) tests every proxy fragment and lets the nearest accepted one
+    win, ``carve=False`` tests only the nearest (one cheaper pass, see _NEAREST_VS)."""
+
     name = "proxy"
     needs_proxies = True
 
     def __init__(self, ctx, output, config, proxies=None, tau: float = DEFAULT_TAU,
-                 lod_target_px: float = DEFAULT_TARGET_PX, lod_level: str | None = None, extra_view: bool = True):
+                 lod_target_px: float = DEFAULT_TARGET_PX, lod_level: str | None = None, extra_view: bool = True,
+                 carve: bool = True):
         super().__init__(ctx, output, config)
         if not proxies:
             from pibr.protocol.errors import ConfigError
 
             raise ConfigError("the proxy method needs the scene's proxies; the server sent none")
         self.tau = tau
+        self.carve = bool(carve)
         self.objects = proxies
         self.selector = LodSelector(proxies, output, lod_target_px, force_level=lod_level)
-        frame = {"frame": frame_glsl(config)}
-        self.prog = ctx.program(vertex_shader=_PROXY_VS, fragment_shader=_PROXY_FS % frame)
-        self.resolve = ctx.program(vertex_shader=FULLSCREEN_VS, fragment_shader=_RESOLVE_FS % frame)
+        glsl = {"frame": frame_glsl(config), "background": _BACKGROUND_GLSL}
+        if self.carve:
+            self.prog = ctx.program(vertex_shader=_PROXY_VS, fragment_shader=_PROXY_FS % glsl)
+            self.resolve = ctx.program(vertex_shader=FULLSCREEN_VS, fragment_shader=_RESOLVE_FS % glsl)
+            # (u, v + view, v + accepted) records; see record() in _PROXY_FS
+            self.refs = ctx.texture((output.width, output.height), 2, dtype="f4")
+            geometry, test = self.prog, self.prog
+        else:
+            self.prog = ctx.program(vertex_shader=_NEAREST_VS, fragment_shader=_NEAREST_FS)
+            self.resolve = ctx.program(vertex_shader=FULLSCREEN_VS, fragment_shader=_NEAREST_RESOLVE_FS % glsl)
+            self.refs = ctx.texture((output.width, output.height), 4, dtype="f4")   # position, 1
+            geometry, test = self.prog, self.resolve
         for p in (self.prog, self.resolve):
             bind_frame_uniforms(p, config)
-        self.refs = ctx.texture((output.width, output.height), 2, dtype="f4")
         self.refs.filter = (ctx.NEAREST, ctx.NEAREST)
         self.refs_depth = ctx.depth_renderbuffer((output.width, output.height))
         self.refs_fbo = ctx.framebuffer(color_attachments=[self.refs], depth_attachment=self.refs_depth)
-        self.resolve["u_refs"].value = 5
+        self.resolve["u_refs" if self.carve else "u_pos"].value = 5
         self.resolve["u_tan_half"].value = output_tan_half(output)
         self.resolve["u_out_size"].value = (float(output.width), float(output.height))
         for k, rect in (("u_primary_color", "primary.color"), ("u_extra_color", "extra.color")):
@@ -238,12 +323,12 @@ class ProxyIBR(Method):
                 self.resolve[k].value = rect_uniform(config, rect)
         # extra_view=False ignores a transmitted extra view: what proxy IBR does without one.
         self.uses_extra_view = bool(extra_view) and has_extra_depth(config)
-        self.prog["u_has_extra"].value = self.uses_extra_view
+        test["u_has_extra"].value = self.uses_extra_view
         # Sessions whose extra view marks peeled pixels apart from sky, in depth codes that keep
         # the mark (min_code >= 2; see protocol/depth.py), let the extra view vouch for sky.
         self.resolve["u_extra_sky"].value = (self.uses_extra_view and bool(config.options.get("peel_marker"))
                                              and config.depth_min_code >= 2)
-        self.prog["u_tau"].value = float(tau)
+        test["u_tau"].value = float(tau)
         self.resolve_vbo, self.resolve_vao = fullscreen_quad(ctx, self.resolve)
         self.near, self.far = config.near, config.far
         self.projection = output_projection(output, self.near, self.far)
@@ -257,7 +342,7 @@ class ProxyIBR(Method):
                     continue
                 vbo = ctx.buffer(np.ascontiguousarray(v, np.float32).tobytes())
                 ibo = ctx.buffer(np.ascontiguousarray(f, np.uint32).tobytes())
-                vao = ctx.vertex_array(self.prog, [(vbo, "3f", "in_position")], index_buffer=ibo,
+                vao = ctx.vertex_array(geometry, [(vbo, "3f", "in_position")], index_buffer=ibo,
                                        index_element_size=4)
                 self._buffers += [vbo, ibo]
                 levels[level] = (vao, len(f))
@@ -268,22 +353,31 @@ class ProxyIBR(Method):
         ctx = self.ctx
         output_fbo = ctx.fbo
         textures.use()
-        # Proxies, depth-tested, accepted fragments in front of the rest; each pixel keeps where
-        # to fetch its colour.
         draws = self._draws(out_pose, frame, scene_t)
         self.refs_fbo.use()
-        self.refs_fbo.clear(*_NO_PROXY, 0.0, 0.0, depth=1.0)
         ctx.enable(ctx.DEPTH_TEST)
-        ctx.enable_direct(_GL_CLIP_DISTANCE0)
-        for depth_half in (-1.0, 1.0):   # accepted fragments, then the rest behind them
-            self.prog["u_fallback"].value = depth_half > 0
-            self.prog["u_depth_half"].value = depth_half
-            for vao, mvp, to_primary, to_extra in draws:
+        if self.carve:
+            # Proxies, depth-tested, accepted fragments in front of the rest; each pixel keeps
+            # where to fetch its colour.
+            self.refs_fbo.clear(*_NO_PROXY, 0.0, 0.0, depth=1.0)
+            ctx.enable_direct(_GL_CLIP_DISTANCE0)
+            for depth_half in (-1.0, 1.0):   # accepted fragments, then the rest behind them
+                self.prog["u_fallback"].value = depth_half > 0
+                self.prog["u_depth_half"].value = depth_half
+                for vao, mvp, to_primary, to_extra, _ in draws:
+                    self.prog["u_mvp"].write(mvp)
+                    self.prog["u_to_primary"].write(to_primary)
+                    self.prog["u_to_extra"].write(to_extra)
+                    vao.render(ctx.TRIANGLES)
+            ctx.disable_direct(_GL_CLIP_DISTANCE0)
+        else:
+            self.refs_fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)   # w = 0: no proxy here
+            for vao, mvp, _, _, seen in draws:
                 self.prog["u_mvp"].write(mvp)
-                self.prog["u_to_primary"].write(to_primary)
-                self.prog["u_to_extra"].write(to_extra)
+                self.prog["u_seen"].write(seen)
                 vao.render(ctx.TRIANGLES)
-        ctx.disable_direct(_GL_CLIP_DISTANCE0)
+            self.resolve["u_world_to_primary"].write(mat4_bytes(frame.primary_pose.view_matrix()))
+            self.resolve["u_world_to_extra"].write(mat4_bytes((frame.extra_pose or frame.primary_pose).view_matrix()))
         ctx.disable(ctx.DEPTH_TEST)
         output_fbo.use()
         self.refs.use(5)
@@ -295,8 +389,9 @@ class ProxyIBR(Method):
         self.resolve_vao.render(ctx.TRIANGLE_STRIP)
 
     def _draws(self, out_pose: Pose, frame, scene_t: float) -> list:
-        """[(vao, mvp, to_primary, to_extra)] of the objects to draw, nearest first (so the depth
-        test rejects most hidden fragments before they are shaded); matrices as uniform bytes."""
+        """[(vao, mvp, to_primary, to_extra, seen)] of the objects to draw, nearest first (so the
+        depth test rejects most hidden fragments before they are shaded); matrices as uniform
+        bytes (seen: object -> world where the views saw it)."""
         view = out_pose.view_matrix()
         to_p = frame.primary_pose.view_matrix()
         to_e = frame.extra_pose.view_matrix() if frame.extra_pose is not None else to_p
@@ -313,7 +408,8 @@ class ProxyIBR(Method):
             # A moving object is drawn where it is now, but looked up where the views saw it.
             seen = obj.world_matrix(frame_t) if obj.motion is not None else model
             vao, n = levels[level]
-            draws.append((vao, mat4_bytes(vp @ model), mat4_bytes(to_p @ seen), mat4_bytes(to_e @ seen)))
+            draws.append((vao, mat4_bytes(vp @ model), mat4_bytes(to_p @ seen), mat4_bytes(to_e @ seen),
+                          mat4_bytes(seen)))
             tris += n
         self.last_primitives = tris
         return draws

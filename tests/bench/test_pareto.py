@@ -76,7 +76,7 @@ def test_tiny_pareto_run(tmp_path):
     v = room["variants"]
     assert set(v) == {"none", "rotation", "coarse-meshwarp s=2", "coarse-meshwarp s=4", "coarse-meshwarp s=8",
                       "coarse-meshwarp s=16", "proxy", "proxy lod 2px", "proxy lod 16px", "proxy tau 0.05",
-                      "proxy tau 0.2", "proxy, no extra view", ORACLE}
+                      "proxy tau 0.2", "proxy, no extra view", "proxy, no carving", ORACLE}
     assert all(x["quality"]["frames"] == 3 and x["quality"]["flip_frames"] == 2 for x in v.values())
     # One geometric definition: methods drawing from the same views share it; the extra view
     # only ever removes holes.
