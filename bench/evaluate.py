@@ -100,6 +100,7 @@ def evaluate_run(run_dir: str, scene_spec: str | None = None, flip_every: int = 
         raise ConfigError(f"{run_dir}: the recording has no displayed frames")
     ppd = pixels_per_degree(width, fov)
     streams = {m: _frames(os.path.join(run_dir, f"{m}.lossless.mkv")) for m in methods}
+    shown = dict.fromkeys(methods)   # each method's image on screen
     gt = GroundTruth(scene, width, height, fov)
     transmitted = TransmittedViews(scene, info["session"], (width, height), fov)
     uses_extra = {m: bool((info.get("methods") or {}).get(m, {}).get("uses_extra_view", False)) for m in methods}
@@ -136,10 +137,15 @@ def evaluate_run(run_dir: str, scene_spec: str | None = None, flip_every: int = 
             geometric.append(transmitted.holes(pose, rec))
             rows = []
             for m in methods:
-                try:
-                    img = next(streams[m])
-                except StopIteration:
-                    raise ConfigError(f"{m}.lossless.mkv ends after {i} frames but {m}.records.csv has {n}") from None
+                if records[m][i]["missed"]:   # the display kept the previous image (blank before any)
+                    img = shown[m] if shown[m] is not None else np.zeros_like(ref)
+                else:
+                    try:
+                        img = shown[m] = next(streams[m])
+                    except StopIteration:
+                        fresh = sum(1 for r in records[m] if not r["missed"])
+                        raise ConfigError(f"{m}.lossless.mkv ends at tick {i}, but {m}.records.csv has {fresh} "
+                                          f"ticks displayed afresh (one frame each)") from None
                 if img.shape != ref.shape:
                     raise ConfigError(f"{m}.lossless.mkv frames are {img.shape}, expected {ref.shape}")
                 with_flip = flip_every > 0 and i % flip_every == 0

@@ -352,7 +352,7 @@ class Client:
                 continue
             record = self._record(tick, t_us, pose, decoded, ms, hole, missed=0)
             rec.submit(rgb, record)
-            self._last_shown[name] = (rgb, record)
+            self._last_shown[name] = record
 
     def _record(self, tick: int, t_us: int, pose: Pose, decoded, client_ms: float, hole: float, missed: int) -> dict:
         """One row of ``<method>.records.csv``: the tick, its pose, and the frame shown (if any)."""
@@ -468,14 +468,12 @@ class Client:
         pose = self._pose_at(trace, t_us / 1e6)
         for name, rec in self.recorders.items():
             if name not in self._last_shown:  # nothing displayed yet: the screen stays blank
-                rec.submit(np.zeros((rec.height, rec.width, 3), np.uint8),
-                           self._record(tick, t_us, pose, None, 0.0, 1.0, missed=1))
+                rec.repeat(self._record(tick, t_us, pose, None, 0.0, 1.0, missed=1))
                 continue
-            rgb, record = self._last_shown[name]
+            record = self._last_shown[name]
             age = record["age_ms"] + (t_us / 1e6 - record["t"]) * 1e3  # NaN stays NaN: no frame yet
-            record = dict(record, tick=tick, t=t_us / 1e6, scene_t=(t_us + self._server_offset_us) / 1e6, missed=1,
-                          age_ms=age, **dict(zip(POSE_FIELDS, pose.as_array())))
-            rec.submit(rgb, record)
+            rec.repeat(dict(record, tick=tick, t=t_us / 1e6, scene_t=(t_us + self._server_offset_us) / 1e6,
+                            missed=1, age_ms=age, **dict(zip(POSE_FIELDS, pose.as_array()))))
 
     async def _receive_real(self, origin: float) -> None:
         """Decode every frame as it arrives (arrival in client time once the clock has started)

@@ -5,7 +5,10 @@ Files in the output directory, for method M::
 
     M.mp4            H.264 yuv420p, for people
     M.lossless.mkv   H.264 4:4:4 RGB at qp 0 (lossless), for metrics against ground truth
-    M.records.csv    one row per displayed tick (columns: RECORD_FIELDS)
+    M.records.csv    one row per output tick (columns: RECORD_FIELDS)
+
+The videos hold one frame per tick displayed afresh, stamped with its tick; a missed tick
+(``missed`` = 1 in its record) kept the previous image and adds none.
 
 Encoding runs on a worker thread per method; at most ``max_pending`` frames wait, so a slow
 disk slows the client (and, on the real clock, shows up as missed deadlines) rather than
@@ -62,22 +65,34 @@ class MethodRecorder:
         self.max_pending = max_pending
         self.frames = 0
 
-    def _write(self, rgb: np.ndarray, pts: int, record: dict) -> None:
-        frame = self._av.VideoFrame.from_ndarray(rgb, format="rgb24")
-        for container, stream in zip(self._containers, self._streams):
-            frame.pts = pts
-            for packet in stream.encode(frame):
-                container.mux(packet)
+    def _write(self, rgb: np.ndarray | None, pts: int, record: dict) -> None:
+        if rgb is not None:
+            frame = self._av.VideoFrame.from_ndarray(rgb, format="rgb24")
+            for container, stream in zip(self._containers, self._streams):
+                frame.pts = pts
+                for packet in stream.encode(frame):
+                    container.mux(packet)
         self._csv.writerow(record)
 
     def submit(self, rgb: np.ndarray, record: dict) -> None:
-        """Queue one displayed image (H, W, 3) uint8 and its record; blocks while too many wait."""
+        """Queue one displayed image (H, W, 3) uint8 and its record; blocks while too many wait.
+        The image's timestamp is its tick, so ticks recorded with :meth:`repeat` in between are
+        held on screen by players."""
         if rgb.shape != (self.height, self.width, 3):
             raise ValueError(f"expected a ({self.height}, {self.width}, 3) image, got {rgb.shape}")
+        self._queue(np.ascontiguousarray(rgb), record)
+
+    def repeat(self, record: dict) -> None:
+        """A tick whose display kept the previous image (a missed deadline): its record only. The
+        videos hold the previous frame (blank before the first); nothing is encoded, so a client
+        that falls behind does not also fall behind on its recording."""
+        self._queue(None, record)
+
+    def _queue(self, rgb, record: dict) -> None:
         while len(self._pending) >= self.max_pending:
             self._pending.popleft().result()
-        self._pending.append(self._pool.submit(self._write, np.ascontiguousarray(rgb), self.frames, record))
-        self.frames += 1
+        self._pending.append(self._pool.submit(self._write, rgb, int(record.get("tick", self.frames)), record))
+        self.frames += rgb is not None
 
     def close(self) -> None:
         while self._pending:

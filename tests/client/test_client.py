@@ -98,15 +98,27 @@ async def test_real_clock_records_every_tick_even_when_the_preroll_overruns(rela
                                    preroll_s=0.002, methods=("rotation",)))
     rows = read_records(tmp_path / "rotation.records.csv")
     assert [r["tick"] for r in rows] == list(range(result.ticks)) and result.ticks == 50
-    assert len(_frames(tmp_path / "rotation.lossless.mkv")) == result.ticks
+    # One video frame per tick displayed afresh; a missed tick holds the previous one.
+    shown = [r for r in rows if not r["missed"]]
+    assert len(_frames(tmp_path / "rotation.lossless.mkv")) == len(shown)
     # Checked against the measured time, not the client's own counter: while a tick was being
     # displayed for client_ms, every deadline in that time passed, so at least that many ticks
     # after it must be recorded as missed.
-    shown = [r for r in rows if not r["missed"]]
     assert 0 < len(shown) < result.ticks
     for a, b in zip(shown, shown[1:]):
         assert b["tick"] - a["tick"] >= math.floor(a["client_ms"] / 1.0), (a, b)
     assert result.missed_deadlines == result.ticks - len(shown)
+    # The evaluation scores every tick, a missed one as the image it held: the same scores as
+    # the tick displayed last before it.
+    from pibr.bench.evaluate import evaluate_run
+
+    metrics = evaluate_run(str(tmp_path), flip_every=0, workers=1, side_by_side=False, plot=False, progress=False)
+    assert metrics["methods"]["rotation"]["frames"] == result.ticks
+    import csv
+
+    with open(tmp_path / "metrics_frames.csv", newline="") as f:
+        scored = [r for r in csv.DictReader(f) if r["method"] == "rotation"]
+    assert len(scored) == result.ticks
 
 
 def test_config_errors_name_the_problem():
