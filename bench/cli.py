@@ -321,6 +321,8 @@ def register(sub) -> None:
     rt.add_argument("--size", type=_size, default=(960, 540), metavar="WxH", help="output size (default 960x540)")
     rt.add_argument("--latency-ms", type=_non_negative, default=128.0, help="round trip (default 128)")
     rt.add_argument("--server-fps", type=_positive, default=10.0, help="server frame rate asked for (default 10)")
+    rt.add_argument("--view-size", type=_size, default=None, metavar="WxH",
+                    help="the server's primary view size (default: the server's, 1024x1024)")
     rt.add_argument("--out", default="out/bench")
     rt.set_defaults(func=cmd_bench_realtime)
 
@@ -353,7 +355,8 @@ def cmd_bench_realtime(args) -> int:
     r = run_realtime_bench(out_dir=args.out, methods=args.method, depth_codecs=args.depth_codec,
                            clients=args.clients, duration_s=args.duration, scaling_duration_s=args.scaling_duration,
                            scene=args.scene, trace=args.trace, start_s=args.start, rate_hz=args.rate,
-                           size=args.size, latency_ms=args.latency_ms, server_fps=args.server_fps)
+                           size=args.size, latency_ms=args.latency_ms, server_fps=args.server_fps,
+                           server_args=() if args.view_size is None else ("--view-size", "%dx%d" % args.view_size))
     print_realtime(r)
     print(f"written: {args.out}/realtime.json")
     return 0

@@ -208,7 +208,8 @@ def _fmt(x, spec):
 def print_realtime(result: dict) -> None:
     s = result["settings"]
     print(f"\nreal clock, {s['scene']}, {s['window']}, {s['duration_s']:g} s, output {s['size'][0]}x{s['size'][1]} "
-          f"at {s['rate_hz']:g} Hz, server asked for {s['server_fps']:g} fps, {s['latency_ms']:g} ms round trip")
+          f"at {s['rate_hz']:g} Hz, server asked for {s['server_fps']:g} fps, {s['latency_ms']:g} ms round trip"
+          + (f", server {' '.join(s['server_args'])}" if s.get("server_args") else ""))
     print(f"{'method':>9} {'depth':>5} {'server fps':>10} {'output Hz':>9} {'missed %':>8} {'age p50':>8} "
           f"{'age p99':>8} {'client ms':>9}   CPU share: server relay client")
     for r in result["runs"]:
