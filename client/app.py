@@ -8,9 +8,11 @@ result. Two clocks (DESIGN.md, Time and latency):
   ``Clock`` promise for its next tick, then reads until the server's messages pass t, so it
   has every frame usable at t (stamped <= t). Nothing depends on the wall clock: the same
   inputs give bit-identical recordings on any machine.
-* **real**: ticks follow the wall clock at the output rate. Frames are decoded as they
-  arrive; a tick whose work ends after the next deadline makes the display skip ticks,
-  each counted as a missed deadline and recorded as a repeat of the last image.
+* **real**: ticks follow the wall clock at the output rate, from when the first frame has
+  been decoded and drawn once by every method (the warm-up compiles shaders). Frames are
+  decoded as they arrive and each is reported to the server, which keeps only a few frames
+  ahead; a tick whose work ends after the next deadline makes the display skip ticks, each
+  counted as a missed deadline and recorded as a repeat of the last image.
 
 The client knows the scene only from the wire (``Welcome``; proxies when a method asks).
 """
@@ -476,7 +478,7 @@ class Client:
                             missed=1, age_ms=age, **dict(zip(POSE_FIELDS, pose.as_array()))))
 
     async def _receive_real(self, origin: float) -> None:
-        """Decode every frame as it arrives (arrival in client time once the clock has started)
+        """Decode every frame as it arrives (arrival stamped from ``origin``, the receiver's start)
         and tell the server how many are decoded, so it never runs far ahead (FRAMES_DECODED)."""
         loop = asyncio.get_running_loop()
         while True:
