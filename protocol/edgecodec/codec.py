@@ -34,6 +34,7 @@ from . import bitstream
 from .bitstream import FrameHeader, grid_shape
 from .edges import decode_edge_image, encode_edge_image, temporal_context
 from .motion import decode_motion, encode_motion
+from .quantize import quantize_codes
 from .regular import decode_regular, encode_regular, nearest_index, sample_positions
 from .values import decode_values, encode_values, temporal_values
 
@@ -279,10 +280,10 @@ class EdgeEncoder:
         d = np.asarray(distance)
         if d.shape != (self.height, self.width):
             raise ValueError(f"distance must have shape ({self.height}, {self.width}), got {d.shape}")
-        return self.quantizer.quantize(d).astype(np.int32)
+        return quantize_codes(d, self.quantizer)
 
     def encode(self, distance, warped_prev_edges=None, warped_prev_values=None, threshold: float | None = None,
-               significance=None, edges=None, signs=None, motion=None, moving=None) -> EncodedDepth:
+               significance=None, edges=None, signs=None, motion=None, moving=None, codes=None) -> EncodedDepth:
         """Encode one frame.
 
         distance : (h, w) float radial distance, 0 = sky. warped_prev_edges : (h, w) bool and
@@ -290,21 +291,28 @@ class EdgeEncoder:
         frame's ``samples`` (used only with ``temporal``). threshold / significance : edge
         selection (see :func:`select_edges`); or ``edges`` (h, w) bool (and optionally ``signs``)
         chosen by the caller. motion : (h, w, 2) float pixels of moving objects; moving :
-        (h, w) bool (default: pixels with non-zero motion).
+        (h, w) bool (default: pixels with non-zero motion). codes : (h, w) int32, this encoder's
+        :meth:`codes` of ``distance`` when the caller already has them (the server's edge
+        extraction does), so they are not computed twice.
         """
-        codes = self.codes(distance)
+        if codes is None:
+            codes = self.codes(distance)
+        else:
+            codes = np.asarray(codes)
+            if codes.shape != (self.height, self.width):
+                raise ValueError(f"codes must have shape ({self.height}, {self.width}), got {codes.shape}")
         h, w = codes.shape
-        lap = laplacian(codes)
         if edges is None:
             thr = self.threshold if threshold is None else float(threshold)
-            edges, auto_signs = select_edges(codes, thr, significance, lap)
+            edges, signs_found = select_edges(codes, thr, significance)
+            if signs is None:
+                signs = signs_found
         else:
             edges = np.asarray(edges, dtype=bool)
             if edges.shape != (h, w):
                 raise ValueError(f"edges must have shape ({h}, {w}), got {edges.shape}")
-            auto_signs = np.where(edges, np.where(lap > 0, 1, -1), 0).astype(np.int8)
-        if signs is None:
-            signs = auto_signs
+        if signs is None:  # the Laplacian is needed only for these signs
+            signs = np.where(edges, np.where(laplacian(codes) > 0, 1, -1), 0).astype(np.int8)
         else:
             signs = np.where(edges, np.where(np.asarray(signs) > 0, 1, -1), 0).astype(np.int8)
         use_t = self.temporal and warped_prev_edges is not None
