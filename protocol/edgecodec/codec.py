@@ -234,13 +234,28 @@ def _check_size(width, height):
         raise ValueError(f"edge codec size must be 1..{bitstream.MAX_SIZE} per side, got {width}x{height}")
 
 
+@njit(cache=True, nogil=True)
+def _assemble_kernel(edges, values, regular, rows, cols, codes, valid):
+    h, w = edges.shape
+    for y in range(h):
+        for x in range(w):
+            if edges[y, x]:
+                codes[y, x] = values[y, x]
+                valid[y, x] = True
+    for i in range(len(rows)):
+        for j in range(len(cols)):
+            y, x = rows[i], cols[j]
+            valid[y, x] = True
+            if not edges[y, x]:
+                codes[y, x] = regular[i, j]
+
+
 def _assemble(edges, signs, values, regular, rows, cols, bits, min_code, q, motion=None, moving=None):
     h, w = edges.shape
     codes = np.zeros((h, w), dtype=np.uint16)
-    valid = edges.copy()
-    codes[np.ix_(rows, cols)] = regular
-    valid[np.ix_(rows, cols)] = True
-    codes[edges] = values[edges]
+    valid = np.zeros((h, w), dtype=bool)
+    edges = np.ascontiguousarray(edges, dtype=bool)
+    _assemble_kernel(edges, np.ascontiguousarray(values), np.ascontiguousarray(regular), rows, cols, codes, valid)
     return DecodedSamples(edges=edges, signs=signs, codes=codes, valid=valid, regular=regular.astype(np.uint16),
                           regular_rows=rows, regular_cols=cols, bits=bits, min_code=min_code, q=q,
                           motion=motion, moving=moving)

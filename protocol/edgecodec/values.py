@@ -286,17 +286,29 @@ def _padded(a, dtype, fill=0):
     return out
 
 
+@njit(cache=True, nogil=True)
+def _temporal_values_kernel(v, out):
+    h, w = v.shape
+    for y in range(h):
+        for x in range(w):
+            out[PAD + y, PAD + x] = v[y, x] if v[y, x] >= 0 else -1
+
+
 def temporal_values(prev_values, height: int, width: int) -> np.ndarray:
-    """Padded (h + 4, w + 4) int32 of warped previous values, -1 where none.
+    """Padded (h + 2 PAD, w + 2 PAD) int32 of warped previous values, -1 where none.
 
     prev_values : (h, w) int, -1 (or any negative) where the warped previous frame has no sample; or None.
     """
+    out = np.full((height + 2 * PAD, width + 2 * PAD), -1, dtype=np.int32)
     if prev_values is None:
-        return np.full((height + 2 * PAD, width + 2 * PAD), -1, dtype=np.int32)
+        return out
     v = np.asarray(prev_values)
     if v.shape != (height, width):
         raise ValueError(f"warped previous values must have shape ({height}, {width}), got {v.shape}")
-    return _padded(np.where(v < 0, -1, v).astype(np.int32), np.int32, -1)
+    if v.dtype != np.int32:
+        v = np.clip(v, -1, np.iinfo(np.int32).max).astype(np.int32)
+    _temporal_values_kernel(np.ascontiguousarray(v), out)
+    return out
 
 
 def encode_values(edges, codes, signs, regular, nearest_rows, nearest_cols, q: int, max_code: int,

@@ -584,3 +584,49 @@ def test_corrupt_payload_memory_is_bounded_by_the_frame():
     finally:
         tracemalloc.stop()
     assert peak < 64 * WIDTH * HEIGHT + 1_000_000
+
+
+# ------------------------------------------------------------------------------------------
+# Compiled helpers against their numpy definitions
+# ------------------------------------------------------------------------------------------
+
+def _temporal_context_numpy(e):
+    h, w = e.shape
+    p = np.zeros((h + 2, w + 2), dtype=bool)
+    p[1:-1, 1:-1] = e
+    around = np.zeros((h, w), dtype=bool)
+    for dy in (0, 1, 2):
+        for dx in (0, 1, 2):
+            if dy != 1 or dx != 1:
+                around |= p[dy:dy + h, dx:dx + w]
+    out = np.zeros((h + 8, w + 8), dtype=np.uint8)
+    out[4:-4, 4:-4] = 2 * e.astype(np.uint8) + around.astype(np.uint8)
+    return out
+
+
+@pytest.mark.parametrize("shape", [(1, 1), (1, 7), (6, 1), (13, 17), (64, 48)])
+def test_compiled_temporal_helpers_and_assembly_match_numpy(shape):
+    from pibr.protocol.edgecodec import codec as codec_module
+    from pibr.protocol.edgecodec.values import PAD as VPAD, temporal_values
+
+    rng = np.random.default_rng(shape[0] * 100 + shape[1])
+    h, w = shape
+    e = rng.random(shape) < 0.2
+    np.testing.assert_array_equal(temporal_context(e, h, w), _temporal_context_numpy(e))
+    v = np.where(rng.random(shape) < 0.5, rng.integers(0, 4096, shape), rng.integers(-3, 0, shape)).astype(np.int32)
+    ref = np.full((h + 2 * VPAD, w + 2 * VPAD), -1, np.int32)
+    ref[VPAD:h + VPAD, VPAD:w + VPAD] = np.where(v < 0, -1, v)
+    np.testing.assert_array_equal(temporal_values(v, h, w), ref)
+    np.testing.assert_array_equal(temporal_values(v.astype(np.int64), h, w), ref)
+    rows, cols = sample_positions(w, h, 2)
+    regular = rng.integers(1, 4096, (len(rows), len(cols)))
+    values = rng.integers(0, 4096, shape).astype(np.int32)
+    s = codec_module._assemble(e, np.where(e, 1, 0).astype(np.int8), values, regular, rows, cols, 12, 1, 1)
+    codes = np.zeros(shape, np.uint16)
+    codes[np.ix_(rows, cols)] = regular
+    codes[e] = values[e]
+    valid = e.copy()
+    valid[np.ix_(rows, cols)] = True
+    np.testing.assert_array_equal(s.codes, codes)
+    np.testing.assert_array_equal(s.valid, valid)
+    assert s.codes.dtype == np.uint16 and s.valid.dtype == bool
