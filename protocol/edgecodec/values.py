@@ -279,6 +279,17 @@ def _decode_kernel(data, E, TV, RG, ri, ci, h, w, q, max_code, m, rate, V, S, A)
     return ds
 
 
+@njit(cache=True, nogil=True)
+def _unpad_decoded(V, S, codes, signs):
+    """Padded decoder outputs -> codes (h, w) and signs (h, w): +1 / -1 for sign codes 2 / 1, else 0."""
+    h, w = codes.shape
+    for y in range(h):
+        for x in range(w):
+            codes[y, x] = V[PAD + y, PAD + x]
+            s = S[PAD + y, PAD + x]
+            signs[y, x] = 1 if s == 2 else (-1 if s == 1 else 0)
+
+
 def _padded(a, dtype, fill=0):
     h, w = a.shape
     out = np.full((h + 2 * PAD, w + 2 * PAD), fill, dtype=dtype)
@@ -355,6 +366,7 @@ def decode_values(data, edges, regular, nearest_rows, nearest_cols, q: int, max_
     arr = as_data(data)
     ds = _decode_kernel(arr, E, tvalues, np.ascontiguousarray(regular, dtype=np.int32), nearest_rows, nearest_cols,
                         h, w, q, max_code, new_model(N_CONTEXTS), RATE_SHIFT, V, S, A)
-    s = S[PAD:-PAD, PAD:-PAD]
-    signs = np.where(s == 2, 1, np.where(s == 1, -1, 0)).astype(np.int8)
-    return V[PAD:-PAD, PAD:-PAD].copy(), signs, decoder_ok(ds, arr)
+    codes = np.empty((h, w), dtype=np.int32)
+    signs = np.empty((h, w), dtype=np.int8)
+    _unpad_decoded(V, S, codes, signs)
+    return codes, signs, decoder_ok(ds, arr)
