@@ -179,8 +179,12 @@ def _smooth_nb(u, m, iterations):
 
 
 @njit(cache=True, nogil=True)
-def _push_pull_nb(v, m, iterations):
-    """(h, w) float64 values and uint8 validity -> filled (h, w) float64 (recursive over levels)."""
+def _push_pull_nb(v, m, iterations, fixed):
+    """(h, w) float64 values and uint8 validity -> filled (h, w) float64 (recursive over levels).
+
+    fixed : (h, w) uint8, the pixels the finest level's sweeps leave alone: ``m``, or more when
+    the caller needs only some pixels (see :func:`_diffuse_regions`).
+    """
     h, w = v.shape
     out = np.empty((h, w))
     n_valid = 0
@@ -237,7 +241,7 @@ def _push_pull_nb(v, m, iterations):
             if den > 0:
                 cv[i, j] = num / den
                 cm[i, j] = 1
-    coarse = _push_pull_nb(cv, cm, min(2 * iterations, _MAX_ITERATIONS))
+    coarse = _push_pull_nb(cv, cm, min(2 * iterations, _MAX_ITERATIONS), cm)
     q = np.zeros((h, w))
     for y in range(0, h, 2):
         for x in range(0, w, 2):
@@ -278,7 +282,7 @@ def _push_pull_nb(v, m, iterations):
                     s += q[y, x + 1]
                     n += 1
                 out[y, x] = s / n
-    _smooth_nb(out, m, iterations)
+    _smooth_nb(out, fixed, iterations)
     return out
 
 
@@ -290,7 +294,7 @@ def push_pull_fast(values, valid, iterations: int = DEFAULT_ITERATIONS) -> np.nd
         raise ValueError(f"values and valid must be (h, w) arrays of one shape, got {v.shape} and {m.shape}")
     if not m.any():
         return np.zeros_like(v)
-    return _push_pull_nb(v, m, int(iterations))
+    return _push_pull_nb(v, m, int(iterations), m)
 
 
 # ------------------------------------------------------------------------------------------
@@ -341,11 +345,18 @@ def _label_regions(edges, labels):
 
 @njit(cache=True, nogil=True)
 def _diffuse_regions(codes, valid, edges, labels, n, boxes, max_work, iterations, out, done):
-    """Push-pull every region from its own samples into ``out``, marking the pixels set in ``done``;
-    regions without samples or beyond the work budget are left alone."""
+    """Push-pull every region from its own samples into ``out`` (h, w) (which also gets the samples),
+    marking the pixels set in ``done``; regions without samples or beyond the work budget are left
+    alone. Returns how many pixels are set (samples included)."""
     h, w = codes.shape
     budget = max_work * h * w
     used = 0
+    n_done = 0
+    for y in range(h):
+        for x in range(w):
+            out[y, x] = codes[y, x]
+            if valid[y, x]:
+                n_done += 1
     for c in range(1, n + 1):
         # one pixel of margin: the region's boundary edge samples
         y0, y1 = max(boxes[c, 0] - 1, 0), min(boxes[c, 1] + 1, h - 1)
@@ -356,6 +367,10 @@ def _diffuse_regions(codes, valid, edges, labels, n, boxes, max_work, iterations
         used += bh * bw
         lv = np.zeros((bh, bw))
         lm = np.zeros((bh, bw), dtype=np.uint8)
+        # The finest level's sweeps need only the region's own pixels: they read nothing but
+        # their 4-neighbours, which are the region's pixels or its samples, so the rest of the
+        # box is held fixed there (the same result for the region, ~half the sweeps' work).
+        lf = np.ones((bh, bw), dtype=np.uint8)
         n_samples = 0
         n_unknown = 0
         for y in range(y0, y1 + 1):
@@ -366,6 +381,7 @@ def _diffuse_regions(codes, valid, edges, labels, n, boxes, max_work, iterations
                         own = True
                     else:
                         n_unknown += 1
+                        lf[y - y0, x - x0] = 0
                 elif edges[y, x] and valid[y, x]:
                     if (y > 0 and labels[y - 1, x] == c) or (y + 1 < h and labels[y + 1, x] == c) or \
                             (x > 0 and labels[y, x - 1] == c) or (x + 1 < w and labels[y, x + 1] == c):
@@ -376,13 +392,14 @@ def _diffuse_regions(codes, valid, edges, labels, n, boxes, max_work, iterations
                     n_samples += 1
         if n_samples == 0 or n_unknown == 0:
             continue
-        filled = _push_pull_nb(lv, lm, iterations)
+        filled = _push_pull_nb(lv, lm, iterations, lf)
         for y in range(y0, y1 + 1):
             for x in range(x0, x1 + 1):
                 if labels[y, x] == c and not valid[y, x]:
                     out[y, x] = filled[y - y0, x - x0]
                     done[y, x] = 1
-    return used
+                    n_done += 1
+    return n_done
 
 
 def _check(samples: DecodedSamples):
@@ -399,18 +416,19 @@ def diffuse_plain(samples: DecodedSamples, iterations: int = DEFAULT_ITERATIONS)
 def diffuse(samples: DecodedSamples, max_work: float = 16.0, iterations: int = DEFAULT_ITERATIONS) -> np.ndarray:
     """Dense codes (h, w) float32 by edge-aware push-pull (module docstring); samples keep their codes."""
     _check(samples)
-    codes = np.ascontiguousarray(samples.codes, dtype=np.float64)
-    valid = np.ascontiguousarray(samples.valid, dtype=np.uint8)
-    edges = np.ascontiguousarray(samples.edges, dtype=np.uint8)
+    # the kernels read the codes and masks as they are (no float64 / uint8 copies of the frame)
+    codes = np.ascontiguousarray(samples.codes)
+    valid = np.ascontiguousarray(samples.valid, dtype=bool).view(np.uint8)
+    edges = np.ascontiguousarray(samples.edges, dtype=bool).view(np.uint8)
     labels = np.zeros(edges.shape, dtype=np.int32)
     n, boxes, _ = _label_regions(edges, labels)
-    out = np.array(codes)
+    out = np.empty(edges.shape, dtype=np.float32)
     done = np.zeros(edges.shape, dtype=np.uint8)
-    _diffuse_regions(codes, valid, edges, labels, n, boxes, float(max_work), int(iterations), out, done)
-    missing = ~(done.astype(bool) | samples.valid)
-    if missing.any():  # regions without samples or over the work budget
-        out[missing] = push_pull_fast(codes, valid, iterations)[missing]
-    return out.astype(np.float32)
+    n_done = _diffuse_regions(codes, valid, edges, labels, n, boxes, float(max_work), int(iterations), out, done)
+    if n_done < out.size:  # regions without samples or over the work budget
+        missing = ~(done.view(bool) | samples.valid)
+        out[missing] = push_pull_fast(samples.codes, samples.valid, iterations)[missing]
+    return out
 
 
 def codes_to_distance(dense, quantizer: DepthQuantizer) -> np.ndarray:
