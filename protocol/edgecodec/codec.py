@@ -59,14 +59,8 @@ def _border_pad(c0, c1, c2):
     return np.where(linear, 2 * c0 - c1, c0)
 
 
-def laplacian(codes) -> np.ndarray:
-    """4-neighbour Laplacian (sum of neighbours - 4 * centre) of codes (h, w): (h, w) int32.
-
-    Outside the image the codes continue linearly where the last three rows (columns) are
-    linear, else the border value repeats: a plane running into the border has no Laplacian
-    there, a step at the border keeps its own. Positive on the far side of a step in
-    disparity, negative on the near side.
-    """
+def laplacian_numpy(codes) -> np.ndarray:
+    """The definition of :func:`laplacian` in numpy (the tests hold the compiled one to it)."""
     c = np.asarray(codes, dtype=np.int32)
     h, w = c.shape
     p = np.pad(c, 1, mode="edge")
@@ -77,6 +71,53 @@ def laplacian(codes) -> np.ndarray:
         p[1:-1, 0] = _border_pad(c[:, 0], c[:, 1], c[:, 2])
         p[1:-1, -1] = _border_pad(c[:, -1], c[:, -2], c[:, -3])
     return p[:-2, 1:-1] + p[2:, 1:-1] + p[1:-1, :-2] + p[1:-1, 2:] - 4 * c
+
+
+@njit(cache=True, nogil=True)
+def _beyond(c0, c1, c2, linear_ok):
+    """Value one step beyond border value c0 (c1, c2 further inside), as :func:`_border_pad`."""
+    if linear_ok and abs(c0 - 2 * c1 + c2) <= 2:
+        return 2 * c0 - c1
+    return c0
+
+
+@njit(cache=True, nogil=True)
+def _laplacian_kernel(c, out):
+    h, w = c.shape
+    for y in range(h):
+        for x in range(w):
+            v = int(c[y, x])
+            up = int(c[y - 1, x]) if y > 0 else _beyond(v, int(c[min(1, h - 1), x]), int(c[min(2, h - 1), x]), h >= 3)
+            down = int(c[y + 1, x]) if y + 1 < h else \
+                _beyond(v, int(c[max(h - 2, 0), x]), int(c[max(h - 3, 0), x]), h >= 3)
+            left = int(c[y, x - 1]) if x > 0 else _beyond(v, int(c[y, min(1, w - 1)]), int(c[y, min(2, w - 1)]), w >= 3)
+            right = int(c[y, x + 1]) if x + 1 < w else \
+                _beyond(v, int(c[y, max(w - 2, 0)]), int(c[y, max(w - 3, 0)]), w >= 3)
+            out[y, x] = up + down + left + right - 4 * v
+
+
+def laplacian(codes) -> np.ndarray:
+    """4-neighbour Laplacian (sum of neighbours - 4 * centre) of codes (h, w): (h, w) int32.
+
+    Outside the image the codes continue linearly where the last three rows (columns) are
+    linear, else the border value repeats: a plane running into the border has no Laplacian
+    there, a step at the border keeps its own. Positive on the far side of a step in
+    disparity, negative on the near side. (Compiled; :func:`laplacian_numpy` is its definition.)
+    """
+    c = np.ascontiguousarray(codes, dtype=np.int32)
+    if c.ndim != 2:
+        raise ValueError(f"codes must have shape (h, w), got {c.shape}")
+    out = np.empty(c.shape, dtype=np.int32)
+    _laplacian_kernel(c, out)
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _signs_kernel(edges, lap, signs):
+    h, w = edges.shape
+    for y in range(h):
+        for x in range(w):
+            signs[y, x] = 0 if not edges[y, x] else (1 if lap[y, x] > 0 else -1)
 
 
 @njit(cache=True, nogil=True)
@@ -127,7 +168,8 @@ def select_edges(codes, threshold: float = DEFAULT_THRESHOLD, significance=None,
         raise ValueError(f"significance and Laplacian must have the codes' shape {c.shape}")
     edges = np.zeros(c.shape, dtype=bool)
     _select_kernel(c, sig, np.float32(threshold), edges)
-    signs = np.where(edges, np.where(L > 0, 1, -1), 0).astype(np.int8)
+    signs = np.empty(c.shape, dtype=np.int8)
+    _signs_kernel(edges, np.ascontiguousarray(L), signs)
     return edges, signs
 
 

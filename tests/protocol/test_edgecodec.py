@@ -630,3 +630,14 @@ def test_compiled_temporal_helpers_and_assembly_match_numpy(shape):
     np.testing.assert_array_equal(s.codes, codes)
     np.testing.assert_array_equal(s.valid, valid)
     assert s.codes.dtype == np.uint16 and s.valid.dtype == bool
+
+
+@pytest.mark.parametrize("shape", [(1, 1), (1, 2), (2, 1), (1, 6), (6, 1), (2, 2), (2, 9), (3, 3), (3, 8), (9, 4), (31, 47)])
+def test_compiled_laplacian_matches_its_numpy_definition(shape):
+    from pibr.protocol.edgecodec.codec import laplacian_numpy
+
+    rng = np.random.default_rng(shape[0] * 31 + shape[1])
+    y, x = np.indices(shape)
+    for codes in (rng.integers(0, 4096, shape), 700 + 3 * y - 5 * x,  # random, a plane (linear borders)
+                  700 + 3 * y - 5 * x + rng.integers(-1, 2, shape), piecewise_planar_codes(*shape)):
+        np.testing.assert_array_equal(laplacian(codes), laplacian_numpy(codes))
