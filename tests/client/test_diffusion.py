@@ -114,3 +114,19 @@ def test_no_edges_at_all_uses_the_regular_samples():
     s = _samples(codes)
     assert not s.edges.any()
     np.testing.assert_allclose(diffuse(s), 1234.0)
+
+
+@pytest.mark.parametrize("shape", [(2, 700), (700, 2), (3, 400), (32, 32), (33, 32), (32, 33), (45, 61), (64, 48)])
+def test_compacted_sweeps_equal_the_plain_red_black_sweeps(shape):
+    """The colour-compacted Gauss-Seidel sweeps compute exactly what the straightforward ones do."""
+    from pibr.client.diffusion import _smooth_nb, _smooth_simple
+
+    rng = np.random.default_rng(shape[0] * 1000 + shape[1])
+    for density in (0.0, 0.05, 0.5, 1.0):
+        u = rng.random(shape) * 4000
+        m = (rng.random(shape) < density).astype(np.uint8)
+        for iterations in (1, 4, 9):
+            a, b = u.copy(), u.copy()
+            _smooth_simple(a, m, iterations)
+            _smooth_nb(b, m, iterations)
+            np.testing.assert_array_equal(a, b)
