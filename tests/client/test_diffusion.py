@@ -130,3 +130,24 @@ def test_compacted_sweeps_equal_the_plain_red_black_sweeps(shape):
             _smooth_simple(a, m, iterations)
             _smooth_nb(b, m, iterations)
             np.testing.assert_array_equal(a, b)
+
+
+@pytest.mark.parametrize("density", [0.0, 0.2, 0.4, 0.55, 0.7, 1.0])
+def test_region_labels_boxes_and_sizes(density):
+    """Regions are the 4-connected components of non-edge pixels, numbered in raster order of their
+    first pixel (as scipy numbers them), with their bounding boxes and pixel counts."""
+    from scipy import ndimage
+
+    from pibr.client.diffusion import _label_regions
+
+    rng = np.random.default_rng(int(density * 100))
+    for shape in [(1, 1), (1, 13), (11, 1), (37, 53), (64, 64)]:
+        edges = rng.random(shape) < density
+        labels = np.zeros(shape, np.int32)
+        n, boxes, sizes = _label_regions(edges.view(np.uint8), labels)
+        expected, n_expected = ndimage.label(~edges)
+        assert n == n_expected
+        np.testing.assert_array_equal(labels, expected)
+        for c in range(1, n + 1):
+            ys, xs = np.nonzero(labels == c)
+            assert list(boxes[c]) == [ys.min(), ys.max(), xs.min(), xs.max()] and sizes[c] == len(ys)
