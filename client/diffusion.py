@@ -317,15 +317,15 @@ def _push_pull_nb(v, m, iterations, fixed):
                 cv[i, j] = num / den
                 cm[i, j] = 1
     coarse = _push_pull_nb(cv, cm, min(2 * iterations, _MAX_ITERATIONS), cm)
-    q = np.zeros((h, w))
+    # pull into qv in place (the quincunx lattice's own values stay, the rest is filled)
+    q = qv
     for y in range(0, h, 2):
         for x in range(0, w, 2):
-            q[y, x] = qv[y, x] if qm[y, x] else coarse[y // 2, x // 2]
+            if not qm[y, x]:
+                q[y, x] = coarse[y // 2, x // 2]
     for y in range(1, h, 2):
         for x in range(1, w, 2):
-            if qm[y, x]:
-                q[y, x] = qv[y, x]
-            else:
+            if not qm[y, x]:
                 s = 0.0
                 n = 0
                 for dy in (-1, 1):
@@ -336,11 +336,14 @@ def _push_pull_nb(v, m, iterations, fixed):
                             n += 1
                 q[y, x] = s / n
     for y in range(h):
+        border_row = y == 0 or y == h - 1
         for x in range(w):
             if m[y, x]:
                 out[y, x] = v[y, x]
             elif (y + x) % 2 == 0:
                 out[y, x] = q[y, x]
+            elif not border_row and 0 < x < w - 1:  # the same sums as below, without the bounds tests
+                out[y, x] = (((0.0 + q[y - 1, x]) + q[y + 1, x]) + q[y, x - 1] + q[y, x + 1]) / 4
             else:
                 s = 0.0
                 n = 0
