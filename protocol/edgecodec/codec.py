@@ -21,6 +21,7 @@ raises :class:`~pibr.protocol.errors.CodecError` and nothing else.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -29,6 +30,7 @@ from numba import njit
 from ..depth import DEQUANTIZE, DepthQuantizer
 from ..errors import CodecError
 from ..pose import Pose
+from ..projection import EPS as _EPS
 from ..projection import FORWARD, INVERSE
 from . import bitstream
 from .bitstream import FrameHeader, grid_shape
@@ -462,9 +464,96 @@ def _rotate(m, x, y, z):
             m[2, 0] * x + m[2, 1] * y + m[2, 2] * z)
 
 
+@njit(cache=True, nogil=True)
+def _warp_kernel(edges, codes, rp, t, rc, near, far, min_code, max_code, eps, values):
+    """:func:`warp_samples_numpy` per sample, operation for operation (so bit-identical): unproject
+    (INVERSE), dequantize (DEQUANTIZE), move, project (FORWARD), quantize (QUANTIZE), splat max."""
+    h, w = edges.shape
+    span = max_code - min_code
+    sky_below = 0.5 * min_code if min_code < 1.5 else 0.25 * min_code
+    peeled_below = 0.0 if min_code < 1.5 else 0.75 * min_code
+    peeled_code = math.floor(0.5 * min_code)
+    for y in range(h):
+        for x in range(w):
+            if not edges[y, x]:
+                continue
+            code = float(codes[y, x])
+            vx = (x + 0.5) / w * 2.0 - 1.0
+            vy = 1.0 - (y + 0.5) / h * 2.0
+            ty = min(max(vy, -1.0), 1.0)
+            dx = min(max(vx, -1.0), 1.0) * math.sqrt(max(1.0 - ty * ty, 0.0))
+            dy = ty
+            dz = -math.sqrt(max(1.0 - dx * dx - ty * ty, 0.0))
+            d = max((code - min_code) / span, 0.5 / span)
+            r = min(near / d, far)
+            if code < peeled_below:
+                r = -1.0
+            if code < sky_below:
+                r = 0.0
+            sky = r <= 0.0
+            if sky:
+                r = 1.0
+            ax, ay, az = dx * r, dy * r, dz * r
+            wx = rp[0, 0] * ax + rp[0, 1] * ay + rp[0, 2] * az
+            wy = rp[1, 0] * ax + rp[1, 1] * ay + rp[1, 2] * az
+            wz = rp[2, 0] * ax + rp[2, 1] * ay + rp[2, 2] * az
+            if not sky:
+                wx = wx + t[0]
+                wy = wy + t[1]
+                wz = wz + t[2]
+            cx = rc[0, 0] * wx + rc[0, 1] * wy + rc[0, 2] * wz
+            cy = rc[1, 0] * wx + rc[1, 1] * wy + rc[1, 2] * wz
+            cz = rc[2, 0] * wx + rc[2, 1] * wy + rc[2, 2] * wz
+            m = max(max(abs(cx), abs(cy)), max(abs(cz), eps))
+            qx, qy, qz = cx / m, cy / m, cz / m
+            qn = math.sqrt(qx * qx + qy * qy + qz * qz)
+            dist = m * qn
+            py = min(max(qy / max(qn, eps), -1.0), 1.0)
+            px = min(max(qx / max(math.sqrt(qx * qx + qz * qz), eps), -1.0), 1.0)
+            col = int(math.floor((px + 1.0) * 0.5 * w))
+            row = int(math.floor((1.0 - py) * 0.5 * h))
+            if not (cz <= 0.0 and 0 <= col < w and 0 <= row < h):
+                continue
+            rr = 0.0 if sky else dist
+            if not math.isfinite(rr):
+                rr = 0.0
+            if rr < 0.0:
+                new = peeled_code
+            elif rr > far or rr <= 0.0:
+                new = 0.0
+            else:
+                new = min_code + math.floor((near / (rr if rr > near else near)) * span + 0.5)
+            if int(new) > values[row, col]:
+                values[row, col] = int(new)
+
+
 def warp_samples(samples: DecodedSamples, prev_pose: Pose, cur_pose: Pose,
                  quantizer: DepthQuantizer) -> WarpedPrevious:
     """Forward-splat the previous frame's decoded edge samples into the current wide-angle view.
+
+    Each edge sample is unprojected through its pixel centre at its decoded distance (sky: a
+    direction at infinity), moved from ``prev_pose`` to ``cur_pose`` (camera-to-world poses),
+    projected, and splatted to the pixel containing it with its re-quantized code; where
+    several land on one pixel the nearest (largest code) wins. Compiled, with the same IEEE
+    operations in the same order as :func:`warp_samples_numpy` (no fused multiply-adds:
+    numba does not contract without fastmath), so encoder and decoder get identical results
+    and so does the numpy definition (tested).
+    """
+    h, w = samples.shape
+    values = np.full((h, w), -1, dtype=np.int32)
+    t = np.asarray(prev_pose.position, dtype=np.float64) - np.asarray(cur_pose.position, dtype=np.float64)
+    _warp_kernel(np.ascontiguousarray(samples.edges), np.ascontiguousarray(samples.codes),
+                 np.ascontiguousarray(prev_pose.rotation(), dtype=np.float64), t,
+                 np.ascontiguousarray(cur_pose.rotation().T, dtype=np.float64), float(quantizer.near),
+                 float(quantizer.far), float(quantizer.min_code), float(quantizer.max_code), float(_EPS), values)
+    return WarpedPrevious(edges=values >= 0, values=values)
+
+
+def warp_samples_numpy(samples: DecodedSamples, prev_pose: Pose, cur_pose: Pose,
+                       quantizer: DepthQuantizer) -> WarpedPrevious:
+    """The definition of :func:`warp_samples` in numpy (the tests hold the compiled one to it).
+
+    Forward-splat the previous frame's decoded edge samples into the current wide-angle view.
 
     Each edge sample is unprojected through its pixel centre at its decoded distance (sky: a
     direction at infinity), moved from ``prev_pose`` to ``cur_pose`` (camera-to-world poses),

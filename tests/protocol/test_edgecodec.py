@@ -641,3 +641,31 @@ def test_compiled_laplacian_matches_its_numpy_definition(shape):
     for codes in (rng.integers(0, 4096, shape), 700 + 3 * y - 5 * x,  # random, a plane (linear borders)
                   700 + 3 * y - 5 * x + rng.integers(-1, 2, shape), piecewise_planar_codes(*shape)):
         np.testing.assert_array_equal(laplacian(codes), laplacian_numpy(codes))
+
+
+@pytest.mark.parametrize("min_code", [1, 2])
+def test_compiled_warp_matches_its_numpy_definition(min_code):
+    """Random samples (sky, peeled, near and far codes) under random motions: the same splat, bit for bit."""
+    from pibr.protocol.edgecodec import codec as codec_module
+
+    q = DepthQuantizer(0.1, 1000.0, bits=12, min_code=min_code)
+    rng = np.random.default_rng(min_code)
+    h, w = 61, 83
+    rows, cols = sample_positions(w, h, 5)
+    for trial in range(12):
+        edges = rng.random((h, w)) < 0.3
+        codes = rng.integers(0, 4096, (h, w)).astype(np.uint16)
+        codes[rng.random((h, w)) < 0.1] = 0
+        codes[rng.random((h, w)) < 0.05] = 1
+        s = codec_module._assemble(edges, np.where(edges, 1, 0).astype(np.int8), codes.astype(np.int32),
+                                   codes[np.ix_(rows, cols)], rows, cols, 12, min_code, 1)
+        axis = rng.normal(size=3)
+        prev = Pose.make(rng.normal(0, 2, 3), quat_from_axis_angle(axis, rng.uniform(-3, 3)))
+        cur = Pose.make(prev.position + rng.normal(0, 0.3 if trial % 2 else 3.0, 3),
+                        quat_from_axis_angle(rng.normal(size=3), rng.uniform(-3, 3)))
+        for a, b in ((prev, cur), (prev, prev)):
+            got = warp_samples(s, a, b, q)
+            want = codec_module.warp_samples_numpy(s, a, b, q)
+            np.testing.assert_array_equal(got.values, want.values)
+            np.testing.assert_array_equal(got.edges, want.edges)
+        assert got.values.dtype == np.int32
