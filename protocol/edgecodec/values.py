@@ -91,7 +91,7 @@ def reconstruct(pred, rq, q, max_code):
     return min(max(pred + rq * q, 0), max_code)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline='always')
 def _activity_bucket(a):
     if a == 0:
         return 0
@@ -108,20 +108,20 @@ def _activity_bucket(a):
     return 6
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline='always')
 def _sign_ctx(S, E, y, x):
     return (int(S[y, x - 1]) + 3 * int(S[y - 1, x]) + 9 * int(S[y - 1, x - 1]) + 27 * int(S[y - 1, x + 1])
             + 81 * (int(E[y, x + 1]) + 2 * int(E[y + 1, x])))
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline='always')
 def _config(E, y, x):
     return (int(E[y - 1, x - 1]) | (int(E[y - 1, x]) << 1) | (int(E[y - 1, x + 1]) << 2) | (int(E[y, x - 1]) << 3)
             | (int(E[y, x + 1]) << 4) | (int(E[y + 1, x - 1]) << 5) | (int(E[y + 1, x]) << 6)
             | (int(E[y + 1, x + 1]) << 7))
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline='always')
 def _candidates(S, V, TV, RG, ri, ci, y, x, s, preds, avail):
     """Fill preds/avail (N_PREDICTORS,) for padded pixel (y, x) whose sign code is s (1 or 2)."""
     for k in range(N_PREDICTORS):
@@ -183,7 +183,7 @@ def _candidates(S, V, TV, RG, ri, ci, y, x, s, preds, avail):
     avail[_R] = 1
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline='always')
 def _choose(scores, cfg, avail):
     best = _R
     best_score = scores[cfg, _R]
@@ -194,7 +194,7 @@ def _choose(scores, cfg, avail):
     return best
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline='always')
 def _learn(scores, cfg, preds, avail, value, max_code):
     for k in range(N_PREDICTORS):
         if avail[k] == 1:
@@ -203,7 +203,7 @@ def _learn(scores, cfg, preds, avail, value, max_code):
             scores[cfg, k] += err - (scores[cfg, k] >> _SCORE_SHIFT)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline='always')
 def _residual_slot(A, y, x, kind, preds, avail):
     a = int(A[y, x - 1]) + int(A[y - 1, x]) + int(A[y - 1, x - 1]) + int(A[y - 1, x + 1])
     lo = 1 << 30
