@@ -370,10 +370,11 @@ class EdgeEncoder:
             edges = np.asarray(edges, dtype=bool)
             if edges.shape != (h, w):
                 raise ValueError(f"edges must have shape ({h}, {w}), got {edges.shape}")
-        if signs is None:  # the Laplacian is needed only for these signs
-            signs = np.where(edges, np.where(laplacian(codes) > 0, 1, -1), 0).astype(np.int8)
-        else:
-            signs = np.where(edges, np.where(np.asarray(signs) > 0, 1, -1), 0).astype(np.int8)
+        edges = np.ascontiguousarray(edges)
+        # +1 / -1 on edges (the sign of the Laplacian unless given), 0 elsewhere
+        given = laplacian(codes) if signs is None else np.ascontiguousarray(signs)
+        signs = np.empty((h, w), dtype=np.int8)
+        _signs_kernel(edges, given, signs)
         use_t = self.temporal and warped_prev_edges is not None
         four = self.passes == 4
         tctx = temporal_context(warped_prev_edges, h, w) if use_t else None
@@ -402,8 +403,7 @@ class EdgeEncoder:
         stats = EncodeStats(header_bytes=bitstream.HEADER_SIZE, edge_bytes=len(edge_bytes),
                             regular_bytes=len(reg_bytes), value_bytes=len(val_bytes), motion_bytes=len(mot_bytes),
                             n_edges=n_edges, n_regular=reg_true.size, temporal=use_t, four_passes=four)
-        dec_signs = np.where(edges, signs, 0).astype(np.int8)
-        samples = _assemble(edges, dec_signs, val_dec, reg_dec, self.rows, self.cols, self.bits,
+        samples = _assemble(edges, signs, val_dec, reg_dec, self.rows, self.cols, self.bits,
                             self.quantizer.min_code, self.q, mot_dec, mov_dec)
         return EncodedDepth(payload=payload, stats=stats, samples=samples)
 
