@@ -193,27 +193,26 @@ def _half_sweep(t, o, f, h, w, p0):
     (y, x = 2k + p) with p = (y + p0) & 1 is t[y, k]; the other colour's pixels are o[y, k'] at
     x = 2k' + 1 - p, so its upper and lower neighbours are o[y -+ 1, k], its left one
     o[y, k - 1 + p] and its right one o[y, k + p]. f: the compacted fixed mask of t. The
-    arithmetic is :func:`_smooth_simple`'s, term for term."""
+    arithmetic is :func:`_smooth_simple`'s, term for term. (Indexed in 2-D throughout: row
+    views would cost a reference-count update each.)"""
     for y in range(h):
         p = (y + p0) & 1
         k_first = 1 - p          # x >= 1
         k_last = (w - 2 - p) // 2  # x <= w - 2
-        trow, frow, orow = t[y], f[y], o[y]
         if y == 0 or y == h - 1:  # border row: the 1-D equation along it, corners stay
             for k in range(k_first, k_last + 1):
-                v = 0.5 * (orow[k - 1 + p] + orow[k + p])
-                trow[k] = trow[k] if frow[k] else v
+                v = 0.5 * (o[y, k - 1 + p] + o[y, k + p])
+                t[y, k] = t[y, k] if f[y, k] else v
             continue
-        up, down = o[y - 1], o[y + 1]
         for k in range(k_first, k_last + 1):
-            v = 0.25 * (up[k] + down[k] + orow[k - 1 + p] + orow[k + p])
-            trow[k] = trow[k] if frow[k] else v
-        if p == 0 and not frow[0]:  # x = 0: the 1-D equation along the border column
-            trow[0] = 0.5 * (up[0] + down[0])
+            v = 0.25 * (o[y - 1, k] + o[y + 1, k] + o[y, k - 1 + p] + o[y, k + p])
+            t[y, k] = t[y, k] if f[y, k] else v
+        if p == 0 and not f[y, 0]:  # x = 0: the 1-D equation along the border column
+            t[y, 0] = 0.5 * (o[y - 1, 0] + o[y + 1, 0])
         if ((w - 1 - p) & 1) == 0:  # x = w - 1 has this colour
             k = (w - 1 - p) // 2
-            if not frow[k]:
-                trow[k] = 0.5 * (up[k] + down[k])
+            if not f[y, k]:
+                t[y, k] = 0.5 * (o[y - 1, k] + o[y + 1, k])
 
 
 @njit(cache=True, nogil=True)
