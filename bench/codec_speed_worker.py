@@ -116,6 +116,8 @@ def main(argv=None) -> int:
     encoder = codec.EdgeEncoder(w, h, EDGE_BITS, quantizer)
     decoder = codec.EdgeDecoder(w, h, EDGE_BITS, quantizer)
     passes_codes = "codes" in inspect.signature(encoder.encode).parameters
+    # a persistent workspace where the checkout has one, as its client's depth stream keeps
+    workspace = diffusion.DiffusionWorkspace() if hasattr(diffusion, "DiffusionWorkspace") else None
     clock = StageClock()
     for mod_name, names in INNER.items():
         module = importlib.import_module(mod_name)
@@ -145,7 +147,7 @@ def main(argv=None) -> int:
         samples = decoder.decode(enc.payload, None if warped_d is None else warped_d.edges,
                                  None if warped_d is None else warped_d.values)
         t5 = pt()
-        dense = diffusion.diffuse(samples)
+        dense = diffusion.diffuse(samples) if workspace is None else diffusion.diffuse(samples, workspace=workspace)
         t6 = pt()
         inner = dict(clock.ms)
         clock.ms = {}

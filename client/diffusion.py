@@ -523,10 +523,11 @@ def _label_regions(edges, labels):
 
 
 @njit(cache=True, nogil=True)
-def _diffuse_regions(codes, valid, edges, labels, n, boxes, max_work, iterations, out, done):
+def _diffuse_regions(codes, valid, edges, labels, n, boxes, max_work, iterations, out, done, fws, uws):
     """Push-pull every region from its own samples into ``out`` (h, w) (which also gets the samples),
     marking the pixels set in ``done``; regions without samples or beyond the work budget are left
-    alone. Returns how many pixels are set (samples included)."""
+    alone. Returns how many pixels are set (samples included). fws (float64) / uws (uint8): flat
+    memory of at least :func:`_workspace_sizes` (h, w) elements, reused by every region."""
     h, w = codes.shape
     budget = max_work * h * w
     used = 0
@@ -536,20 +537,17 @@ def _diffuse_regions(codes, valid, edges, labels, n, boxes, max_work, iterations
             out[y, x] = codes[y, x]
             if valid[y, x]:
                 n_done += 1
-    # memory for the largest box, reused by every region (see _push_pull_pooled)
-    big_h, big_w, big = 1, 1, 1
-    for c in range(1, n + 1):
-        bh = min(boxes[c, 1] + 1, h - 1) - max(boxes[c, 0] - 1, 0) + 1
-        bw = min(boxes[c, 3] + 1, w - 1) - max(boxes[c, 2] - 1, 0) + 1
-        big_h, big_w, big = max(big_h, bh), max(big_w, bw), max(big, bh * bw)
-    nf, nu = _pool_sizes(big_h, big_w)  # covers every box's pyramid: each level fits inside
-    fpool = np.empty(nf)
-    upool = np.empty(nu, dtype=np.uint8)
-    sf = np.empty(2 * big_h * ((big_w + 1) // 2))
-    su = np.empty(2 * big_h * ((big_w + 1) // 2), dtype=np.uint8)
-    lv_pool = np.empty(big)
-    lm_pool = np.empty(big, dtype=np.uint8)
-    lf_pool = np.empty(big, dtype=np.uint8)
+    # memory reused by every region (see _push_pull_pooled), sized for the whole image, which
+    # covers any box's pyramid (each level fits inside the image's)
+    nf, nu = _pool_sizes(h, w)
+    ns = 2 * h * ((w + 1) // 2)
+    fpool = fws[:nf]
+    sf = fws[nf:nf + ns]
+    lv_pool = fws[nf + ns:nf + ns + h * w]
+    upool = uws[:nu]
+    su = uws[nu:nu + ns]
+    lm_pool = uws[nu + ns:nu + ns + h * w]
+    lf_pool = uws[nu + ns + h * w:nu + ns + 2 * h * w]
     for c in range(1, n + 1):
         # one pixel of margin: the region's boundary edge samples
         y0, y1 = max(boxes[c, 0] - 1, 0), min(boxes[c, 1] + 1, h - 1)
@@ -610,8 +608,42 @@ def diffuse_plain(samples: DecodedSamples, iterations: int = DEFAULT_ITERATIONS)
     return push_pull_fast(samples.codes, samples.valid, iterations).astype(np.float32)
 
 
-def diffuse(samples: DecodedSamples, max_work: float = 16.0, iterations: int = DEFAULT_ITERATIONS) -> np.ndarray:
-    """Dense codes (h, w) float32 by edge-aware push-pull (module docstring); samples keep their codes."""
+def _workspace_sizes(h: int, w: int) -> tuple[int, int]:
+    """(float64, uint8) elements of memory :func:`_diffuse_regions` needs for an (h, w) frame."""
+    nf, nu = _pool_sizes(h, w)
+    ns = 2 * h * ((w + 1) // 2)
+    return nf + ns + h * w, nu + ns + 2 * h * w
+
+
+class DiffusionWorkspace:
+    """Memory the edge-aware diffusion reuses from frame to frame: keep one per depth stream (per
+    thread: it is not shared safely). Without it every frame faults ~50 MB of fresh pages in at
+    1024^2; :func:`diffuse` makes a temporary one when given none."""
+
+    def __init__(self):
+        self._f = np.empty(0)
+        self._u = np.empty(0, dtype=np.uint8)
+
+    def arrays(self, height: int, width: int) -> tuple[np.ndarray, np.ndarray]:
+        """(float64, uint8) flat arrays large enough for a (height, width) frame (grown when needed)."""
+        nf, nu = _workspace_sizes(height, width)
+        if len(self._f) < nf:
+            self._f = np.empty(nf)
+        if len(self._u) < nu:
+            self._u = np.empty(nu, dtype=np.uint8)
+        return self._f, self._u
+
+    def release(self) -> None:
+        self._f = np.empty(0)
+        self._u = np.empty(0, dtype=np.uint8)
+
+
+def diffuse(samples: DecodedSamples, max_work: float = 16.0, iterations: int = DEFAULT_ITERATIONS,
+            workspace: DiffusionWorkspace | None = None) -> np.ndarray:
+    """Dense codes (h, w) float32 by edge-aware push-pull (module docstring); samples keep their codes.
+
+    workspace : memory to reuse (see :class:`DiffusionWorkspace`); the result is the same without.
+    """
     _check(samples)
     # the kernels read the codes and masks as they are (no float64 / uint8 copies of the frame)
     codes = np.ascontiguousarray(samples.codes)
@@ -621,7 +653,9 @@ def diffuse(samples: DecodedSamples, max_work: float = 16.0, iterations: int = D
     n, boxes, _ = _label_regions(edges, labels)
     out = np.empty(edges.shape, dtype=np.float32)
     done = np.zeros(edges.shape, dtype=np.uint8)
-    n_done = _diffuse_regions(codes, valid, edges, labels, n, boxes, float(max_work), int(iterations), out, done)
+    fws, uws = (workspace or DiffusionWorkspace()).arrays(*edges.shape)
+    n_done = _diffuse_regions(codes, valid, edges, labels, n, boxes, float(max_work), int(iterations), out, done,
+                              fws, uws)
     if n_done < out.size:  # regions without samples or over the work budget
         missing = ~(done.view(bool) | samples.valid)
         out[missing] = push_pull_fast(samples.codes, samples.valid, iterations)[missing]
@@ -635,7 +669,8 @@ def codes_to_distance(dense, quantizer: DepthQuantizer) -> np.ndarray:
     return r.astype(np.float32)
 
 
-def reconstruct_depth(samples: DecodedSamples, quantizer: DepthQuantizer, edge_aware: bool = True) -> np.ndarray:
-    """Decoded samples -> dense radial distance (h, w) float32 (0 = sky)."""
-    dense = diffuse(samples) if edge_aware else diffuse_plain(samples)
+def reconstruct_depth(samples: DecodedSamples, quantizer: DepthQuantizer, edge_aware: bool = True,
+                      workspace: DiffusionWorkspace | None = None) -> np.ndarray:
+    """Decoded samples -> dense radial distance (h, w) float32 (0 = sky). workspace: see :func:`diffuse`."""
+    dense = diffuse(samples, workspace=workspace) if edge_aware else diffuse_plain(samples)
     return codes_to_distance(dense, quantizer)

@@ -151,3 +151,14 @@ def test_region_labels_boxes_and_sizes(density):
         for c in range(1, n + 1):
             ys, xs = np.nonzero(labels == c)
             assert list(boxes[c]) == [ys.min(), ys.max(), xs.min(), xs.max()] and sizes[c] == len(ys)
+
+
+def test_a_reused_workspace_gives_the_same_depth():
+    """One workspace across frames of different content and size: every result equals a fresh run."""
+    from pibr.client.diffusion import DiffusionWorkspace
+
+    ws = DiffusionWorkspace()
+    for codes in (cluttered_codes(96, 128, seed=1), piecewise_planar_codes(61, 93), cluttered_codes(96, 128, seed=2),
+                  cluttered_codes(40, 30, seed=3)):
+        s = _samples(codes)
+        np.testing.assert_array_equal(diffuse(s, workspace=ws), diffuse(s))
