@@ -252,6 +252,21 @@ def register(sub) -> None:
     cd.add_argument("--out", default="out/bench")
     cd.set_defaults(func=cmd_bench_codec)
 
+    cs = bs.add_parser("codec-speed", help="the edge codec's CPU ms stage by stage, bytes and PSNR, vs a baseline",
+                       description="Encode and decode (with diffusion) of the edge codec on rendered frames along "
+                                   "real traces, process CPU ms per stage; with --baseline, another pibr checkout "
+                                   "runs interleaved frame by frame in its own process and the table shows both, "
+                                   "the ratio, the bytes ratio and whether payloads are identical.")
+    cs.add_argument("--scene", default="room")
+    cs.add_argument("--windows", type=_windows, default="evaluation", help=_WINDOWS_HELP)
+    cs.add_argument("--duration", type=_positive, default=1.0, help="seconds of each window (default 1)")
+    cs.add_argument("--fps", type=_positive, default=10.0, help="server frames per second (default 10)")
+    cs.add_argument("--view-size", type=_size, default=(1024, 1024), metavar="WxH")
+    cs.add_argument("--baseline", default=None, metavar="CHECKOUT",
+                    help="a pibr source tree to compare against, e.g. a git worktree of main")
+    cs.add_argument("--out", default="out/bench")
+    cs.set_defaults(func=cmd_bench_codec_speed)
+
     pa = bs.add_parser("pareto", help="every method and knob: client ms against DSSIM (Reinert et al.'s Figure 9)",
                        description="Runs every client method with each of its knobs (and a zero-latency oracle) on "
                                    "the scenes and head-trace windows, scores each against ground truth (DSSIM, "
@@ -465,6 +480,16 @@ def cmd_bench_codec(args) -> int:
                         out_dir=args.out)
     print_codec_table(r)
     print(f"written: {args.out}/codec.json, {args.out}/codec.png")
+    return 0
+
+
+def cmd_bench_codec_speed(args) -> int:
+    from .codec_speed import print_codec_speed, run_codec_speed
+
+    r = run_codec_speed(scene_spec=args.scene, windows=args.windows, window_s=args.duration, fps=args.fps,
+                        view_size=args.view_size, baseline=args.baseline, out_dir=args.out)
+    print_codec_speed(r)
+    print(f"written: {args.out}/codec_speed.json")
     return 0
 
 

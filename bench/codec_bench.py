@@ -147,7 +147,8 @@ def run_codec_bench(scene_spec="room", windows=None, window_s=4.0, fps=10.0, vie
                     warped = warp_samples(state["enc"][0], state["enc"][1], pose, q12) if state["enc"] else None
                     found = extract_edge_samples(r_true, q12)
                     e = enc.encode(r_true, None if warped is None else warped.edges,
-                                   None if warped is None else warped.values, edges=found.edges, signs=found.signs)
+                                   None if warped is None else warped.values, edges=found.edges, signs=found.signs,
+                                   codes=found.codes)
                     t1 = time.perf_counter()
                     warped_d = warp_samples(state["dec"][0], state["dec"][1], pose, q12) if state["dec"] else None
                     samples = dec.decode(e.payload, None if warped_d is None else warped_d.edges,

@@ -15,7 +15,7 @@ from pibr.protocol.errors import CodecError
 from pibr.protocol.messages import Frame, PayloadKind
 from pibr.protocol.pose import Pose
 
-from .diffusion import reconstruct_depth
+from .diffusion import DiffusionWorkspace, reconstruct_depth
 
 
 class EdgeDepthStreamDecoder:
@@ -24,6 +24,7 @@ class EdgeDepthStreamDecoder:
     def __init__(self, width: int, height: int, quantizer: DepthQuantizer, edge_aware: bool = True):
         self.quantizer, self.edge_aware = quantizer, edge_aware
         self.decoder = EdgeDecoder(width, height, quantizer.bits, quantizer)
+        self.workspace = DiffusionWorkspace()  # this stream's: the streams decode on threads of their own
         self._prev: tuple[DecodedSamples, Pose] | None = None
 
     def decode(self, payload: bytes, pose: Pose) -> tuple[np.ndarray, DecodedSamples]:
@@ -32,7 +33,7 @@ class EdgeDepthStreamDecoder:
         samples = self.decoder.decode(payload, None if warped is None else warped.edges,
                                       None if warped is None else warped.values)
         self._prev = (samples, pose)
-        return reconstruct_depth(samples, self.quantizer, self.edge_aware), samples
+        return reconstruct_depth(samples, self.quantizer, self.edge_aware, self.workspace), samples
 
 
 class EdgeDepthDecoder:

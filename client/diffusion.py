@@ -32,6 +32,15 @@ plain push-pull value. The total work is bounded: regions whose bounding boxes w
 
 Measured on a 1024^2 room frame (threshold 3.5, 4.1 % edge samples): edge-aware 62.1 dB PSNR
 of the 12-bit codes, max error 37 codes, 60 ms; plain push-pull 54.1 dB, max 276 codes, 24 ms.
+The cost is the push-pull over the boxes (summing to ~1.9 images on room frames, 1.5 of them
+the three largest regions'), so it is about the box area times a plain push-pull. Tried and not
+kept (issue 12): one pyramid shared by all regions, whose cells hold one entry per region
+present (sum and weight of that region's samples, pushed with bilinear weights, pulled
+bilinearly, swept among same-region cells): about as costly as a plain push-pull, but
+0.55-0.8 dB below this per-region diffusion in disparity PSNR on room frames; with all pixels
+one region it was 2.7 dB below the quincunx push-pull below, so its bilinear pyramid, not the
+region bookkeeping, lost the quality. A shared pyramid with this module's quincunx steps per
+region entry is the next thing to try.
 
 Codes are diffused (disparity is linear on planes, so diffusion between edge samples
 reconstructs planes); :func:`codes_to_distance` turns them into distance, with 0 (sky) where
@@ -153,8 +162,8 @@ def _push_pull_np(v, m, iterations):
 # ------------------------------------------------------------------------------------------
 
 @njit(cache=True, nogil=True)
-def _smooth_nb(u, m, iterations):
-    """numba twin of :func:`_smooth_np` (in place)."""
+def _smooth_simple(u, m, iterations):
+    """numba twin of :func:`_smooth_np` (in place), straight from its definition."""
     h, w = u.shape
     for _ in range(iterations):
         for colour in range(2):
@@ -179,107 +188,260 @@ def _smooth_nb(u, m, iterations):
 
 
 @njit(cache=True, nogil=True)
-def _push_pull_nb(v, m, iterations):
-    """(h, w) float64 values and uint8 validity -> filled (h, w) float64 (recursive over levels)."""
-    h, w = v.shape
-    out = np.empty((h, w))
-    n_valid = 0
+def _half_sweep(t, o, f, h, w, p0):
+    """Update the pixels of one colour, compacted row by row into t (h, (w + 1) // 2): pixel
+    (y, x = 2k + p) with p = (y + p0) & 1 is t[y, k]; the other colour's pixels are o[y, k'] at
+    x = 2k' + 1 - p, so its upper and lower neighbours are o[y -+ 1, k], its left one
+    o[y, k - 1 + p] and its right one o[y, k + p]. f: the compacted fixed mask of t. The
+    arithmetic is :func:`_smooth_simple`'s, term for term. (Indexed in 2-D throughout: row
+    views would cost a reference-count update each.)"""
     for y in range(h):
-        for x in range(w):
-            if m[y, x]:
-                n_valid += 1
-    if n_valid == h * w or (h == 1 and w == 1):
+        p = (y + p0) & 1
+        k_first = 1 - p          # x >= 1
+        k_last = (w - 2 - p) // 2  # x <= w - 2
+        if y == 0 or y == h - 1:  # border row: the 1-D equation along it, corners stay
+            for k in range(k_first, k_last + 1):
+                v = 0.5 * (o[y, k - 1 + p] + o[y, k + p])
+                t[y, k] = t[y, k] if f[y, k] else v
+            continue
+        for k in range(k_first, k_last + 1):
+            v = 0.25 * (o[y - 1, k] + o[y + 1, k] + o[y, k - 1 + p] + o[y, k + p])
+            t[y, k] = t[y, k] if f[y, k] else v
+        if p == 0 and not f[y, 0]:  # x = 0: the 1-D equation along the border column
+            t[y, 0] = 0.5 * (o[y - 1, 0] + o[y + 1, 0])
+        if ((w - 1 - p) & 1) == 0:  # x = w - 1 has this colour
+            k = (w - 1 - p) // 2
+            if not f[y, k]:
+                t[y, k] = 0.5 * (o[y - 1, k] + o[y + 1, k])
+
+
+@njit(cache=True, nogil=True)
+def _smooth_nb(u, m, iterations, sf=None, su=None):
+    """numba twin of :func:`_smooth_np` (in place).
+
+    The two colours are compacted into arrays of their own first, so each half-sweep reads
+    and writes contiguous rows (vectorised: measured ~3x faster than striding over the full
+    image); the arithmetic is the same, term for term, so results equal :func:`_smooth_simple`'s
+    exactly. Small or thin images go straight to :func:`_smooth_simple`. sf (float64) and su
+    (uint8), flat, of at least 2 h ceil(w / 2) elements: scratch for the compacted colours
+    (allocated here when None).
+    """
+    h, w = u.shape
+    if h < 3 or w < 3 or h * w < 1024 or iterations <= 0:
+        _smooth_simple(u, m, iterations)
+        return
+    wh = (w + 1) // 2
+    n = h * wh
+    if sf is None or su is None or len(sf) < 2 * n or len(su) < 2 * n:
+        sf = np.empty(2 * n)
+        su = np.empty(2 * n, dtype=np.uint8)
+    red = sf[:n].reshape((h, wh))   # (x + y) even: updated first
+    black = sf[n:2 * n].reshape((h, wh))
+    fred = su[:n].reshape((h, wh))
+    fblack = su[n:2 * n].reshape((h, wh))
+    for y in range(h):
+        pr = y & 1
+        for k in range((w - pr + 1) >> 1):
+            red[y, k] = u[y, 2 * k + pr]
+            fred[y, k] = 1 if m[y, 2 * k + pr] else 0
+        for k in range((w - 1 + pr + 1) >> 1):
+            black[y, k] = u[y, 2 * k + 1 - pr]
+            fblack[y, k] = 1 if m[y, 2 * k + 1 - pr] else 0
+    for _ in range(iterations):
+        _half_sweep(red, black, fred, h, w, 0)
+        _half_sweep(black, red, fblack, h, w, 1)
+    for y in range(h):
+        pr = y & 1
+        for k in range((w - pr + 1) >> 1):
+            u[y, 2 * k + pr] = red[y, k]
+        for k in range((w - 1 + pr + 1) >> 1):
+            u[y, 2 * k + 1 - pr] = black[y, k]
+
+
+@njit(cache=True, nogil=True)
+def _pool_sizes(h, w):
+    """(float64, uint8) pool elements :func:`_push_pull_pooled` needs for an (h, w) image; enough
+    for any smaller one too."""
+    nf = 0
+    nu = 0
+    while True:
+        ch, cw = (h + 1) // 2, (w + 1) // 2
+        nf += 2 * h * w + ch * cw
+        nu += h * w + ch * cw
+        if h == 1 and w == 1:
+            return nf, nu
+        h, w = ch, cw
+
+
+@njit(cache=True, nogil=True)
+def _push_pull_pooled(v, m, iterations, fixed, fpool, upool, sf, su):
+    """(h, w) float64 values and uint8 validity -> filled (h, w) float64.
+
+    fixed : (h, w) uint8, the pixels the finest level's sweeps leave alone: ``m``, or more when
+    the caller needs only some pixels (see :func:`_diffuse_regions`).
+    Every level's arrays are views into the flat pools fpool (float64) and upool (uint8) of
+    :func:`_pool_sizes`, sf / su the sweeps' scratch (see :func:`_smooth_nb`): a caller that
+    diffuses many boxes reuses memory instead of faulting fresh pages in for every level of
+    every box (perf: ~20 % of the diffusion was the kernel's page handling). Every element of
+    those views that is read was written first (qv / qm only on the quincunx lattice, the only
+    one read). The levels are walked down and up in loops, not by recursion (numba's cache
+    cannot load a cached caller of a recursive function). Returns a view into fpool.
+    """
+    # level l: size (lh, lw), values / validity (the input at level 0, else the parent's cv / cm),
+    # arrays out, qv at fpool[fo:], then cv; qm at upool[uo:], then cm
+    max_levels = 64
+    lh = np.empty(max_levels, dtype=np.int64)
+    lw = np.empty(max_levels, dtype=np.int64)
+    lfo = np.empty(max_levels, dtype=np.int64)
+    luo = np.empty(max_levels, dtype=np.int64)
+    lit = np.empty(max_levels, dtype=np.int64)
+    h, w = v.shape
+    fo = 0
+    uo = 0
+    it = iterations
+    n_levels = 0
+    vv = v
+    mm = m
+    while True:
+        l = n_levels
+        n_levels += 1
+        lh[l], lw[l], lfo[l], luo[l], lit[l] = h, w, fo, uo, it
+        hw = h * w
+        ch, cw = (h + 1) // 2, (w + 1) // 2
+        out = fpool[fo:fo + hw].reshape((h, w))
+        n_valid = 0
         for y in range(h):
             for x in range(w):
-                out[y, x] = v[y, x] if m[y, x] else 0.0
-        return out
-    qv = np.zeros((h, w))
-    qm = np.zeros((h, w), dtype=np.uint8)
-    for y in range(h):
-        for x in range((y & 1), w, 2):
-            num = 0.0
-            den = 0.0
-            if m[y, x]:
-                num += _C_SELF * v[y, x]
-                den += _C_SELF
-            if y > 0 and m[y - 1, x]:
-                num += _C_NEIGHBOUR * v[y - 1, x]
-                den += _C_NEIGHBOUR
-            if y + 1 < h and m[y + 1, x]:
-                num += _C_NEIGHBOUR * v[y + 1, x]
-                den += _C_NEIGHBOUR
-            if x > 0 and m[y, x - 1]:
-                num += _C_NEIGHBOUR * v[y, x - 1]
-                den += _C_NEIGHBOUR
-            if x + 1 < w and m[y, x + 1]:
-                num += _C_NEIGHBOUR * v[y, x + 1]
-                den += _C_NEIGHBOUR
-            if den > 0:
-                qv[y, x] = num / den
-                qm[y, x] = 1
-    ch, cw = (h + 1) // 2, (w + 1) // 2
-    cv = np.zeros((ch, cw))
-    cm = np.zeros((ch, cw), dtype=np.uint8)
-    for i in range(ch):
-        for j in range(cw):
-            y, x = 2 * i, 2 * j
-            num = 0.0
-            den = 0.0
-            if qm[y, x]:
-                num += _C_SELF * qv[y, x]
-                den += _C_SELF
-            for dy in (-1, 1):
-                for dx in (-1, 1):
-                    yy, xx = y + dy, x + dx
-                    if 0 <= yy < h and 0 <= xx < w and qm[yy, xx]:
-                        num += _C_NEIGHBOUR * qv[yy, xx]
-                        den += _C_NEIGHBOUR
-            if den > 0:
-                cv[i, j] = num / den
-                cm[i, j] = 1
-    coarse = _push_pull_nb(cv, cm, min(2 * iterations, _MAX_ITERATIONS))
-    q = np.zeros((h, w))
-    for y in range(0, h, 2):
-        for x in range(0, w, 2):
-            q[y, x] = qv[y, x] if qm[y, x] else coarse[y // 2, x // 2]
-    for y in range(1, h, 2):
-        for x in range(1, w, 2):
-            if qm[y, x]:
-                q[y, x] = qv[y, x]
-            else:
-                s = 0.0
-                n = 0
+                if mm[y, x]:
+                    n_valid += 1
+        if n_valid == hw or (h == 1 and w == 1):  # the coarsest level
+            for y in range(h):
+                for x in range(w):
+                    out[y, x] = vv[y, x] if mm[y, x] else 0.0
+            break
+        qv = fpool[fo + hw:fo + 2 * hw].reshape((h, w))
+        qm = upool[uo:uo + hw].reshape((h, w))
+        for y in range(h):
+            for x in range((y & 1), w, 2):
+                num = 0.0
+                den = 0.0
+                if mm[y, x]:
+                    num += _C_SELF * vv[y, x]
+                    den += _C_SELF
+                if y > 0 and mm[y - 1, x]:
+                    num += _C_NEIGHBOUR * vv[y - 1, x]
+                    den += _C_NEIGHBOUR
+                if y + 1 < h and mm[y + 1, x]:
+                    num += _C_NEIGHBOUR * vv[y + 1, x]
+                    den += _C_NEIGHBOUR
+                if x > 0 and mm[y, x - 1]:
+                    num += _C_NEIGHBOUR * vv[y, x - 1]
+                    den += _C_NEIGHBOUR
+                if x + 1 < w and mm[y, x + 1]:
+                    num += _C_NEIGHBOUR * vv[y, x + 1]
+                    den += _C_NEIGHBOUR
+                if den > 0:
+                    qv[y, x] = num / den
+                    qm[y, x] = 1
+                else:
+                    qv[y, x] = 0.0
+                    qm[y, x] = 0
+        cv = fpool[fo + 2 * hw:fo + 2 * hw + ch * cw].reshape((ch, cw))
+        cm = upool[uo + hw:uo + hw + ch * cw].reshape((ch, cw))
+        for i in range(ch):
+            for j in range(cw):
+                y, x = 2 * i, 2 * j
+                num = 0.0
+                den = 0.0
+                if qm[y, x]:
+                    num += _C_SELF * qv[y, x]
+                    den += _C_SELF
                 for dy in (-1, 1):
                     for dx in (-1, 1):
                         yy, xx = y + dy, x + dx
-                        if 0 <= yy < h and 0 <= xx < w:
-                            s += q[yy, xx]
-                            n += 1
-                q[y, x] = s / n
-    for y in range(h):
-        for x in range(w):
-            if m[y, x]:
-                out[y, x] = v[y, x]
-            elif (y + x) % 2 == 0:
-                out[y, x] = q[y, x]
-            else:
-                s = 0.0
-                n = 0
-                if y > 0:
-                    s += q[y - 1, x]
-                    n += 1
-                if y + 1 < h:
-                    s += q[y + 1, x]
-                    n += 1
-                if x > 0:
-                    s += q[y, x - 1]
-                    n += 1
-                if x + 1 < w:
-                    s += q[y, x + 1]
-                    n += 1
-                out[y, x] = s / n
-    _smooth_nb(out, m, iterations)
-    return out
+                        if 0 <= yy < h and 0 <= xx < w and qm[yy, xx]:
+                            num += _C_NEIGHBOUR * qv[yy, xx]
+                            den += _C_NEIGHBOUR
+                if den > 0:
+                    cv[i, j] = num / den
+                    cm[i, j] = 1
+                else:
+                    cv[i, j] = 0.0
+                    cm[i, j] = 0
+        vv, mm = cv, cm
+        fo += 2 * hw + ch * cw
+        uo += hw + ch * cw
+        h, w = ch, cw
+        it = min(2 * it, _MAX_ITERATIONS)
+    # back up: pull each level from the one below it, then its sweeps
+    for l in range(n_levels - 2, -1, -1):
+        h, w, fo, uo = lh[l], lw[l], lfo[l], luo[l]
+        hw = h * w
+        ch, cw = lh[l + 1], lw[l + 1]
+        coarse = fpool[lfo[l + 1]:lfo[l + 1] + ch * cw].reshape((ch, cw))
+        out = fpool[fo:fo + hw].reshape((h, w))
+        q = fpool[fo + hw:fo + 2 * hw].reshape((h, w))  # qv, pulled into in place
+        qm = upool[uo:uo + hw].reshape((h, w))
+        if l == 0:
+            vv, mm, fx = v, m, fixed
+        else:
+            vv = fpool[lfo[l - 1] + 2 * lh[l - 1] * lw[l - 1]:lfo[l - 1] + 2 * lh[l - 1] * lw[l - 1] + hw].reshape((h, w))
+            mm = upool[luo[l - 1] + lh[l - 1] * lw[l - 1]:luo[l - 1] + lh[l - 1] * lw[l - 1] + hw].reshape((h, w))
+            fx = mm
+        for y in range(0, h, 2):
+            for x in range(0, w, 2):
+                if not qm[y, x]:
+                    q[y, x] = coarse[y // 2, x // 2]
+        for y in range(1, h, 2):
+            for x in range(1, w, 2):
+                if not qm[y, x]:
+                    s = 0.0
+                    n = 0
+                    for dy in (-1, 1):
+                        for dx in (-1, 1):
+                            yy, xx = y + dy, x + dx
+                            if 0 <= yy < h and 0 <= xx < w:
+                                s += q[yy, xx]
+                                n += 1
+                    q[y, x] = s / n
+        for y in range(h):
+            border_row = y == 0 or y == h - 1
+            for x in range(w):
+                if mm[y, x]:
+                    out[y, x] = vv[y, x]
+                elif (y + x) % 2 == 0:
+                    out[y, x] = q[y, x]
+                elif not border_row and 0 < x < w - 1:  # the same sums as below, without the bounds tests
+                    out[y, x] = (((0.0 + q[y - 1, x]) + q[y + 1, x]) + q[y, x - 1] + q[y, x + 1]) / 4
+                else:
+                    s = 0.0
+                    n = 0
+                    if y > 0:
+                        s += q[y - 1, x]
+                        n += 1
+                    if y + 1 < h:
+                        s += q[y + 1, x]
+                        n += 1
+                    if x > 0:
+                        s += q[y, x - 1]
+                        n += 1
+                    if x + 1 < w:
+                        s += q[y, x + 1]
+                        n += 1
+                    out[y, x] = s / n
+        _smooth_nb(out, fx, lit[l], sf, su)
+    return fpool[:v.shape[0] * v.shape[1]].reshape(v.shape)
+
+
+@njit(cache=True, nogil=True)
+def _push_pull_nb(v, m, iterations, fixed):
+    """:func:`_push_pull_pooled` with pools of its own: filled (h, w) float64."""
+    h, w = v.shape
+    nf, nu = _pool_sizes(h, w)
+    wh = (w + 1) // 2
+    out = _push_pull_pooled(v, m, iterations, fixed, np.empty(nf), np.empty(nu, dtype=np.uint8),
+                            np.empty(2 * h * wh), np.empty(2 * h * wh, dtype=np.uint8))
+    return out.copy()
 
 
 def push_pull_fast(values, valid, iterations: int = DEFAULT_ITERATIONS) -> np.ndarray:
@@ -290,7 +452,7 @@ def push_pull_fast(values, valid, iterations: int = DEFAULT_ITERATIONS) -> np.nd
         raise ValueError(f"values and valid must be (h, w) arrays of one shape, got {v.shape} and {m.shape}")
     if not m.any():
         return np.zeros_like(v)
-    return _push_pull_nb(v, m, int(iterations))
+    return _push_pull_nb(v, m, int(iterations), m)
 
 
 # ------------------------------------------------------------------------------------------
@@ -300,9 +462,15 @@ def push_pull_fast(values, valid, iterations: int = DEFAULT_ITERATIONS) -> np.nd
 @njit(cache=True, nogil=True)
 def _label_regions(edges, labels):
     """4-connected components of non-edge pixels: labels (h, w) int32 from 1 (0 on edges);
-    returns (n, boxes (n + 1, 4) int64 as y0, y1, x0, x1 inclusive, sizes (n + 1,))."""
+    returns (n, boxes (n + 1, 4) int64 as y0, y1, x0, x1 inclusive, sizes (n + 1,)).
+
+    Components are numbered in the raster order of their first pixel and filled run by run
+    (a scanline flood fill: a popped seed labels its whole row run, then pushes one seed per
+    unlabelled run above and below it), which touches each pixel a few times in row order
+    instead of pushing every pixel through a stack.
+    """
     h, w = edges.shape
-    stack = np.empty(h * w, dtype=np.int64)
+    stack = np.empty(2 * h * w + 4, dtype=np.int64)  # a pixel is pushed at most once from each side
     # Rows 1..n are written as regions are found (np.empty: zeroing ~20 MB cost more than labelling).
     boxes = np.empty((h * w // 2 + 2, 4), dtype=np.int64)
     sizes = np.empty(h * w // 2 + 2, dtype=np.int64)
@@ -316,7 +484,6 @@ def _label_regions(edges, labels):
             n += 1
             if n >= len(sizes):  # cannot happen: components are separated by edges
                 return -1, boxes, sizes
-            labels[sy, sx] = n
             top = 0
             stack[top] = sy * w + sx
             top += 1
@@ -326,26 +493,61 @@ def _label_regions(edges, labels):
                 top -= 1
                 p = stack[top]
                 y, x = p // w, p % w
-                size += 1
-                y0, y1, x0, x1 = min(y0, y), max(y1, y), min(x0, x), max(x1, x)
-                for dy, dx in ((-1, 0), (1, 0), (0, -1), (0, 1)):
-                    yy, xx = y + dy, x + dx
-                    if 0 <= yy < h and 0 <= xx < w and not edges[yy, xx] and labels[yy, xx] == 0:
-                        labels[yy, xx] = n
-                        stack[top] = yy * w + xx
-                        top += 1
+                if labels[y, x] != 0:
+                    continue
+                xl = x
+                while xl > 0 and not edges[y, xl - 1] and labels[y, xl - 1] == 0:
+                    xl -= 1
+                xr = x
+                while xr + 1 < w and not edges[y, xr + 1] and labels[y, xr + 1] == 0:
+                    xr += 1
+                for xx in range(xl, xr + 1):
+                    labels[y, xx] = n
+                size += xr - xl + 1
+                y0, y1, x0, x1 = min(y0, y), max(y1, y), min(x0, xl), max(x1, xr)
+                for yy in (y - 1, y + 1):
+                    if yy < 0 or yy >= h:
+                        continue
+                    inside = False
+                    for xx in range(xl, xr + 1):
+                        free = not edges[yy, xx] and labels[yy, xx] == 0
+                        if free and not inside:
+                            if top >= len(stack):  # cannot happen: one seed per free run
+                                return -1, boxes, sizes
+                            stack[top] = yy * w + xx
+                            top += 1
+                        inside = free
             boxes[n, 0], boxes[n, 1], boxes[n, 2], boxes[n, 3] = y0, y1, x0, x1
             sizes[n] = size
     return n, boxes, sizes
 
 
 @njit(cache=True, nogil=True)
-def _diffuse_regions(codes, valid, edges, labels, n, boxes, max_work, iterations, out, done):
-    """Push-pull every region from its own samples into ``out``, marking the pixels set in ``done``;
-    regions without samples or beyond the work budget are left alone."""
+def _diffuse_regions(codes, valid, edges, labels, n, boxes, max_work, iterations, out, done, fws, uws):
+    """Push-pull every region from its own samples into ``out`` (h, w) (which also gets the samples),
+    marking the pixels set in ``done``; regions without samples or beyond the work budget are left
+    alone. Returns how many pixels are set (samples included). fws (float64) / uws (uint8): flat
+    memory of at least :func:`_workspace_sizes` (h, w) elements, reused by every region."""
     h, w = codes.shape
     budget = max_work * h * w
     used = 0
+    n_done = 0
+    for y in range(h):
+        for x in range(w):
+            out[y, x] = codes[y, x]
+            if valid[y, x]:
+                n_done += 1
+    # memory reused by every region (see _push_pull_pooled), sized for the whole image, which
+    # covers any box's pyramid (each level fits inside the image's)
+    nf, nu = _pool_sizes(h, w)
+    ns = 2 * h * ((w + 1) // 2)
+    fpool = fws[:nf]
+    sf = fws[nf:nf + ns]
+    lv_pool = fws[nf + ns:nf + ns + h * w]
+    upool = uws[:nu]
+    su = uws[nu:nu + ns]
+    lm_pool = uws[nu + ns:nu + ns + h * w]
+    lf_pool = uws[nu + ns + h * w:nu + ns + 2 * h * w]
     for c in range(1, n + 1):
         # one pixel of margin: the region's boundary edge samples
         y0, y1 = max(boxes[c, 0] - 1, 0), min(boxes[c, 1] + 1, h - 1)
@@ -354,18 +556,24 @@ def _diffuse_regions(codes, valid, edges, labels, n, boxes, max_work, iterations
         if used + bh * bw > budget:
             continue
         used += bh * bw
-        lv = np.zeros((bh, bw))
-        lm = np.zeros((bh, bw), dtype=np.uint8)
+        lv = lv_pool[:bh * bw].reshape((bh, bw))
+        lm = lm_pool[:bh * bw].reshape((bh, bw))
+        # The finest level's sweeps need only the region's own pixels: they read nothing but
+        # their 4-neighbours, which are the region's pixels or its samples, so the rest of the
+        # box is held fixed there (the same result for the region, ~half the sweeps' work).
+        lf = lf_pool[:bh * bw].reshape((bh, bw))
         n_samples = 0
         n_unknown = 0
         for y in range(y0, y1 + 1):
             for x in range(x0, x1 + 1):
                 own = False
+                lf[y - y0, x - x0] = 1
                 if labels[y, x] == c:
                     if valid[y, x]:
                         own = True
                     else:
                         n_unknown += 1
+                        lf[y - y0, x - x0] = 0
                 elif edges[y, x] and valid[y, x]:
                     if (y > 0 and labels[y - 1, x] == c) or (y + 1 < h and labels[y + 1, x] == c) or \
                             (x > 0 and labels[y, x - 1] == c) or (x + 1 < w and labels[y, x + 1] == c):
@@ -374,15 +582,19 @@ def _diffuse_regions(codes, valid, edges, labels, n, boxes, max_work, iterations
                     lv[y - y0, x - x0] = codes[y, x]
                     lm[y - y0, x - x0] = 1
                     n_samples += 1
+                else:
+                    lv[y - y0, x - x0] = 0.0
+                    lm[y - y0, x - x0] = 0
         if n_samples == 0 or n_unknown == 0:
             continue
-        filled = _push_pull_nb(lv, lm, iterations)
+        filled = _push_pull_pooled(lv, lm, iterations, lf, fpool, upool, sf, su)
         for y in range(y0, y1 + 1):
             for x in range(x0, x1 + 1):
                 if labels[y, x] == c and not valid[y, x]:
                     out[y, x] = filled[y - y0, x - x0]
                     done[y, x] = 1
-    return used
+                    n_done += 1
+    return n_done
 
 
 def _check(samples: DecodedSamples):
@@ -396,21 +608,58 @@ def diffuse_plain(samples: DecodedSamples, iterations: int = DEFAULT_ITERATIONS)
     return push_pull_fast(samples.codes, samples.valid, iterations).astype(np.float32)
 
 
-def diffuse(samples: DecodedSamples, max_work: float = 16.0, iterations: int = DEFAULT_ITERATIONS) -> np.ndarray:
-    """Dense codes (h, w) float32 by edge-aware push-pull (module docstring); samples keep their codes."""
+def _workspace_sizes(h: int, w: int) -> tuple[int, int]:
+    """(float64, uint8) elements of memory :func:`_diffuse_regions` needs for an (h, w) frame."""
+    nf, nu = _pool_sizes(h, w)
+    ns = 2 * h * ((w + 1) // 2)
+    return nf + ns + h * w, nu + ns + 2 * h * w
+
+
+class DiffusionWorkspace:
+    """Memory the edge-aware diffusion reuses from frame to frame: keep one per depth stream (per
+    thread: it is not shared safely). Without it every frame faults ~50 MB of fresh pages in at
+    1024^2; :func:`diffuse` makes a temporary one when given none."""
+
+    def __init__(self):
+        self._f = np.empty(0)
+        self._u = np.empty(0, dtype=np.uint8)
+
+    def arrays(self, height: int, width: int) -> tuple[np.ndarray, np.ndarray]:
+        """(float64, uint8) flat arrays large enough for a (height, width) frame (grown when needed)."""
+        nf, nu = _workspace_sizes(height, width)
+        if len(self._f) < nf:
+            self._f = np.empty(nf)
+        if len(self._u) < nu:
+            self._u = np.empty(nu, dtype=np.uint8)
+        return self._f, self._u
+
+    def release(self) -> None:
+        self._f = np.empty(0)
+        self._u = np.empty(0, dtype=np.uint8)
+
+
+def diffuse(samples: DecodedSamples, max_work: float = 16.0, iterations: int = DEFAULT_ITERATIONS,
+            workspace: DiffusionWorkspace | None = None) -> np.ndarray:
+    """Dense codes (h, w) float32 by edge-aware push-pull (module docstring); samples keep their codes.
+
+    workspace : memory to reuse (see :class:`DiffusionWorkspace`); the result is the same without.
+    """
     _check(samples)
-    codes = np.ascontiguousarray(samples.codes, dtype=np.float64)
-    valid = np.ascontiguousarray(samples.valid, dtype=np.uint8)
-    edges = np.ascontiguousarray(samples.edges, dtype=np.uint8)
+    # the kernels read the codes and masks as they are (no float64 / uint8 copies of the frame)
+    codes = np.ascontiguousarray(samples.codes)
+    valid = np.ascontiguousarray(samples.valid, dtype=bool).view(np.uint8)
+    edges = np.ascontiguousarray(samples.edges, dtype=bool).view(np.uint8)
     labels = np.zeros(edges.shape, dtype=np.int32)
     n, boxes, _ = _label_regions(edges, labels)
-    out = np.array(codes)
+    out = np.empty(edges.shape, dtype=np.float32)
     done = np.zeros(edges.shape, dtype=np.uint8)
-    _diffuse_regions(codes, valid, edges, labels, n, boxes, float(max_work), int(iterations), out, done)
-    missing = ~(done.astype(bool) | samples.valid)
-    if missing.any():  # regions without samples or over the work budget
-        out[missing] = push_pull_fast(codes, valid, iterations)[missing]
-    return out.astype(np.float32)
+    fws, uws = (workspace or DiffusionWorkspace()).arrays(*edges.shape)
+    n_done = _diffuse_regions(codes, valid, edges, labels, n, boxes, float(max_work), int(iterations), out, done,
+                              fws, uws)
+    if n_done < out.size:  # regions without samples or over the work budget
+        missing = ~(done.view(bool) | samples.valid)
+        out[missing] = push_pull_fast(samples.codes, samples.valid, iterations)[missing]
+    return out
 
 
 def codes_to_distance(dense, quantizer: DepthQuantizer) -> np.ndarray:
@@ -420,7 +669,8 @@ def codes_to_distance(dense, quantizer: DepthQuantizer) -> np.ndarray:
     return r.astype(np.float32)
 
 
-def reconstruct_depth(samples: DecodedSamples, quantizer: DepthQuantizer, edge_aware: bool = True) -> np.ndarray:
-    """Decoded samples -> dense radial distance (h, w) float32 (0 = sky)."""
-    dense = diffuse(samples) if edge_aware else diffuse_plain(samples)
+def reconstruct_depth(samples: DecodedSamples, quantizer: DepthQuantizer, edge_aware: bool = True,
+                      workspace: DiffusionWorkspace | None = None) -> np.ndarray:
+    """Decoded samples -> dense radial distance (h, w) float32 (0 = sky). workspace: see :func:`diffuse`."""
+    dense = diffuse(samples, workspace=workspace) if edge_aware else diffuse_plain(samples)
     return codes_to_distance(dense, quantizer)

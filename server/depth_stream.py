@@ -56,7 +56,7 @@ class EdgeDepthStream:
                                      colour if self.perceptual else None)
         enc = self.encoder.encode(distance, None if warped is None else warped.edges,
                                   None if warped is None else warped.values, edges=found.edges, signs=found.signs,
-                                  motion=motion, moving=moving)
+                                  codes=found.codes, motion=motion, moving=moving)
         if self.rate is not None:
             self.rate.update(enc.stats.total_bits)
         self._prev = (enc.samples, pose)

@@ -26,6 +26,7 @@ import numpy as np
 from pibr.protocol.depth import DepthQuantizer
 from pibr.protocol.edgecodec.codec import DEFAULT_THRESHOLD, laplacian, select_edges
 from pibr.protocol.edgecodec.motion import quantize_motion
+from pibr.protocol.edgecodec.quantize import quantize_codes
 
 
 @dataclass
@@ -106,9 +107,9 @@ def extract_edge_samples(distance, quantizer: DepthQuantizer, threshold: float =
 
     distance : (h, w) float radial distance, 0 = sky; motion : (h, w, 2) or None;
     colour : low-resolution colour (hl, wl, 3) for :func:`perceptual_importance`, or None.
-    Pass the result's ``edges`` and ``signs`` to ``EdgeEncoder.encode(..., edges=, signs=)``.
+    Pass the result's ``edges``, ``signs`` and ``codes`` to ``EdgeEncoder.encode(..., edges=, signs=, codes=)``.
     """
-    codes = quantizer.quantize(distance).astype(np.int32)
+    codes = quantize_codes(distance, quantizer)
     importance = None if colour is None else perceptual_importance(colour, codes.shape)
     sig, lap = significance(codes, motion, depth_weight, motion_weight, motion_scale, importance)
     edges, signs = select_edges(codes, threshold, sig, lap)

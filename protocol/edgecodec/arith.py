@@ -8,7 +8,10 @@ Two implementations of one bitstream:
   tuple and the model in an array, which the edge, value, regular-sample and motion coders
   call from their own compiled loops. In hot loops write ``model_p1`` -> ``enc_raw`` ->
   ``model_update`` out (as ``_encode_bits_kernel`` does): the ``enc_bit`` wrapper measured
-  3x slower there (~50 instead of ~150 M symbols/s), as numba does not inline it.
+  3x slower there (~50 instead of ~150 M symbols/s). perf shows why: a call that numba does
+  not let LLVM inline and that passes arrays updates their reference counts (atomic
+  instructions) on the way in and out, and ``inline='always'`` keeps those updates. So the
+  integer coders (``enc_sint`` ...) write their bins out the same way, flat.
 
 Both produce identical bytes (``tests/protocol/test_edgecodec.py`` checks it); so do the
 kernels run as plain Python (``NUMBA_DISABLE_JIT=1``), which is why they cast every array
@@ -386,19 +389,25 @@ def enc_bit(es, buf, m, rate, ctx, bit):
 
 @njit(cache=True, nogil=True)
 def _enc_magnitude(es, buf, m, rate, base, mag):
+    # model_p1 -> enc_raw -> model_update written out rather than enc_bit (see the module docstring)
     v = mag + 1
     k = 0
     while (v >> (k + 1)) != 0:
         k += 1
-    for i in range(k):
-        es = enc_bit(es, buf, m, rate, base + _UNARY0 + i, 1)
-    if k < KMAX:
-        es = enc_bit(es, buf, m, rate, base + _UNARY0 + k, 0)
+    for i in range(k + 1):
+        if i == KMAX:
+            break
+        b = 1 if i < k else 0
+        c = base + _UNARY0 + i
+        es = enc_raw(es, buf, b, model_p1(m, c))
+        model_update(m, c, b, rate)
     r = v - (1 << k)
     for i in range(k - 1, -1, -1):
         b = (r >> i) & 1
         if i == k - 1:
-            es = enc_bit(es, buf, m, rate, base + _MANT0 + k, b)
+            c = base + _MANT0 + k
+            es = enc_raw(es, buf, b, model_p1(m, c))
+            model_update(m, c, b, rate)
         else:
             es = enc_raw(es, buf, b, HALF_P)
     return es
@@ -407,20 +416,50 @@ def _enc_magnitude(es, buf, m, rate, base, mag):
 @njit(cache=True, nogil=True)
 def enc_uint(es, buf, m, rate, base, v):
     """Code 0 <= v < 2^(KMAX + 1) with the integer slot at context ``base``."""
-    if v == 0:
-        return enc_bit(es, buf, m, rate, base, 1)
-    es = enc_bit(es, buf, m, rate, base, 0)
+    z = 1 if v == 0 else 0
+    es = enc_raw(es, buf, z, model_p1(m, base))
+    model_update(m, base, z, rate)
+    if z:
+        return es
     return _enc_magnitude(es, buf, m, rate, base, v - 1)
 
 
 @njit(cache=True, nogil=True)
 def enc_sint(es, buf, m, rate, base, v):
-    """Code |v| < 2^(KMAX + 1) with the integer slot at context ``base``."""
-    if v == 0:
-        return enc_bit(es, buf, m, rate, base, 1)
-    es = enc_bit(es, buf, m, rate, base, 0)
-    es = enc_bit(es, buf, m, rate, base + 1, 1 if v < 0 else 0)
-    return _enc_magnitude(es, buf, m, rate, base, abs(v) - 1)
+    """Code |v| < 2^(KMAX + 1) with the integer slot at context ``base``.
+
+    One flat function (the magnitude's bins written out here too): nested calls that pass
+    the buffer and model arrays cost numba reference-count updates (atomic) per call, which
+    made a coded integer ~3x dearer than its bins (measured with perf)."""
+    z = 1 if v == 0 else 0
+    es = enc_raw(es, buf, z, model_p1(m, base))
+    model_update(m, base, z, rate)
+    if z:
+        return es
+    neg = 1 if v < 0 else 0
+    es = enc_raw(es, buf, neg, model_p1(m, base + 1))
+    model_update(m, base + 1, neg, rate)
+    a = abs(v)
+    k = 0
+    while (a >> (k + 1)) != 0:
+        k += 1
+    for i in range(k + 1):
+        if i == KMAX:
+            break
+        b = 1 if i < k else 0
+        c = base + _UNARY0 + i
+        es = enc_raw(es, buf, b, model_p1(m, c))
+        model_update(m, c, b, rate)
+    r = a - (1 << k)
+    for i in range(k - 1, -1, -1):
+        b = (r >> i) & 1
+        if i == k - 1:
+            c = base + _MANT0 + k
+            es = enc_raw(es, buf, b, model_p1(m, c))
+            model_update(m, c, b, rate)
+        else:
+            es = enc_raw(es, buf, b, HALF_P)
+    return es
 
 
 @njit(cache=True, nogil=True)
@@ -463,14 +502,18 @@ def dec_bit(ds, data, m, rate, ctx):
 def _dec_magnitude(ds, data, m, rate, base):
     k = 0
     while k < KMAX:
-        ds, b = dec_bit(ds, data, m, rate, base + _UNARY0 + k)
+        c = base + _UNARY0 + k
+        ds, b = dec_raw(ds, data, model_p1(m, c))
+        model_update(m, c, b, rate)
         if b == 0:
             break
         k += 1
     r = 0
     for i in range(k - 1, -1, -1):
         if i == k - 1:
-            ds, b = dec_bit(ds, data, m, rate, base + _MANT0 + k)
+            c = base + _MANT0 + k
+            ds, b = dec_raw(ds, data, model_p1(m, c))
+            model_update(m, c, b, rate)
         else:
             ds, b = dec_raw(ds, data, HALF_P)
         r = (r << 1) | b
@@ -479,7 +522,8 @@ def _dec_magnitude(ds, data, m, rate, base):
 
 @njit(cache=True, nogil=True)
 def dec_uint(ds, data, m, rate, base):
-    ds, z = dec_bit(ds, data, m, rate, base)
+    ds, z = dec_raw(ds, data, model_p1(m, base))
+    model_update(m, base, z, rate)
     if z == 1:
         return ds, 0
     ds, v = _dec_magnitude(ds, data, m, rate, base)
@@ -488,12 +532,32 @@ def dec_uint(ds, data, m, rate, base):
 
 @njit(cache=True, nogil=True)
 def dec_sint(ds, data, m, rate, base):
-    ds, z = dec_bit(ds, data, m, rate, base)
+    """Decoder of :func:`enc_sint`, as flat as it (same reason)."""
+    ds, z = dec_raw(ds, data, model_p1(m, base))
+    model_update(m, base, z, rate)
     if z == 1:
         return ds, 0
-    ds, neg = dec_bit(ds, data, m, rate, base + 1)
-    ds, v = _dec_magnitude(ds, data, m, rate, base)
-    return ds, (-(v + 1) if neg == 1 else v + 1)
+    ds, neg = dec_raw(ds, data, model_p1(m, base + 1))
+    model_update(m, base + 1, neg, rate)
+    k = 0
+    while k < KMAX:
+        c = base + _UNARY0 + k
+        ds, b = dec_raw(ds, data, model_p1(m, c))
+        model_update(m, c, b, rate)
+        if b == 0:
+            break
+        k += 1
+    r = 0
+    for i in range(k - 1, -1, -1):
+        if i == k - 1:
+            c = base + _MANT0 + k
+            ds, b = dec_raw(ds, data, model_p1(m, c))
+            model_update(m, c, b, rate)
+        else:
+            ds, b = dec_raw(ds, data, HALF_P)
+        r = (r << 1) | b
+    v = r + (1 << k)
+    return ds, (-v if neg == 1 else v)
 
 
 # --------------------------------------------------------------------------------------------

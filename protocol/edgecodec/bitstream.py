@@ -4,7 +4,7 @@ Layout (little-endian)::
 
     offset size  field
      0      4    magic b"PIBE"
-     4      1    version (1)
+     4      1    version (2: the edge image starts with a block occupancy map; 1 coded every pixel)
      5      1    flags: bit 0 temporal context, bit 1 four interleaved passes (else one raster
                  pass), bit 2 motion section present; other bits must be 0
      6      2    width   (1..MAX_SIZE)
@@ -28,9 +28,10 @@ from dataclasses import dataclass, replace
 
 from ..errors import CodecError
 from .arith import INT_SLOT
+from .edges import BLOCK_LOG2
 
 MAGIC = b"PIBE"
-VERSION = 1
+VERSION = 2
 MAX_SIZE = 8192
 MIN_BITS, MAX_BITS = 10, 16
 MIN_SPACING_LOG2, MAX_SPACING_LOG2 = 2, 7
@@ -87,7 +88,8 @@ class FrameHeader:
         """Upper bounds of the four section lengths (bytes), from the header's sizes alone."""
         rh, rw = grid_shape(self.width, self.height, self.spacing_log2)
         pixels = self.width * self.height
-        return (_BYTES_PER_BIN * pixels + _SLACK,
+        blocks = grid_shape(self.width, self.height, BLOCK_LOG2)
+        return (_BYTES_PER_BIN * (pixels + blocks[0] * blocks[1]) + _SLACK,
                 _BYTES_PER_BIN * _BINS_PER_INT * rh * rw + _SLACK,
                 _BYTES_PER_BIN * (1 + _BINS_PER_INT) * self.n_edges + _SLACK,
                 motion_bound(self.width, self.height) if self.motion else 0)

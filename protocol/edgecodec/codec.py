@@ -21,6 +21,7 @@ raises :class:`~pibr.protocol.errors.CodecError` and nothing else.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -29,11 +30,13 @@ from numba import njit
 from ..depth import DEQUANTIZE, DepthQuantizer
 from ..errors import CodecError
 from ..pose import Pose
+from ..projection import EPS as _EPS
 from ..projection import FORWARD, INVERSE
 from . import bitstream
 from .bitstream import FrameHeader, grid_shape
 from .edges import decode_edge_image, encode_edge_image, temporal_context
 from .motion import decode_motion, encode_motion
+from .quantize import quantize_codes
 from .regular import decode_regular, encode_regular, nearest_index, sample_positions
 from .values import decode_values, encode_values, temporal_values
 
@@ -58,14 +61,8 @@ def _border_pad(c0, c1, c2):
     return np.where(linear, 2 * c0 - c1, c0)
 
 
-def laplacian(codes) -> np.ndarray:
-    """4-neighbour Laplacian (sum of neighbours - 4 * centre) of codes (h, w): (h, w) int32.
-
-    Outside the image the codes continue linearly where the last three rows (columns) are
-    linear, else the border value repeats: a plane running into the border has no Laplacian
-    there, a step at the border keeps its own. Positive on the far side of a step in
-    disparity, negative on the near side.
-    """
+def laplacian_numpy(codes) -> np.ndarray:
+    """The definition of :func:`laplacian` in numpy (the tests hold the compiled one to it)."""
     c = np.asarray(codes, dtype=np.int32)
     h, w = c.shape
     p = np.pad(c, 1, mode="edge")
@@ -76,6 +73,53 @@ def laplacian(codes) -> np.ndarray:
         p[1:-1, 0] = _border_pad(c[:, 0], c[:, 1], c[:, 2])
         p[1:-1, -1] = _border_pad(c[:, -1], c[:, -2], c[:, -3])
     return p[:-2, 1:-1] + p[2:, 1:-1] + p[1:-1, :-2] + p[1:-1, 2:] - 4 * c
+
+
+@njit(cache=True, nogil=True)
+def _beyond(c0, c1, c2, linear_ok):
+    """Value one step beyond border value c0 (c1, c2 further inside), as :func:`_border_pad`."""
+    if linear_ok and abs(c0 - 2 * c1 + c2) <= 2:
+        return 2 * c0 - c1
+    return c0
+
+
+@njit(cache=True, nogil=True)
+def _laplacian_kernel(c, out):
+    h, w = c.shape
+    for y in range(h):
+        for x in range(w):
+            v = int(c[y, x])
+            up = int(c[y - 1, x]) if y > 0 else _beyond(v, int(c[min(1, h - 1), x]), int(c[min(2, h - 1), x]), h >= 3)
+            down = int(c[y + 1, x]) if y + 1 < h else \
+                _beyond(v, int(c[max(h - 2, 0), x]), int(c[max(h - 3, 0), x]), h >= 3)
+            left = int(c[y, x - 1]) if x > 0 else _beyond(v, int(c[y, min(1, w - 1)]), int(c[y, min(2, w - 1)]), w >= 3)
+            right = int(c[y, x + 1]) if x + 1 < w else \
+                _beyond(v, int(c[y, max(w - 2, 0)]), int(c[y, max(w - 3, 0)]), w >= 3)
+            out[y, x] = up + down + left + right - 4 * v
+
+
+def laplacian(codes) -> np.ndarray:
+    """4-neighbour Laplacian (sum of neighbours - 4 * centre) of codes (h, w): (h, w) int32.
+
+    Outside the image the codes continue linearly where the last three rows (columns) are
+    linear, else the border value repeats: a plane running into the border has no Laplacian
+    there, a step at the border keeps its own. Positive on the far side of a step in
+    disparity, negative on the near side. (Compiled; :func:`laplacian_numpy` is its definition.)
+    """
+    c = np.ascontiguousarray(codes, dtype=np.int32)
+    if c.ndim != 2:
+        raise ValueError(f"codes must have shape (h, w), got {c.shape}")
+    out = np.empty(c.shape, dtype=np.int32)
+    _laplacian_kernel(c, out)
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _signs_kernel(edges, lap, signs):
+    h, w = edges.shape
+    for y in range(h):
+        for x in range(w):
+            signs[y, x] = 0 if not edges[y, x] else (1 if lap[y, x] > 0 else -1)
 
 
 @njit(cache=True, nogil=True)
@@ -126,7 +170,8 @@ def select_edges(codes, threshold: float = DEFAULT_THRESHOLD, significance=None,
         raise ValueError(f"significance and Laplacian must have the codes' shape {c.shape}")
     edges = np.zeros(c.shape, dtype=bool)
     _select_kernel(c, sig, np.float32(threshold), edges)
-    signs = np.where(edges, np.where(L > 0, 1, -1), 0).astype(np.int8)
+    signs = np.empty(c.shape, dtype=np.int8)
+    _signs_kernel(edges, np.ascontiguousarray(L), signs)
     return edges, signs
 
 
@@ -233,13 +278,28 @@ def _check_size(width, height):
         raise ValueError(f"edge codec size must be 1..{bitstream.MAX_SIZE} per side, got {width}x{height}")
 
 
+@njit(cache=True, nogil=True)
+def _assemble_kernel(edges, values, regular, rows, cols, codes, valid):
+    h, w = edges.shape
+    for y in range(h):
+        for x in range(w):
+            if edges[y, x]:
+                codes[y, x] = values[y, x]
+                valid[y, x] = True
+    for i in range(len(rows)):
+        for j in range(len(cols)):
+            y, x = rows[i], cols[j]
+            valid[y, x] = True
+            if not edges[y, x]:
+                codes[y, x] = regular[i, j]
+
+
 def _assemble(edges, signs, values, regular, rows, cols, bits, min_code, q, motion=None, moving=None):
     h, w = edges.shape
     codes = np.zeros((h, w), dtype=np.uint16)
-    valid = edges.copy()
-    codes[np.ix_(rows, cols)] = regular
-    valid[np.ix_(rows, cols)] = True
-    codes[edges] = values[edges]
+    valid = np.zeros((h, w), dtype=bool)
+    edges = np.ascontiguousarray(edges, dtype=bool)
+    _assemble_kernel(edges, np.ascontiguousarray(values), np.ascontiguousarray(regular), rows, cols, codes, valid)
     return DecodedSamples(edges=edges, signs=signs, codes=codes, valid=valid, regular=regular.astype(np.uint16),
                           regular_rows=rows, regular_cols=cols, bits=bits, min_code=min_code, q=q,
                           motion=motion, moving=moving)
@@ -279,10 +339,10 @@ class EdgeEncoder:
         d = np.asarray(distance)
         if d.shape != (self.height, self.width):
             raise ValueError(f"distance must have shape ({self.height}, {self.width}), got {d.shape}")
-        return self.quantizer.quantize(d).astype(np.int32)
+        return quantize_codes(d, self.quantizer)
 
     def encode(self, distance, warped_prev_edges=None, warped_prev_values=None, threshold: float | None = None,
-               significance=None, edges=None, signs=None, motion=None, moving=None) -> EncodedDepth:
+               significance=None, edges=None, signs=None, motion=None, moving=None, codes=None) -> EncodedDepth:
         """Encode one frame.
 
         distance : (h, w) float radial distance, 0 = sky. warped_prev_edges : (h, w) bool and
@@ -290,23 +350,31 @@ class EdgeEncoder:
         frame's ``samples`` (used only with ``temporal``). threshold / significance : edge
         selection (see :func:`select_edges`); or ``edges`` (h, w) bool (and optionally ``signs``)
         chosen by the caller. motion : (h, w, 2) float pixels of moving objects; moving :
-        (h, w) bool (default: pixels with non-zero motion).
+        (h, w) bool (default: pixels with non-zero motion). codes : (h, w) int32, this encoder's
+        :meth:`codes` of ``distance`` when the caller already has them (the server's edge
+        extraction does), so they are not computed twice.
         """
-        codes = self.codes(distance)
+        if codes is None:
+            codes = self.codes(distance)
+        else:
+            codes = np.asarray(codes)
+            if codes.shape != (self.height, self.width):
+                raise ValueError(f"codes must have shape ({self.height}, {self.width}), got {codes.shape}")
         h, w = codes.shape
-        lap = laplacian(codes)
         if edges is None:
             thr = self.threshold if threshold is None else float(threshold)
-            edges, auto_signs = select_edges(codes, thr, significance, lap)
+            edges, signs_found = select_edges(codes, thr, significance)
+            if signs is None:
+                signs = signs_found
         else:
             edges = np.asarray(edges, dtype=bool)
             if edges.shape != (h, w):
                 raise ValueError(f"edges must have shape ({h}, {w}), got {edges.shape}")
-            auto_signs = np.where(edges, np.where(lap > 0, 1, -1), 0).astype(np.int8)
-        if signs is None:
-            signs = auto_signs
-        else:
-            signs = np.where(edges, np.where(np.asarray(signs) > 0, 1, -1), 0).astype(np.int8)
+        edges = np.ascontiguousarray(edges)
+        # +1 / -1 on edges (the sign of the Laplacian unless given), 0 elsewhere
+        given = laplacian(codes) if signs is None else np.ascontiguousarray(signs)
+        signs = np.empty((h, w), dtype=np.int8)
+        _signs_kernel(edges, given, signs)
         use_t = self.temporal and warped_prev_edges is not None
         four = self.passes == 4
         tctx = temporal_context(warped_prev_edges, h, w) if use_t else None
@@ -335,8 +403,7 @@ class EdgeEncoder:
         stats = EncodeStats(header_bytes=bitstream.HEADER_SIZE, edge_bytes=len(edge_bytes),
                             regular_bytes=len(reg_bytes), value_bytes=len(val_bytes), motion_bytes=len(mot_bytes),
                             n_edges=n_edges, n_regular=reg_true.size, temporal=use_t, four_passes=four)
-        dec_signs = np.where(edges, signs, 0).astype(np.int8)
-        samples = _assemble(edges, dec_signs, val_dec, reg_dec, self.rows, self.cols, self.bits,
+        samples = _assemble(edges, signs, val_dec, reg_dec, self.rows, self.cols, self.bits,
                             self.quantizer.min_code, self.q, mot_dec, mov_dec)
         return EncodedDepth(payload=payload, stats=stats, samples=samples)
 
@@ -397,9 +464,96 @@ def _rotate(m, x, y, z):
             m[2, 0] * x + m[2, 1] * y + m[2, 2] * z)
 
 
+@njit(cache=True, nogil=True)
+def _warp_kernel(edges, codes, rp, t, rc, near, far, min_code, max_code, eps, values):
+    """:func:`warp_samples_numpy` per sample, operation for operation (so bit-identical): unproject
+    (INVERSE), dequantize (DEQUANTIZE), move, project (FORWARD), quantize (QUANTIZE), splat max."""
+    h, w = edges.shape
+    span = max_code - min_code
+    sky_below = 0.5 * min_code if min_code < 1.5 else 0.25 * min_code
+    peeled_below = 0.0 if min_code < 1.5 else 0.75 * min_code
+    peeled_code = math.floor(0.5 * min_code)
+    for y in range(h):
+        for x in range(w):
+            if not edges[y, x]:
+                continue
+            code = float(codes[y, x])
+            vx = (x + 0.5) / w * 2.0 - 1.0
+            vy = 1.0 - (y + 0.5) / h * 2.0
+            ty = min(max(vy, -1.0), 1.0)
+            dx = min(max(vx, -1.0), 1.0) * math.sqrt(max(1.0 - ty * ty, 0.0))
+            dy = ty
+            dz = -math.sqrt(max(1.0 - dx * dx - ty * ty, 0.0))
+            d = max((code - min_code) / span, 0.5 / span)
+            r = min(near / d, far)
+            if code < peeled_below:
+                r = -1.0
+            if code < sky_below:
+                r = 0.0
+            sky = r <= 0.0
+            if sky:
+                r = 1.0
+            ax, ay, az = dx * r, dy * r, dz * r
+            wx = rp[0, 0] * ax + rp[0, 1] * ay + rp[0, 2] * az
+            wy = rp[1, 0] * ax + rp[1, 1] * ay + rp[1, 2] * az
+            wz = rp[2, 0] * ax + rp[2, 1] * ay + rp[2, 2] * az
+            if not sky:
+                wx = wx + t[0]
+                wy = wy + t[1]
+                wz = wz + t[2]
+            cx = rc[0, 0] * wx + rc[0, 1] * wy + rc[0, 2] * wz
+            cy = rc[1, 0] * wx + rc[1, 1] * wy + rc[1, 2] * wz
+            cz = rc[2, 0] * wx + rc[2, 1] * wy + rc[2, 2] * wz
+            m = max(max(abs(cx), abs(cy)), max(abs(cz), eps))
+            qx, qy, qz = cx / m, cy / m, cz / m
+            qn = math.sqrt(qx * qx + qy * qy + qz * qz)
+            dist = m * qn
+            py = min(max(qy / max(qn, eps), -1.0), 1.0)
+            px = min(max(qx / max(math.sqrt(qx * qx + qz * qz), eps), -1.0), 1.0)
+            col = int(math.floor((px + 1.0) * 0.5 * w))
+            row = int(math.floor((1.0 - py) * 0.5 * h))
+            if not (cz <= 0.0 and 0 <= col < w and 0 <= row < h):
+                continue
+            rr = 0.0 if sky else dist
+            if not math.isfinite(rr):
+                rr = 0.0
+            if rr < 0.0:
+                new = peeled_code
+            elif rr > far or rr <= 0.0:
+                new = 0.0
+            else:
+                new = min_code + math.floor((near / (rr if rr > near else near)) * span + 0.5)
+            if int(new) > values[row, col]:
+                values[row, col] = int(new)
+
+
 def warp_samples(samples: DecodedSamples, prev_pose: Pose, cur_pose: Pose,
                  quantizer: DepthQuantizer) -> WarpedPrevious:
     """Forward-splat the previous frame's decoded edge samples into the current wide-angle view.
+
+    Each edge sample is unprojected through its pixel centre at its decoded distance (sky: a
+    direction at infinity), moved from ``prev_pose`` to ``cur_pose`` (camera-to-world poses),
+    projected, and splatted to the pixel containing it with its re-quantized code; where
+    several land on one pixel the nearest (largest code) wins. Compiled, with the same IEEE
+    operations in the same order as :func:`warp_samples_numpy` (no fused multiply-adds:
+    numba does not contract without fastmath), so encoder and decoder get identical results
+    and so does the numpy definition (tested).
+    """
+    h, w = samples.shape
+    values = np.full((h, w), -1, dtype=np.int32)
+    t = np.asarray(prev_pose.position, dtype=np.float64) - np.asarray(cur_pose.position, dtype=np.float64)
+    _warp_kernel(np.ascontiguousarray(samples.edges), np.ascontiguousarray(samples.codes),
+                 np.ascontiguousarray(prev_pose.rotation(), dtype=np.float64), t,
+                 np.ascontiguousarray(cur_pose.rotation().T, dtype=np.float64), float(quantizer.near),
+                 float(quantizer.far), float(quantizer.min_code), float(quantizer.max_code), float(_EPS), values)
+    return WarpedPrevious(edges=values >= 0, values=values)
+
+
+def warp_samples_numpy(samples: DecodedSamples, prev_pose: Pose, cur_pose: Pose,
+                       quantizer: DepthQuantizer) -> WarpedPrevious:
+    """The definition of :func:`warp_samples` in numpy (the tests hold the compiled one to it).
+
+    Forward-splat the previous frame's decoded edge samples into the current wide-angle view.
 
     Each edge sample is unprojected through its pixel centre at its decoded distance (sky: a
     direction at infinity), moved from ``prev_pose`` to ``cur_pose`` (camera-to-world poses),

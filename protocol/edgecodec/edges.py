@@ -23,6 +23,16 @@ and a moving view the same with both).
 **Priors.** Every context starts from a prior P(edge) (from the temporal bits, or else from
 how many of its neighbours are edges) worth two observations, rather than from 1/2.
 
+**Block occupancy** (bitstream version 2). The image is cut into 8 x 8 blocks (``BLOCK_LOG2``;
+the last row and column of blocks may be partial) and a map of which blocks hold an edge is
+coded first, in raster order, each block's context being the occupancy of its W, N, NW and NE
+blocks and the largest temporal context inside it. The passes then visit only the pixels of
+occupied blocks, still in raster order within each pass (the templates rely on it); pixels
+of empty blocks are known to be 0 and read as such by the templates. At 1024^2 (3.7 % edge
+pixels) this codes about a quarter of the pixels: measured on room frames along a trace,
+2.8x faster encode and decode for +0.5 % edge-image bytes (16 x 16 blocks: -0.7 % bytes but
+1.3x slower than 8 x 8).
+
 **Raster baseline.** One pass in raster order with 10 causal neighbours (W, WW, NW, N, NE,
 NN, (-1, +-2), (-2, +-1)) plus the temporal bits, to measure what the passes buy.
 
@@ -44,8 +54,14 @@ _OFF_A, _OFF_B, _OFF_C, _OFF_D = 0, 4096, 4096 + 1024, 4096 + 2048
 _SMALL_A, _SMALL_B, _SMALL_C, _SMALL_D = 10240, 10240 + 256, 10240 + 512, 10240 + 768
 _BIG_TEMPLATES = ((_OFF_A, 10), (_OFF_B, 8), (_OFF_C, 8), (_OFF_D, 10))
 _SMALL_TEMPLATES = ((_SMALL_A, 6), (_SMALL_B, 6), (_SMALL_C, 6), (_SMALL_D, 8))
-N_CONTEXTS_4PASS = 10240 + 1792
-N_CONTEXTS_RASTER = 4096
+_PIXEL_CONTEXTS_4PASS = 10240 + 1792
+_PIXEL_CONTEXTS_RASTER = 4096
+#: Contexts of the block occupancy map (4 neighbour bits, 2 temporal bits), after the pixels'.
+_OCC_CONTEXTS = 64
+N_CONTEXTS_4PASS = _PIXEL_CONTEXTS_4PASS + _OCC_CONTEXTS
+N_CONTEXTS_RASTER = _PIXEL_CONTEXTS_RASTER + _OCC_CONTEXTS
+#: log2 of the side of the occupancy map's blocks: only blocks holding an edge code their pixels.
+BLOCK_LOG2 = 3
 #: (row, column) parity of passes A, B, C, D.
 PASS_PHASES = ((0, 0), (1, 1), (1, 0), (0, 1))
 
@@ -121,53 +137,139 @@ def _ctx_raster(img, tc, y, x):
 
 
 @njit(cache=True, nogil=True)
-def _encode_kernel(img, tc, h, w, four_passes, big, buf, m, rate):
+def block_occupancy(img, h, w, block_log2):
+    """(ceil(h / B), ceil(w / B)) uint8: 1 where a B x B block (B = 2^block_log2) of the padded image holds an edge."""
+    bs = 1 << block_log2
+    occ = np.zeros(((h + bs - 1) >> block_log2, (w + bs - 1) >> block_log2), dtype=np.uint8)
+    for y in range(h):
+        for x in range(w):
+            if img[PAD + y, PAD + x]:
+                occ[y >> block_log2, x >> block_log2] = 1
+    return occ
+
+
+@njit(cache=True, nogil=True)
+def _block_ctx(occ, tc, by, bx, h, w, block_log2, occ_off):
+    """Context of block (by, bx) of the occupancy map: its causal neighbours' occupancy
+    (W, N, NW, NE) and the largest temporal context inside the block."""
+    bh, bw = occ.shape
+    c = 0
+    if bx > 0:
+        c |= int(occ[by, bx - 1])
+    if by > 0:
+        c |= int(occ[by - 1, bx]) << 1
+        if bx > 0:
+            c |= int(occ[by - 1, bx - 1]) << 2
+        if bx + 1 < bw:
+            c |= int(occ[by - 1, bx + 1]) << 3
+    t = 0
+    y0, x0 = by << block_log2, bx << block_log2
+    for y in range(y0, min(y0 + (1 << block_log2), h)):
+        for x in range(x0, min(x0 + (1 << block_log2), w)):
+            t = max(t, int(tc[PAD + y, PAD + x]))
+    return occ_off + (c << 2) + t
+
+
+@njit(cache=True, nogil=True)
+def _encode_kernel(img, tc, h, w, four_passes, big, buf, m, rate, block_log2, occ_off):
     es = enc_start()
+    occ = block_occupancy(img, h, w, block_log2)
+    bh, bw = occ.shape
+    bs = 1 << block_log2
+    for by in range(bh):
+        for bx in range(bw):
+            c = _block_ctx(occ, tc, by, bx, h, w, block_log2, occ_off)
+            b = int(occ[by, bx])
+            es = enc_raw(es, buf, b, model_p1(m, c))
+            model_update(m, c, b, rate)
+    # only occupied blocks, in raster order within each pass (the contexts need it)
     if four_passes:
         for phase in range(4):
             py = 1 if phase == 1 or phase == 2 else 0
             px = 1 if phase == 1 or phase == 3 else 0
-            for y in range(PAD + py, PAD + h, 2):
-                for x in range(PAD + px, PAD + w, 2):
-                    c = _ctx_pass(img, tc, phase, y, x, big)
-                    b = int(img[y, x])
+            for y in range(py, h, 2):
+                by = y >> block_log2
+                for bx in range(bw):
+                    if occ[by, bx] == 0:
+                        continue
+                    for x in range((bx << block_log2) + px, min((bx + 1) << block_log2, w), 2):
+                        c = _ctx_pass(img, tc, phase, PAD + y, PAD + x, big)
+                        b = int(img[PAD + y, PAD + x])
+                        es = enc_raw(es, buf, b, model_p1(m, c))
+                        model_update(m, c, b, rate)
+    else:
+        for y in range(h):
+            by = y >> block_log2
+            for bx in range(bw):
+                if occ[by, bx] == 0:
+                    continue
+                for x in range(bx << block_log2, min((bx + 1) << block_log2, w)):
+                    c = _ctx_raster(img, tc, PAD + y, PAD + x)
+                    b = int(img[PAD + y, PAD + x])
                     es = enc_raw(es, buf, b, model_p1(m, c))
                     model_update(m, c, b, rate)
-    else:
-        for y in range(PAD, PAD + h):
-            for x in range(PAD, PAD + w):
-                c = _ctx_raster(img, tc, y, x)
-                b = int(img[y, x])
-                es = enc_raw(es, buf, b, model_p1(m, c))
-                model_update(m, c, b, rate)
     return enc_finish(es, buf)
 
 
 @njit(cache=True, nogil=True)
-def _decode_kernel(data, tc, h, w, four_passes, big, m, rate, img):
+def _decode_kernel(data, tc, h, w, four_passes, big, m, rate, img, block_log2, occ_off):
     ds = dec_start(data)
+    bs = 1 << block_log2
+    occ = np.zeros(((h + bs - 1) >> block_log2, (w + bs - 1) >> block_log2), dtype=np.uint8)
+    bh, bw = occ.shape
+    for by in range(bh):
+        for bx in range(bw):
+            c = _block_ctx(occ, tc, by, bx, h, w, block_log2, occ_off)
+            ds, b = dec_raw(ds, data, model_p1(m, c))
+            model_update(m, c, b, rate)
+            occ[by, bx] = b
+    if ds[3] != 0:
+        return ds
     if four_passes:
         for phase in range(4):
             py = 1 if phase == 1 or phase == 2 else 0
             px = 1 if phase == 1 or phase == 3 else 0
-            for y in range(PAD + py, PAD + h, 2):
-                for x in range(PAD + px, PAD + w, 2):
-                    c = _ctx_pass(img, tc, phase, y, x, big)
-                    ds, b = dec_raw(ds, data, model_p1(m, c))
-                    model_update(m, c, b, rate)
-                    img[y, x] = b
+            for y in range(py, h, 2):
+                by = y >> block_log2
+                for bx in range(bw):
+                    if occ[by, bx] == 0:
+                        continue
+                    for x in range((bx << block_log2) + px, min((bx + 1) << block_log2, w), 2):
+                        c = _ctx_pass(img, tc, phase, PAD + y, PAD + x, big)
+                        ds, b = dec_raw(ds, data, model_p1(m, c))
+                        model_update(m, c, b, rate)
+                        img[PAD + y, PAD + x] = b
             if ds[3] != 0:
                 return ds
     else:
-        for y in range(PAD, PAD + h):
-            for x in range(PAD, PAD + w):
-                c = _ctx_raster(img, tc, y, x)
-                ds, b = dec_raw(ds, data, model_p1(m, c))
-                model_update(m, c, b, rate)
-                img[y, x] = b
+        for y in range(h):
+            by = y >> block_log2
+            for bx in range(bw):
+                if occ[by, bx] == 0:
+                    continue
+                for x in range(bx << block_log2, min((bx + 1) << block_log2, w)):
+                    c = _ctx_raster(img, tc, PAD + y, PAD + x)
+                    ds, b = dec_raw(ds, data, model_p1(m, c))
+                    model_update(m, c, b, rate)
+                    img[PAD + y, PAD + x] = b
             if ds[3] != 0:
                 return ds
+    # a block announced occupied must hold an edge: else the stream is not one this encoder wrote
+    for by in range(bh):
+        for bx in range(bw):
+            if occ[by, bx] == 1:
+                found = False
+                for y in range(by << block_log2, min((by + 1) << block_log2, h)):
+                    for x in range(bx << block_log2, min((bx + 1) << block_log2, w)):
+                        if img[PAD + y, PAD + x]:
+                            found = True
+                if not found:
+                    return (ds[0], ds[1], ds[2], 1)
     return ds
+
+
+def _occ_offset(four_passes: bool) -> int:
+    return _PIXEL_CONTEXTS_4PASS if four_passes else _PIXEL_CONTEXTS_RASTER
 
 
 def n_contexts(four_passes: bool) -> int:
@@ -180,6 +282,12 @@ def _prior_p1(four_passes: bool) -> np.ndarray:
     the context's neighbours are edges."""
     sizes = _BIG_TEMPLATES + _SMALL_TEMPLATES if four_passes else ((0, 10),)
     p = np.empty(n_contexts(four_passes))
+    # occupancy of a block: from the largest temporal context in it, else its occupied neighbours
+    idx = np.arange(_OCC_CONTEXTS)
+    t = idx & 3
+    k = np.array([bin(i >> 2).count("1") for i in idx])
+    spatial = np.choose(k, [0.05, 0.4, 0.6, 0.7, 0.8])
+    p[_occ_offset(four_passes):] = np.where(t >= 2, 0.9, np.where(t == 1, 0.5, spatial))
     for off, bits in sizes:
         idx = np.arange(1 << (bits + 2))
         t = idx & 3
@@ -198,7 +306,7 @@ def _model(four_passes: bool) -> np.ndarray:
     return new_model(n_contexts(four_passes), _PRIORS[four_passes], _PRIOR_COUNT)
 
 
-def encode_edge_image(mask, tctx=None, four_passes: bool = True) -> bytes:
+def encode_edge_image(mask, tctx=None, four_passes: bool = True, block_log2: int = BLOCK_LOG2) -> bytes:
     """mask (h, w) bool -> arithmetic-coded bytes.
 
     tctx : padded temporal context from :func:`temporal_context`, or None for none (then the
@@ -214,19 +322,22 @@ def encode_edge_image(mask, tctx=None, four_passes: bool = True) -> bytes:
     capacity = h * w // 8 + 256
     while True:
         buf = np.zeros(capacity, dtype=np.uint8)
-        es = _encode_kernel(img, tctx, h, w, four_passes, big, buf, _model(four_passes), RATE_SHIFT)
+        es = _encode_kernel(img, tctx, h, w, four_passes, big, buf, _model(four_passes), RATE_SHIFT, block_log2,
+                            _occ_offset(four_passes))
         out = encoder_bytes(es, buf)
         if out is not None:
             return out
         capacity = int(es[4]) + 16
 
 
-def decode_edge_image(data, height: int, width: int, tctx=None, four_passes: bool = True) -> tuple[np.ndarray, bool]:
+def decode_edge_image(data, height: int, width: int, tctx=None, four_passes: bool = True,
+                      block_log2: int = BLOCK_LOG2) -> tuple[np.ndarray, bool]:
     """bytes -> (mask (h, w) bool, True when the stream decoded cleanly)."""
     big = tctx is None
     if tctx is None:
         tctx = temporal_context(None, height, width)
     img = np.zeros((height + 2 * PAD, width + 2 * PAD), dtype=np.uint8)
     arr = as_data(data)
-    ds = _decode_kernel(arr, tctx, height, width, four_passes, big, _model(four_passes), RATE_SHIFT, img)
+    ds = _decode_kernel(arr, tctx, height, width, four_passes, big, _model(four_passes), RATE_SHIFT, img,
+                        block_log2, _occ_offset(four_passes))
     return img[PAD:-PAD, PAD:-PAD].astype(bool), decoder_ok(ds, arr)

@@ -79,3 +79,27 @@ def test_bench_codec(tmp_path, capsys):
     assert (tmp_path / "codec.json").exists() and (tmp_path / "codec.png").stat().st_size > 0
     print_codec_table(r)
     assert "end to end" in capsys.readouterr().out
+
+
+def test_bench_codec_speed_against_a_checkout_of_itself(tmp_path, capsys):
+    """The baseline worker imports pibr from the given source tree; against this very tree every
+    payload and decoded sample set must come out identical, and every stage is timed."""
+    import os
+
+    from pibr.bench.codec_speed import print_codec_speed, run_codec_speed
+
+    root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    r = run_codec_speed(windows=(Window("pred6dof-1", 30.0, 8.0),), window_s=0.3, view_size=TINY_VIEW,
+                        baseline=root, out_dir=str(tmp_path), progress=False)
+    assert r["frames"] == 3 and set(r["versions"]) == {"current", "baseline"}
+    assert r["versions"]["baseline"]["pibr"].startswith(os.path.join(root, "protocol")) or \
+        "pibr-checkout-" in r["versions"]["baseline"]["pibr"]
+    c = r["comparison"]
+    assert c["identical_payloads"] == 3 and c["identical_samples"] == 3 and c["bytes_ratio"] == 1.0
+    for v in r["versions"].values():
+        assert v["decoder_matches_encoder"]
+        assert all(_finite(ms) and ms >= 0 for ms in v["median_ms"].values())
+        assert v["median_encode_total_ms"] > 0 and v["mean_psnr_db"] > v["mean_plain_psnr_db"] - 1e-9
+    assert json.loads((tmp_path / "codec_speed.json").read_text())["frames"] == 3
+    print_codec_speed(r)
+    assert "enc.encode" in capsys.readouterr().out

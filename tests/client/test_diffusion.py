@@ -114,3 +114,51 @@ def test_no_edges_at_all_uses_the_regular_samples():
     s = _samples(codes)
     assert not s.edges.any()
     np.testing.assert_allclose(diffuse(s), 1234.0)
+
+
+@pytest.mark.parametrize("shape", [(2, 700), (700, 2), (3, 400), (32, 32), (33, 32), (32, 33), (45, 61), (64, 48)])
+def test_compacted_sweeps_equal_the_plain_red_black_sweeps(shape):
+    """The colour-compacted Gauss-Seidel sweeps compute exactly what the straightforward ones do."""
+    from pibr.client.diffusion import _smooth_nb, _smooth_simple
+
+    rng = np.random.default_rng(shape[0] * 1000 + shape[1])
+    for density in (0.0, 0.05, 0.5, 1.0):
+        u = rng.random(shape) * 4000
+        m = (rng.random(shape) < density).astype(np.uint8)
+        for iterations in (1, 4, 9):
+            a, b = u.copy(), u.copy()
+            _smooth_simple(a, m, iterations)
+            _smooth_nb(b, m, iterations)
+            np.testing.assert_array_equal(a, b)
+
+
+@pytest.mark.parametrize("density", [0.0, 0.2, 0.4, 0.55, 0.7, 1.0])
+def test_region_labels_boxes_and_sizes(density):
+    """Regions are the 4-connected components of non-edge pixels, numbered in raster order of their
+    first pixel (as scipy numbers them), with their bounding boxes and pixel counts."""
+    from scipy import ndimage
+
+    from pibr.client.diffusion import _label_regions
+
+    rng = np.random.default_rng(int(density * 100))
+    for shape in [(1, 1), (1, 13), (11, 1), (37, 53), (64, 64)]:
+        edges = rng.random(shape) < density
+        labels = np.zeros(shape, np.int32)
+        n, boxes, sizes = _label_regions(edges.view(np.uint8), labels)
+        expected, n_expected = ndimage.label(~edges)
+        assert n == n_expected
+        np.testing.assert_array_equal(labels, expected)
+        for c in range(1, n + 1):
+            ys, xs = np.nonzero(labels == c)
+            assert list(boxes[c]) == [ys.min(), ys.max(), xs.min(), xs.max()] and sizes[c] == len(ys)
+
+
+def test_a_reused_workspace_gives_the_same_depth():
+    """One workspace across frames of different content and size: every result equals a fresh run."""
+    from pibr.client.diffusion import DiffusionWorkspace
+
+    ws = DiffusionWorkspace()
+    for codes in (cluttered_codes(96, 128, seed=1), piecewise_planar_codes(61, 93), cluttered_codes(96, 128, seed=2),
+                  cluttered_codes(40, 30, seed=3)):
+        s = _samples(codes)
+        np.testing.assert_array_equal(diffuse(s, workspace=ws), diffuse(s))

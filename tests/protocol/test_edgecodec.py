@@ -158,6 +158,70 @@ def test_edge_image_round_trips_losslessly(four):
             np.testing.assert_array_equal(out, mask, err_msg=name)
 
 
+@FUZZ
+@given(h=st.integers(1, 41), w=st.integers(1, 41), density=st.sampled_from([0.0, 0.002, 0.05, 0.5, 1.0]),
+       four=st.booleans(), temporal=st.sampled_from(["none", "same", "shifted", "random"]),
+       block_log2=st.integers(2, 5), seed=st.integers(0, 2**32 - 1))
+def test_edge_image_property_round_trip(h, w, density, four, temporal, block_log2, seed):
+    """Any mask, any size (block multiples or not), any temporal context: decoded exactly, cleanly."""
+    rng = np.random.default_rng(seed)
+    mask = rng.random((h, w)) < density
+    prev = {"none": None, "same": mask, "shifted": np.roll(mask, (1, -2), axis=(0, 1)),
+            "random": rng.random((h, w)) < 0.1}[temporal]
+    tctx = None if prev is None else temporal_context(prev, h, w)
+    data = encode_edge_image(mask, tctx, four, block_log2)
+    out, ok = decode_edge_image(data, h, w, tctx, four, block_log2)
+    assert ok
+    np.testing.assert_array_equal(out, mask)
+
+
+def test_occupancy_map_spends_bits_only_on_occupied_blocks():
+    """Edges in one 8 x 8 block of a large image: the rest is one cheap occupancy symbol per block."""
+    one_block = np.zeros((512, 512), bool)
+    one_block[200:206, 203] = True
+    spread = np.zeros((512, 512), bool)
+    spread[::64, 203] = True  # as many edges, in 8 blocks
+    assert len(encode_edge_image(one_block)) < len(encode_edge_image(spread))
+    assert len(encode_edge_image(one_block)) < 30
+    out, ok = decode_edge_image(encode_edge_image(one_block), 512, 512)
+    assert ok and np.array_equal(out, one_block)
+
+
+def _hand_coded_edge_image(h, w, occ, pixel_on):
+    """Four-pass stream (intra, 8 x 8 blocks) of occupancy ``occ`` whose occupied pixels are 0
+    except ``pixel_on`` (y, x) or None, coded with the reference coder."""
+    from pibr.protocol.edgecodec import edges as edge_module
+
+    tctx = temporal_context(None, h, w)
+    model = arith.AdaptiveBitModel.from_state(edge_module._model(True))
+    enc = arith.RangeEncoder()
+    for by in range(occ.shape[0]):
+        for bx in range(occ.shape[1]):
+            c = edge_module._block_ctx(occ, tctx, by, bx, h, w, 3, edge_module._occ_offset(True))
+            arith.encode_bit(enc, model, c, int(occ[by, bx]))
+    pad = edge_module.PAD
+    img = np.zeros((h + 2 * pad, w + 2 * pad), np.uint8)
+    for phase, (py, px) in enumerate(edge_module.PASS_PHASES):
+        for y in range(py, h, 2):
+            for x in range(px, w, 2):
+                if occ[y >> 3, x >> 3]:
+                    bit = int((y, x) == pixel_on)
+                    arith.encode_bit(enc, model, edge_module._ctx_pass(img, tctx, phase, pad + y, pad + x, True), bit)
+                    img[pad + y, pad + x] = bit
+    return enc.finish()
+
+
+def test_decoder_rejects_an_occupied_block_without_edges():
+    """A stream that marks a block occupied and then codes it empty was not written by the encoder."""
+    occ = np.zeros((2, 2), np.uint8)
+    occ[0, 1] = 1
+    out, ok = decode_edge_image(_hand_coded_edge_image(16, 16, occ, (3, 12)), 16, 16)
+    assert ok and out.sum() == 1 and out[3, 12]  # the hand-made stream is a valid one ...
+    assert _hand_coded_edge_image(16, 16, occ, (3, 12)) == encode_edge_image(out)
+    out, ok = decode_edge_image(_hand_coded_edge_image(16, 16, occ, None), 16, 16)
+    assert not ok  # ... until its occupied block holds no edge
+
+
 def test_edge_image_extremes_cost_almost_nothing():
     for fill in (False, True):
         mask = np.full((512, 512), fill)
@@ -520,3 +584,88 @@ def test_corrupt_payload_memory_is_bounded_by_the_frame():
     finally:
         tracemalloc.stop()
     assert peak < 64 * WIDTH * HEIGHT + 1_000_000
+
+
+# ------------------------------------------------------------------------------------------
+# Compiled helpers against their numpy definitions
+# ------------------------------------------------------------------------------------------
+
+def _temporal_context_numpy(e):
+    h, w = e.shape
+    p = np.zeros((h + 2, w + 2), dtype=bool)
+    p[1:-1, 1:-1] = e
+    around = np.zeros((h, w), dtype=bool)
+    for dy in (0, 1, 2):
+        for dx in (0, 1, 2):
+            if dy != 1 or dx != 1:
+                around |= p[dy:dy + h, dx:dx + w]
+    out = np.zeros((h + 8, w + 8), dtype=np.uint8)
+    out[4:-4, 4:-4] = 2 * e.astype(np.uint8) + around.astype(np.uint8)
+    return out
+
+
+@pytest.mark.parametrize("shape", [(1, 1), (1, 7), (6, 1), (13, 17), (64, 48)])
+def test_compiled_temporal_helpers_and_assembly_match_numpy(shape):
+    from pibr.protocol.edgecodec import codec as codec_module
+    from pibr.protocol.edgecodec.values import PAD as VPAD, temporal_values
+
+    rng = np.random.default_rng(shape[0] * 100 + shape[1])
+    h, w = shape
+    e = rng.random(shape) < 0.2
+    np.testing.assert_array_equal(temporal_context(e, h, w), _temporal_context_numpy(e))
+    v = np.where(rng.random(shape) < 0.5, rng.integers(0, 4096, shape), rng.integers(-3, 0, shape)).astype(np.int32)
+    ref = np.full((h + 2 * VPAD, w + 2 * VPAD), -1, np.int32)
+    ref[VPAD:h + VPAD, VPAD:w + VPAD] = np.where(v < 0, -1, v)
+    np.testing.assert_array_equal(temporal_values(v, h, w), ref)
+    np.testing.assert_array_equal(temporal_values(v.astype(np.int64), h, w), ref)
+    rows, cols = sample_positions(w, h, 2)
+    regular = rng.integers(1, 4096, (len(rows), len(cols)))
+    values = rng.integers(0, 4096, shape).astype(np.int32)
+    s = codec_module._assemble(e, np.where(e, 1, 0).astype(np.int8), values, regular, rows, cols, 12, 1, 1)
+    codes = np.zeros(shape, np.uint16)
+    codes[np.ix_(rows, cols)] = regular
+    codes[e] = values[e]
+    valid = e.copy()
+    valid[np.ix_(rows, cols)] = True
+    np.testing.assert_array_equal(s.codes, codes)
+    np.testing.assert_array_equal(s.valid, valid)
+    assert s.codes.dtype == np.uint16 and s.valid.dtype == bool
+
+
+@pytest.mark.parametrize("shape", [(1, 1), (1, 2), (2, 1), (1, 6), (6, 1), (2, 2), (2, 9), (3, 3), (3, 8), (9, 4), (31, 47)])
+def test_compiled_laplacian_matches_its_numpy_definition(shape):
+    from pibr.protocol.edgecodec.codec import laplacian_numpy
+
+    rng = np.random.default_rng(shape[0] * 31 + shape[1])
+    y, x = np.indices(shape)
+    for codes in (rng.integers(0, 4096, shape), 700 + 3 * y - 5 * x,  # random, a plane (linear borders)
+                  700 + 3 * y - 5 * x + rng.integers(-1, 2, shape), piecewise_planar_codes(*shape)):
+        np.testing.assert_array_equal(laplacian(codes), laplacian_numpy(codes))
+
+
+@pytest.mark.parametrize("min_code", [1, 2])
+def test_compiled_warp_matches_its_numpy_definition(min_code):
+    """Random samples (sky, peeled, near and far codes) under random motions: the same splat, bit for bit."""
+    from pibr.protocol.edgecodec import codec as codec_module
+
+    q = DepthQuantizer(0.1, 1000.0, bits=12, min_code=min_code)
+    rng = np.random.default_rng(min_code)
+    h, w = 61, 83
+    rows, cols = sample_positions(w, h, 5)
+    for trial in range(12):
+        edges = rng.random((h, w)) < 0.3
+        codes = rng.integers(0, 4096, (h, w)).astype(np.uint16)
+        codes[rng.random((h, w)) < 0.1] = 0
+        codes[rng.random((h, w)) < 0.05] = 1
+        s = codec_module._assemble(edges, np.where(edges, 1, 0).astype(np.int8), codes.astype(np.int32),
+                                   codes[np.ix_(rows, cols)], rows, cols, 12, min_code, 1)
+        axis = rng.normal(size=3)
+        prev = Pose.make(rng.normal(0, 2, 3), quat_from_axis_angle(axis, rng.uniform(-3, 3)))
+        cur = Pose.make(prev.position + rng.normal(0, 0.3 if trial % 2 else 3.0, 3),
+                        quat_from_axis_angle(rng.normal(size=3), rng.uniform(-3, 3)))
+        for a, b in ((prev, cur), (prev, prev)):
+            got = warp_samples(s, a, b, q)
+            want = codec_module.warp_samples_numpy(s, a, b, q)
+            np.testing.assert_array_equal(got.values, want.values)
+            np.testing.assert_array_equal(got.edges, want.edges)
+        assert got.values.dtype == np.int32

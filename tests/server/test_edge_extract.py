@@ -146,3 +146,17 @@ def test_rate_controller_validates_and_clamps():
     for _ in range(20):
         rc.update(0)
     assert rc.threshold == 0.5
+
+
+def test_encoder_reuses_the_extracted_codes_with_identical_bytes():
+    """The server hands its codes to the encoder (no second quantization): same payload and samples."""
+    distance = _distance(cluttered_codes(96, 128, seed=3))
+    found = extract_edge_samples(distance, Q, colour=np.full((12, 16, 3), 128, np.uint8))
+    enc = EdgeEncoder(128, 96, 12, Q)
+    reused = enc.encode(distance, edges=found.edges, signs=found.signs, codes=found.codes)
+    fresh = enc.encode(distance, edges=found.edges, signs=found.signs)
+    assert reused.payload == fresh.payload
+    np.testing.assert_array_equal(reused.samples.codes, fresh.samples.codes)
+    np.testing.assert_array_equal(found.codes, Q.quantize(distance).astype(np.int32))
+    with pytest.raises(ValueError, match="codes must have shape"):
+        enc.encode(distance, edges=found.edges, signs=found.signs, codes=found.codes[:-1])

@@ -1,0 +1,47 @@
+"""Distance -> quantized disparity codes for the edge codec, compiled: the same codes as
+:meth:`pibr.protocol.depth.DepthQuantizer.quantize` (its ``QUANTIZE`` formula, operation for
+operation in float64, so the results are bit-identical), in one pass without the numpy
+temporaries (measured at 1024^2: about 7x faster than the float64 numpy formula).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from ..depth import DepthQuantizer
+
+
+@njit(cache=True, nogil=True)
+def _quantize_kernel(r_in, near, far, min_code, max_code, out):
+    h, w = r_in.shape
+    span = max_code - min_code
+    peeled = math.floor(0.5 * min_code)
+    for y in range(h):
+        for x in range(w):
+            r = float(r_in[y, x])
+            if not math.isfinite(r):
+                r = 0.0
+            if r < 0.0:
+                code = peeled
+            elif r > far or r <= 0.0:
+                code = 0.0
+            else:
+                d = near / (r if r > near else near)
+                code = min_code + math.floor(d * span + 0.5)
+            out[y, x] = int(code)
+
+
+def quantize_codes(distance, quantizer: DepthQuantizer) -> np.ndarray:
+    """distance (h, w) float (0, inf or NaN = sky, negative = peeled) -> codes (h, w) int32,
+    equal to ``quantizer.quantize(distance).astype(np.int32)``."""
+    r = np.asarray(distance)
+    if r.ndim != 2:
+        raise ValueError(f"distance must have shape (h, w), got {r.shape}")
+    if r.dtype not in (np.float32, np.float64):
+        r = r.astype(np.float64)
+    out = np.empty(r.shape, dtype=np.int32)
+    _quantize_kernel(np.ascontiguousarray(r), float(quantizer.near), float(quantizer.far),
+                     float(quantizer.min_code), float(quantizer.max_code), out)
+    return out
