@@ -140,8 +140,15 @@ def run_one(out_dir: str, method: str, depth_codec: str, clients: int = 1, clock
     ticks = _Ticks()
     cpu_end: dict = {}
 
+    server_log = os.path.join(out_dir, "logs", "server.log")
+
     def before_stop(procs):
         cpu_end.update({name: p.cpu_seconds() for name, p in procs.items()})
+        # The server logs a session when it sees the client's end, a moment after the client
+        # exits: wait for every session's line before stopping it.
+        give_up = time.perf_counter() + 10.0
+        while len(_server_sessions(server_log)) < clients and time.perf_counter() < give_up:
+            time.sleep(0.1)
 
     t0 = time.perf_counter()
     try:
@@ -155,8 +162,7 @@ def run_one(out_dir: str, method: str, depth_codec: str, clients: int = 1, clock
     outs = [out_dir] if clients == 1 else [os.path.join(out_dir, f"client-{k + 1}") for k in range(clients)]
     per_client = [_client_summary(o, method, duration_s, rate_hz) for o in outs]
     result = {"method": method, "depth_codec": depth_codec, "clients": clients, "clock": clock,
-              "wall_s": wall, "per_client": per_client, "server": _server_sessions(
-                  os.path.join(out_dir, "logs", "server.log"))}
+              "wall_s": wall, "per_client": per_client, "server": _server_sessions(server_log)}
     if ticks.first is not None and ticks.last is not None:
         names = ["server", "relay"] + (["client"] if clients == 1 else [f"client-{k + 1}" for k in range(clients)])
         result["cpu_share"] = {n: sampler.share(n, ticks.first, ticks.last) for n in names}
