@@ -40,7 +40,8 @@ SUMMARY_KEYS = ("psnr_mean", "ssim_mean", "dssim_mean", "flip_mean", "geometric_
                 "client_ms_median", "frames")
 
 
-def _read_session(run_dir: str) -> dict:
+def read_session(run_dir: str) -> dict:
+    """The client's ``session.json`` in ``run_dir`` (a clear error when missing or broken)."""
     path = os.path.join(run_dir, "session.json")
     try:
         with open(path) as f:
@@ -87,7 +88,7 @@ def evaluate_run(run_dir: str, scene_spec: str | None = None, flip_every: int = 
 
     if flip_every < 0:
         raise ConfigError("flip_every must be >= 0 (0: no FLIP)")
-    info = _read_session(run_dir)
+    info = read_session(run_dir)
     client = info["client"]
     methods = list(client["methods"])
     width, height, fov = int(client["width"]), int(client["height"]), float(client["fov_deg"])

@@ -21,7 +21,6 @@ recorder's. Timings depend on the machine and on whatever else runs: compare row
 """
 from __future__ import annotations
 
-import json
 import os
 import re
 import sys
@@ -91,8 +90,9 @@ class _Ticks:
 def _client_summary(out: str, method: str, duration_s: float, rate_hz: float) -> dict:
     from pibr.client.recorder import read_records
 
-    with open(os.path.join(out, "session.json")) as f:
-        session = json.load(f)
+    from .evaluate import read_session
+
+    session = read_session(out)
     rows = read_records(os.path.join(out, f"{method}.records.csv"))
     ticks = len(rows)
     missed = sum(r["missed"] for r in rows)

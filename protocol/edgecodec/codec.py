@@ -36,7 +36,7 @@ from . import bitstream
 from .bitstream import FrameHeader, grid_shape
 from .edges import decode_edge_image, encode_edge_image, temporal_context
 from .motion import decode_motion, encode_motion
-from .quantize import quantize_codes
+from .quantize import code_of, quantize_codes
 from .regular import decode_regular, encode_regular, nearest_index, sample_positions
 from .values import decode_values, encode_values, temporal_values
 
@@ -472,7 +472,6 @@ def _warp_kernel(edges, codes, rp, t, rc, near, far, min_code, max_code, eps, va
     span = max_code - min_code
     sky_below = 0.5 * min_code if min_code < 1.5 else 0.25 * min_code
     peeled_below = 0.0 if min_code < 1.5 else 0.75 * min_code
-    peeled_code = math.floor(0.5 * min_code)
     for y in range(h):
         for x in range(w):
             if not edges[y, x]:
@@ -514,15 +513,7 @@ def _warp_kernel(edges, codes, rp, t, rc, near, far, min_code, max_code, eps, va
             row = int(math.floor((1.0 - py) * 0.5 * h))
             if not (cz <= 0.0 and 0 <= col < w and 0 <= row < h):
                 continue
-            rr = 0.0 if sky else dist
-            if not math.isfinite(rr):
-                rr = 0.0
-            if rr < 0.0:
-                new = peeled_code
-            elif rr > far or rr <= 0.0:
-                new = 0.0
-            else:
-                new = min_code + math.floor((near / (rr if rr > near else near)) * span + 0.5)
+            new = code_of(0.0 if sky else dist, near, far, min_code, span)
             if int(new) > values[row, col]:
                 values[row, col] = int(new)
 

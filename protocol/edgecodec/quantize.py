@@ -14,23 +14,25 @@ from ..depth import DepthQuantizer
 
 
 @njit(cache=True, nogil=True)
+def code_of(r, near, far, min_code, span):
+    """One distance's code (float64 maths as ``QUANTIZE``): sky (0, inf, NaN) 0, peeled
+    (negative) floor(min_code / 2), else min_code + round(near / max(r, near) * span)."""
+    if not math.isfinite(r):
+        r = 0.0
+    if r < 0.0:
+        return math.floor(0.5 * min_code)
+    if r > far or r <= 0.0:
+        return 0.0
+    return min_code + math.floor((near / (r if r > near else near)) * span + 0.5)
+
+
+@njit(cache=True, nogil=True)
 def _quantize_kernel(r_in, near, far, min_code, max_code, out):
     h, w = r_in.shape
     span = max_code - min_code
-    peeled = math.floor(0.5 * min_code)
     for y in range(h):
         for x in range(w):
-            r = float(r_in[y, x])
-            if not math.isfinite(r):
-                r = 0.0
-            if r < 0.0:
-                code = peeled
-            elif r > far or r <= 0.0:
-                code = 0.0
-            else:
-                d = near / (r if r > near else near)
-                code = min_code + math.floor(d * span + 0.5)
-            out[y, x] = int(code)
+            out[y, x] = int(code_of(float(r_in[y, x]), near, far, min_code, span))
 
 
 def quantize_codes(distance, quantizer: DepthQuantizer) -> np.ndarray:
