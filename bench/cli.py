@@ -341,6 +341,31 @@ def register(sub) -> None:
     rt.add_argument("--out", default="out/bench")
     rt.set_defaults(func=cmd_bench_realtime)
 
+    from .hostile import KINDS
+
+    so = bs.add_parser("soak", help="a server under legitimate clients and hostile peers: equal records, flat "
+                                    "memory, no traceback",
+                       description="Runs each legitimate client alone (virtual clock), then all of them again and "
+                                   "again for --duration seconds beside hostile peers of every kind (malformed "
+                                   "messages, slow and idle connections, a far-future clock, a non-reading client, "
+                                   "connection floods). Passes when every soaked run equals its solo run, the "
+                                   "server's memory and open files stay flat and its log has no traceback. "
+                                   "Writes soak.json; exit code 1 when it fails.")
+    so.add_argument("--duration", type=_positive, default=60.0, help="seconds of soak (default 60)")
+    so.add_argument("--clients", type=int, default=8, help="legitimate clients (default 8)")
+    so.add_argument("--kinds", default=",".join(KINDS), metavar="KIND,...",
+                    help="hostile kinds (default all: " + ", ".join(KINDS) + ")")
+    so.add_argument("--scene", default="room")
+    so.add_argument("--trace", default="pred6dof-1")
+    so.add_argument("--method", default="rotation", help="the legitimate clients' method (default rotation)")
+    so.add_argument("--run-duration", type=_positive, default=1.0,
+                    help="seconds of trace per legitimate run (default 1)")
+    so.add_argument("--view-size", type=_size, default=(256, 256), metavar="WxH",
+                    help="the server's primary view size (default 256x256: many sessions on two cores)")
+    so.add_argument("--seed", type=int, default=0)
+    so.add_argument("--out", default="out/bench")
+    so.set_defaults(func=cmd_bench_soak)
+
     o = bs.add_parser("optimize-offset", help="search the extra view's offset for the fewest holes",
                       description="Exhaustive (or coarse-to-fine) search over forward offset, height and tilt of "
                                   "the extra view, minimising the mean missing-pixel fraction over traces.")
@@ -375,6 +400,28 @@ def cmd_bench_realtime(args) -> int:
     print_realtime(r)
     print(f"written: {args.out}/realtime.json")
     return 0
+
+
+def cmd_bench_soak(args) -> int:
+    from pibr.protocol.errors import ConfigError
+
+    from .demo import check_inputs
+    from .hostile import KINDS
+    from .soak import print_soak, run_soak
+
+    kinds = tuple(k.strip() for k in args.kinds.split(",") if k.strip())
+    unknown = [k for k in kinds if k not in KINDS]
+    if unknown:
+        raise ConfigError(f"unknown hostile kind(s) {', '.join(unknown)}; kinds: {', '.join(KINDS)}")
+    if args.clients < 1:
+        raise ConfigError(f"--clients must be at least 1, got {args.clients}")
+    check_inputs(args.scene, args.trace, 0.0, args.clients * (args.run_duration + 1.0))
+    r = run_soak(args.out, duration_s=args.duration, clients=args.clients, kinds=kinds, scene=args.scene,
+                 trace=args.trace, method=args.method, run_s=args.run_duration,
+                 view_size="%dx%d" % args.view_size, seed=args.seed)
+    print_soak(r)
+    print(f"written: {args.out}/soak.json")
+    return 0 if r["passed"] else 1
 
 
 def cmd_bench_split(args) -> int:
