@@ -13,8 +13,9 @@ import math
 import time
 from collections import deque
 
+from pibr.protocol.access import token_matches
 from pibr.protocol.connection import Connection, Envelope
-from pibr.protocol.errors import (ConfigError, ProtocolError, SceneError, UnexpectedMessage,
+from pibr.protocol.errors import (AccessDenied, ConfigError, ProtocolError, SceneError, UnexpectedMessage,
                                   UnsupportedVersion)
 from pibr.protocol.messages import (FRAMES_DECODED, PROTOCOL_VERSION, Bye, Clock, Error, Frame, Hello, PayloadKind,
                                     PoseMsg, Stats, Welcome)
@@ -139,6 +140,9 @@ class Session:
         hello = env.message
         if not isinstance(hello, Hello):
             raise UnexpectedMessage(f"expected Hello as the first message, got {hello.NAME}")
+        token = self.server.config.token
+        if token is not None and not token_matches(token, hello.token):   # before anything else is told
+            raise AccessDenied("bad or missing token")
         if hello.protocol != PROTOCOL_VERSION:
             raise UnsupportedVersion(f"client speaks protocol {hello.protocol}, this server speaks {PROTOCOL_VERSION}")
         setup = await self.server.setup_session(hello)
