@@ -6,10 +6,11 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import ssl
 from collections import deque
 
 from pibr.protocol.connection import Connection, Envelope
-from pibr.protocol.errors import AccessDenied, RemoteError, UnexpectedMessage
+from pibr.protocol.errors import AccessDenied, RemoteError, TLSError, UnexpectedMessage
 from pibr.protocol.framing import DEFAULT_MAX_MESSAGE_SIZE
 from pibr.protocol.messages import Bye, Error, Hello, Message, Welcome
 from pibr.protocol.session import SessionConfig
@@ -55,7 +56,10 @@ class ClientConnection:
                 await self._flush_quietly()
                 raise self.conn.error
             read = self.reader.read(1 << 16)
-            data = await (asyncio.wait_for(read, timeout) if timeout else read)
+            try:
+                data = await (asyncio.wait_for(read, timeout) if timeout else read)
+            except ssl.SSLError as exc:
+                raise TLSError(f"the TLS connection to the server broke: {exc.reason or exc}") from None
             if not data:
                 self.conn.receive_eof()
                 if self.conn.error is not None:
@@ -99,7 +103,7 @@ class ClientConnection:
             try:
                 self.writer.write(data)
                 await self.writer.drain()
-            except (ConnectionError, RuntimeError):
+            except (ConnectionError, ssl.SSLError, RuntimeError):
                 pass
 
     async def close(self, reason: str = "done") -> None:
@@ -112,5 +116,5 @@ class ClientConnection:
         self.writer.close()
         try:
             await asyncio.wait_for(self.writer.wait_closed(), 2.0)
-        except (ConnectionError, asyncio.TimeoutError):
-            pass
+        except (ConnectionError, ssl.SSLError, asyncio.TimeoutError):
+            pass  # TLS: the server may still have been sending when we closed

@@ -40,6 +40,7 @@ import dataclasses
 import hashlib
 import itertools
 import logging
+import ssl
 from dataclasses import dataclass
 
 from pibr.protocol.access import check_listen_access, token_matches
@@ -195,7 +196,7 @@ class _Pair:
         conn.send(err)
         try:
             writer.write(conn.data_to_send())
-        except (ConnectionError, RuntimeError):
+        except (ConnectionError, ssl.SSLError, RuntimeError):
             pass
 
     def _timed(self, f: RawFrame, model: LinkModel) -> tuple:
@@ -256,7 +257,7 @@ class _Pair:
             try:
                 writer.write(data)
                 await writer.drain()
-            except (ConnectionError, RuntimeError):
+            except (ConnectionError, ssl.SSLError, RuntimeError):
                 await queue.abandon()
                 return
             await queue.done(nbytes)
@@ -266,7 +267,7 @@ async def _close(writer) -> None:
     try:
         writer.close()
         await asyncio.wait_for(writer.wait_closed(), 2.0)
-    except (ConnectionError, asyncio.TimeoutError, RuntimeError):
+    except (ConnectionError, ssl.SSLError, asyncio.TimeoutError, RuntimeError):
         writer.transport.abort()   # a peer that does not read would keep a closing socket for ever
 
 

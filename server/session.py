@@ -10,6 +10,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import math
+import ssl
 import time
 from collections import deque
 
@@ -104,7 +105,7 @@ class Session:
             self.conn.send(Error(exc.code, str(exc)))
         except asyncio.TimeoutError:
             self.conn.send(Error(UnexpectedMessage.code, "no Hello within the handshake timeout"))
-        except (ConnectionError, asyncio.IncompleteReadError) as exc:
+        except (ConnectionError, ssl.SSLError, asyncio.IncompleteReadError) as exc:
             log.info("session %d: connection lost: %s", self.id, exc)
         except asyncio.CancelledError:
             # The server is shutting down: say so, close, and end this handler normally.
@@ -118,13 +119,13 @@ class Session:
     async def _close(self) -> None:
         try:
             await asyncio.wait_for(self._flush(), 2.0)
-        except (ConnectionError, asyncio.TimeoutError, RuntimeError):
+        except (ConnectionError, ssl.SSLError, asyncio.TimeoutError, RuntimeError):
             pass  # the peer is gone; nothing more to tell it
         self.writer.close()
         try:
             await asyncio.wait_for(self.writer.wait_closed(), 2.0)
-        except (ConnectionError, asyncio.TimeoutError):
-            pass
+        except (ConnectionError, ssl.SSLError, asyncio.TimeoutError):
+            pass  # TLS: the client may still have been sending when we closed
         if self.producer is not None:
             producer, self.producer = self.producer, None
             await self.server.gl.run(lambda ctx: producer.release())

@@ -124,3 +124,24 @@ def test_a_server_off_loopback_refuses_to_start_without_a_token():
     ServerConfig(host="::1")
     with pytest.raises(ConfigError, match="needs both --tls-cert and --tls-key"):
         ServerConfig(tls_cert="server.crt")
+
+
+@pytest.mark.gl
+async def test_a_tls_client_still_sending_when_refused_does_not_upset_the_server(secured, caplog):
+    """The server closes (bad token) while the client keeps sending: ssl raises on the close
+    (application data after close notify); the session ends quietly and others are served."""
+    host, port, files = secured
+    tls = ClientTLS(ca_file=files.cert)
+    with caplog.at_level(logging.INFO):
+        for _ in range(3):
+            reader, writer = await open_connection(host, port, tls)
+            writer.write(encode_frame(Hello.TYPE, Hello(**{**HELLO.__dict__, "token": "guess"}).serialize()))
+            try:
+                for _ in range(2000):
+                    writer.write(encode_frame(8, b"", 0) * 16)     # Clock frames, on and on
+                    await writer.drain()
+            except (ConnectionError, OSError):
+                pass
+            writer.close()
+        assert await _handshake(host, port, tls, TOKEN)
+    assert not [r for r in caplog.records if r.levelno >= logging.ERROR]

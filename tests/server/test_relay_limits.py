@@ -1,7 +1,9 @@
 """The relay against a stand-in server (no rendering): memory bounded in bytes, a connection limit,
 jitter that replays identically, its token and TLS."""
 import asyncio
+import logging
 import socket
+import ssl
 import tracemalloc
 
 import pytest
@@ -10,7 +12,7 @@ from pibr.client.connection import ClientConnection
 from pibr.protocol.errors import AccessDenied, ConfigError, RemoteError, TLSError
 from pibr.protocol.framing import HEADER_SIZE, encode_frame
 from pibr.protocol.link import LinkParams
-from pibr.protocol.messages import Error, Frame, Hello, PoseMsg, Welcome
+from pibr.protocol.messages import Clock, Error, Frame, Hello, PoseMsg, Welcome
 from pibr.protocol.tls import ClientTLS, certificate_fingerprint, open_connection, server_context
 from pibr.server.relay import Relay, RelayConfig
 
@@ -209,3 +211,44 @@ async def test_relay_with_tls_on_both_sides(tls_files):
                                               f"fingerprint: expected {wrong[:16]}..., got {pin[:16]}..."):
             await c.handshake(Hello(client="pinned"))
         await c.close()
+
+
+async def test_closing_a_tls_connection_while_the_peer_still_sends_is_quiet(tls_files, caplog):
+    """The peer's data arriving after our TLS close_notify makes ssl raise on close
+    (APPLICATION_DATA_AFTER_CLOSE_NOTIFY): the client and the relay treat it as the end."""
+    stop = asyncio.Event()
+
+    async def chatter(reader, writer):
+        try:
+            while not stop.is_set():
+                writer.write(encode_frame(Clock.TYPE, b"", 0) * 64)
+                await writer.drain()
+        except (ConnectionError, ssl.SSLError):
+            pass
+        finally:
+            writer.close()
+
+    server = await asyncio.start_server(chatter, "127.0.0.1", 0, ssl=server_context(tls_files.cert, tls_files.key))
+    port = server.sockets[0].getsockname()[1]
+    try:
+        for _ in range(5):
+            c = await ClientConnection.open("127.0.0.1", port, tls=ClientTLS(ca_file=tls_files.cert))
+            await c.recv(10)
+            await c.close()                     # raised ssl.SSLError before
+        relay = Relay(RelayConfig(("127.0.0.1", 0), ("127.0.0.1", port), LinkParams(1.0), LinkParams(1.0),
+                                  upstream_tls=ClientTLS(ca_file=tls_files.cert)))
+        host, rport = await relay.start()
+        task = asyncio.create_task(relay.serve_forever())
+        with caplog.at_level(logging.INFO):
+            for _ in range(2):
+                reader, writer = await asyncio.open_connection(host, rport)
+                writer.write(_hello("chatty"))
+                await read_frames(reader, limit=64)
+                writer.close()
+            await _wait_for(lambda: not relay.pairs, "the pairs to close")
+        task.cancel()
+        await relay.close()
+        assert not [rec for rec in caplog.records if rec.levelno >= logging.ERROR]
+    finally:
+        stop.set()
+        server.close()
