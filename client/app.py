@@ -36,6 +36,7 @@ from pibr.protocol.gl import GLThread
 from pibr.protocol.messages import (FRAMES_DECODED, Clock, Frame, Hello, OutputConfig, PayloadKind, PoseMsg,
                                     ProxyChunk, Stats)
 from pibr.protocol.pose import Pose
+from pibr.protocol.tls import ClientTLS
 
 from .connection import ClientConnection
 from .frame_textures import FrameTextures
@@ -76,6 +77,8 @@ class ClientConfig:
     lod_pixels: float = 6.0  # proxy IBR: on-screen edge length that selects an object's LoD
     lod_level: str | None = None  # proxy IBR: force original, proxy or box for every object
     options: dict = field(default_factory=dict)  # other methods' knobs (client/cli.py METHOD_KNOBS)
+    token: str | None = field(default=None, repr=False)  # the server's (or relay's) access token; never recorded
+    tls: ClientTLS | None = None                 # connect with TLS, verifying the server this way
 
     def __post_init__(self):
         if self.clock not in ("virtual", "real"):
@@ -106,6 +109,10 @@ class ClientConfig:
         if self.progress not in ("bar", "lines", "none"):
             raise ConfigError(f"progress must be bar, lines or none, got {self.progress!r}")
         OutputConfig(self.width, self.height, self.fov_deg, self.rate_hz)
+        if self.token is not None:
+            from pibr.protocol.access import check_token_text
+
+            check_token_text(self.token)
         if not (16 <= self.width <= 8192 and 16 <= self.height <= 8192 and 1 <= self.fov_deg <= 170):
             raise ConfigError(f"output {self.width}x{self.height} at {self.fov_deg} degrees is out of range")
 
@@ -244,12 +251,12 @@ class Client:
         cfg = self.cfg
         trace, self._duration = self._trace_poses()
         loop = asyncio.get_running_loop()
-        self.conn = await ClientConnection.open(cfg.host, cfg.port)
+        self.conn = await ClientConnection.open(cfg.host, cfg.port, tls=cfg.tls)
         t_hello = time.monotonic()
         hello = Hello(client="pibr-client/0.1", scene=cfg.scene, clock=cfg.clock,
                       output=OutputConfig(cfg.width, cfg.height, cfg.fov_deg, cfg.rate_hz),
                       want_proxies=needs_proxies(cfg.methods), depth_codec=cfg.depth_codec,
-                      quadtree_threshold=quadtree_threshold(cfg.methods, cfg.options))
+                      quadtree_threshold=quadtree_threshold(cfg.methods, cfg.options), token=cfg.token or "")
         try:
             self.session = await self.conn.handshake(hello)
             t_welcome = time.monotonic()
@@ -492,7 +499,7 @@ class Client:
     def _write_session(self, result: ClientResult, trace) -> None:
         os.makedirs(self.cfg.out_dir, exist_ok=True)
         info = {
-            "client": asdict(self.cfg) | {"methods": list(self.cfg.methods)},
+            "client": asdict(self.cfg) | {"methods": list(self.cfg.methods), "token": self.cfg.token and "(given)"},
             "session": self.session.to_json(),
             "trace": {"name": trace.name, "start_s": self.cfg.start_s, "duration_s": self._duration,
                       "anchor": self.cfg.anchor, "assumptions": trace.assumptions},

@@ -65,6 +65,17 @@ def register(sub) -> None:
     p.add_argument("--lod-level", choices=("original", "proxy", "box"), default=None,
                    help="proxy: draw this level for every object instead of choosing by distance")
     p.add_argument("--progress", choices=("bar", "lines", "none"), default="bar")
+    g = p.add_argument_group("access (a server or relay with a token or TLS)")
+    g.add_argument("--token-file", metavar="FILE",
+                   help="send the access token on the first line of FILE (default: $PIBR_TOKEN, if set)")
+    g.add_argument("--token", metavar="TEXT",
+                   help="send this access token: prefer --token-file or PIBR_TOKEN, since a command line is "
+                        "visible to other users in ps")
+    g.add_argument("--tls-ca", metavar="FILE",
+                   help="connect with TLS, verifying the server's certificate and host name against this PEM CA file")
+    g.add_argument("--tls-pin", metavar="SHA256",
+                   help="connect with TLS, accepting only the certificate with this SHA-256 fingerprint "
+                        "(as 'pibr serve' prints it; for a self-signed certificate)")
     add_method_knobs(p)
     p.set_defaults(func=cmd_client)
 
@@ -141,9 +152,16 @@ def method_knobs(args) -> dict:
 
 
 def cmd_client(args) -> int:
+    from pibr.protocol.access import resolve_token
+
     from .app import ClientConfig, run_client
 
     host, port = parse_host_port(args.connect)
+    tls = None
+    if args.tls_ca is not None or args.tls_pin is not None:
+        from pibr.protocol.tls import ClientTLS
+
+        tls = ClientTLS(args.tls_ca, args.tls_pin)
     cfg = ClientConfig(host=host, port=port, trace=args.trace, rate_hz=args.rate, clock=args.clock,
                        methods=tuple(args.method), out_dir=args.out, width=args.size[0], height=args.size[1],
                        fov_deg=args.fov, start_s=args.start, duration_s=args.duration, preroll_s=args.preroll,
@@ -151,7 +169,8 @@ def cmd_client(args) -> int:
                        scene=args.scene, depth_codec=args.depth_codec or "", lossless=not args.no_lossless,
                        video=not args.no_video,
                        progress=args.progress, tau=args.tau, lod_pixels=args.lod_pixels,
-                       lod_level=args.lod_level, options=method_knobs(args))
+                       lod_level=args.lod_level, options=method_knobs(args),
+                       token=resolve_token(args.token, args.token_file), tls=tls)
     from .connection import ServerClosed
 
     try:

@@ -6,13 +6,15 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import ssl
 from collections import deque
 
 from pibr.protocol.connection import Connection, Envelope
-from pibr.protocol.errors import RemoteError, UnexpectedMessage
+from pibr.protocol.errors import AccessDenied, RemoteError, TLSError, UnexpectedMessage
 from pibr.protocol.framing import DEFAULT_MAX_MESSAGE_SIZE
 from pibr.protocol.messages import Bye, Error, Hello, Message, Welcome
 from pibr.protocol.session import SessionConfig
+from pibr.protocol.tls import ClientTLS, open_connection
 
 log = logging.getLogger(__name__)
 
@@ -29,14 +31,17 @@ class ClientConnection:
         self.welcome: Welcome | None = None
         self.config: SessionConfig | None = None
         self.bytes_received = 0
+        self.tls: ClientTLS | None = None
 
     @classmethod
-    async def open(cls, host: str, port: int, timeout: float = 10.0, **kw) -> "ClientConnection":
-        try:
-            reader, writer = await asyncio.wait_for(asyncio.open_connection(host, port), timeout)
-        except (OSError, asyncio.TimeoutError) as exc:
-            raise ConnectionError(f"cannot connect to pibr server at {host}:{port}: {exc or 'timed out'}") from None
-        return cls(reader, writer, **kw)
+    async def open(cls, host: str, port: int, timeout: float = 10.0, tls: ClientTLS | None = None,
+                   **kw) -> "ClientConnection":
+        """Connect (over TLS when ``tls`` says how to verify the server). Raises ConnectionError,
+        or TLSError naming why the server's certificate was refused."""
+        reader, writer = await open_connection(host, port, tls, timeout, what="pibr server")
+        conn = cls(reader, writer, **kw)
+        conn.tls = tls
+        return conn
 
     async def send(self, message: Message, vtime_us: int = 0, flush: bool = True) -> None:
         self.conn.send(message, vtime_us)
@@ -51,7 +56,10 @@ class ClientConnection:
                 await self._flush_quietly()
                 raise self.conn.error
             read = self.reader.read(1 << 16)
-            data = await (asyncio.wait_for(read, timeout) if timeout else read)
+            try:
+                data = await (asyncio.wait_for(read, timeout) if timeout else read)
+            except ssl.SSLError as exc:
+                raise TLSError(f"the TLS connection to the server broke: {exc.reason or exc}") from None
             if not data:
                 self.conn.receive_eof()
                 if self.conn.error is not None:
@@ -70,7 +78,17 @@ class ClientConnection:
     async def handshake(self, hello: Hello, timeout: float = 120.0) -> SessionConfig:
         """Send Hello, wait for Welcome (the server may first load and prepare the scene)."""
         await self.send(hello)
-        env = await self.recv(timeout)
+        try:
+            env = await self.recv(timeout)
+        except RemoteError as exc:
+            if exc.code == AccessDenied.code:
+                raise AccessDenied(f"{exc.text}: give the server's token with PIBR_TOKEN or --token-file") from None
+            raise
+        except ServerClosed:
+            if self.tls is None and not self.bytes_received:
+                raise ServerClosed("server closed the connection without answering the Hello; if it serves TLS, "
+                                   "connect with --tls-ca FILE or --tls-pin SHA256") from None
+            raise
         if not isinstance(env.message, Welcome):
             raise UnexpectedMessage(f"expected Welcome, got {env.message.NAME}")
         self.welcome = env.message
@@ -85,7 +103,7 @@ class ClientConnection:
             try:
                 self.writer.write(data)
                 await self.writer.drain()
-            except (ConnectionError, RuntimeError):
+            except (ConnectionError, ssl.SSLError, RuntimeError):
                 pass
 
     async def close(self, reason: str = "done") -> None:
@@ -98,5 +116,5 @@ class ClientConnection:
         self.writer.close()
         try:
             await asyncio.wait_for(self.writer.wait_closed(), 2.0)
-        except (ConnectionError, asyncio.TimeoutError):
-            pass
+        except (ConnectionError, ssl.SSLError, asyncio.TimeoutError):
+            pass  # TLS: the server may still have been sending when we closed

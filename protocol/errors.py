@@ -10,13 +10,15 @@
     │   ├── UnknownMessageType   the frame's type byte names no message
     │   ├── MalformedMessage     the payload does not parse as its message type
     │   ├── TruncatedMessage     the connection ended in the middle of a frame
-    │   └── UnexpectedMessage    a valid message at the wrong moment of the session
+    │   ├── UnexpectedMessage    a valid message at the wrong moment of the session
+    │   └── AccessDenied         the Hello's token is missing or not the one configured
     ├── InvalidPose              NaN/inf components or a zero quaternion
     ├── TraceError               a head-trace file or its columns do not parse (names the line)
     ├── SceneError               unknown scene, unreadable asset, bad scene description
     ├── CodecError               a video or edge-codec payload does not decode
     ├── ConfigError              a command-line or configuration value is out of range
     ├── ListenError              a server or relay cannot listen on its address (port in use, ...)
+    ├── TLSError                 a TLS connection failed: certificate not verified, pin mismatch, no TLS
     └── GLUnavailable            no headless OpenGL context on this machine (EGL missing)
 
 Every :class:`ProtocolError` carries a numeric ``code`` that goes on the wire in an
@@ -61,6 +63,13 @@ class UnexpectedMessage(ProtocolError):
     code = 8
 
 
+class AccessDenied(ProtocolError):
+    """The peer's ``Hello`` carries no token, or not the one this end was given. The ``Error``
+    it gets says only that, so a guess learns nothing else."""
+
+    code = 13
+
+
 class InvalidPose(PibrError, ValueError):
     code = 9
 
@@ -85,6 +94,11 @@ class ListenError(PibrError, OSError):
     """A server or relay cannot bind its address; the message says which and what to do."""
 
 
+class TLSError(PibrError, ConnectionError):
+    """A TLS connection could not be set up; the message names the address and why (the
+    certificate did not verify, its fingerprint is not the pinned one, the peer speaks no TLS)."""
+
+
 class GLUnavailable(PibrError, RuntimeError):
     """No OpenGL context could be created; the message names the backend and how to install it."""
 
@@ -94,7 +108,7 @@ ERROR_CODES = {
     cls.code: cls
     for cls in (ProtocolError, BadMagic, UnsupportedVersion, MessageTooLarge, UnknownMessageType,
                 MalformedMessage, TruncatedMessage, UnexpectedMessage, InvalidPose, SceneError,
-                CodecError, ConfigError)
+                CodecError, ConfigError, AccessDenied)
 }
 
 

@@ -52,6 +52,17 @@ def encode_frame(msg_type: int, payload: bytes, vtime_us: int = 0, flags: int = 
     return HEADER.pack(MAGIC, FRAMING_VERSION, msg_type, flags, int(vtime_us), len(payload)) + payload
 
 
+#: First bytes of a TLS record: handshake (0x16) or alert (0x15), version 3.x.
+_TLS_RECORD_STARTS = (b"\x16\x03", b"\x15\x03")
+
+
+def _bad_magic(got: bytes) -> BadMagic:
+    hint = ""
+    if got[:2] in _TLS_RECORD_STARTS or got == b"\x16":
+        hint = " (a TLS record: the peer speaks TLS and this end does not, or the other way round)"
+    return BadMagic(f"expected magic {MAGIC!r}, got {got!r}{hint}")
+
+
 class FrameReader:
     """Incremental frame parser. Feed bytes with :meth:`feed`; take frames with :meth:`frames`.
 
@@ -111,10 +122,10 @@ class FrameReader:
         if avail < 4:
             # Check the magic's prefix early so garbage fails fast rather than waiting for 20 bytes.
             if avail and bytes(self._buf[self._pos:self._pos + avail]) != MAGIC[:avail]:
-                raise BadMagic(f"expected magic {MAGIC!r}, got {bytes(self._buf[self._pos:self._pos + avail])!r}")
+                raise _bad_magic(bytes(self._buf[self._pos:self._pos + avail]))
             return None
         if bytes(self._buf[self._pos:self._pos + 4]) != MAGIC:
-            raise BadMagic(f"expected magic {MAGIC!r}, got {bytes(self._buf[self._pos:self._pos + 4])!r}")
+            raise _bad_magic(bytes(self._buf[self._pos:self._pos + 4]))
         if avail < HEADER_SIZE:
             return None
         magic, version, mtype, flags, vtime, length = HEADER.unpack_from(self._buf, self._pos)

@@ -25,6 +25,8 @@ CLOCKS = ("virtual", "real")
 MAX_TEXT = 4096
 #: Largest relative distance range a client may ask quadtree leaves to span (Hello.quadtree_threshold).
 MAX_QUADTREE_THRESHOLD = 10.0
+#: Longest access token a Hello may carry (see access.py).
+MAX_TOKEN = 256
 
 
 class Message:
@@ -119,6 +121,9 @@ class Hello(Message):
     (``PayloadKind.QUADTREE``, see :mod:`pibr.protocol.quadtree`) whose leaves span at most
     this relative distance range; 0 (the default, and then the field is left out of the
     JSON) asks for none. At most ``MAX_QUADTREE_THRESHOLD``.
+
+    ``token`` is the shared secret of a server that requires one (see access.py); left out
+    of the JSON when empty, at most ``MAX_TOKEN`` characters, and kept out of ``repr``.
     """
 
     TYPE: ClassVar[int] = 1
@@ -131,6 +136,7 @@ class Hello(Message):
     depth_codec: str = ""   # "" = the server's choice
     protocol: int = PROTOCOL_VERSION
     quadtree_threshold: float = 0.0   # 0 = no quadtree payload
+    token: str = field(default="", repr=False)
 
     def serialize(self) -> bytes:
         obj = {"protocol": self.protocol, "client": self.client, "scene": self.scene,
@@ -138,6 +144,8 @@ class Hello(Message):
                "want_proxies": self.want_proxies, "depth_codec": self.depth_codec}
         if self.quadtree_threshold:
             obj["quadtree_threshold"] = float(self.quadtree_threshold)
+        if self.token:
+            obj["token"] = self.token
         return _dump_json(obj)
 
     @classmethod
@@ -154,7 +162,15 @@ class Hello(Message):
             depth_codec=_get(cls.NAME, o, "depth_codec", str, ""),
             quadtree_threshold=_get(cls.NAME, o, "quadtree_threshold", float, 0.0, lo=0.0,
                                     hi=MAX_QUADTREE_THRESHOLD),
+            token=_token(_get(cls.NAME, o, "token", str, "")),
         )
+
+
+def _token(token: str) -> str:
+    # The error names the limit, never the value.
+    if len(token) > MAX_TOKEN:
+        raise MalformedMessage(f"Hello: field 'token' is longer than {MAX_TOKEN} characters")
+    return token
 
 
 @dataclass(frozen=True)

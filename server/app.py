@@ -54,8 +54,16 @@ class Server(TrackedListener):
         self.gl = await loop.run_in_executor(None, GLThread, "pibr-server-gl")
         scene = await self.get_scene(self.config.scene)  # load and upload the default scene before accepting
         await self.gl.run(self._renderer, scene)
-        host, port = await self.listen(self.config.host, self.config.port)
-        log.info("pibr server listening on %s:%d (default scene %s)", host, port, scene.name)
+        tls = None
+        if self.config.tls_cert is not None:
+            from pibr.protocol.tls import certificate_fingerprint, server_context
+
+            tls = server_context(self.config.tls_cert, self.config.tls_key)
+            log.info("pibr server: TLS certificate sha256 %s", certificate_fingerprint(self.config.tls_cert))
+        host, port = await self.listen(self.config.host, self.config.port, ssl=tls,
+                                       ssl_handshake_timeout=self.config.hello_timeout_s)
+        log.info("pibr server listening on %s:%d%s (default scene %s, %s)", host, port, " (TLS)" if tls else "",
+                 scene.name, "token required" if self.config.token is not None else "no token")
         return host, port
 
     async def close(self) -> None:

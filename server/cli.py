@@ -8,6 +8,7 @@ import sys
 from pibr.protocol.address import parse_host_port
 
 from .config import DEFAULT_PORT
+from .relay import DEFAULT_BUFFER_BYTES, DEFAULT_MAX_CONNECTIONS
 
 
 def _size(text: str) -> tuple[int, int]:
@@ -36,6 +37,38 @@ def _announce(what: str):
     return ready
 
 
+TOKEN_HELP = ("access token every client must send: prefer --token-file or the PIBR_TOKEN environment variable, "
+              "since a command line is visible to other users in ps")
+
+
+def _add_access_options(p, what: str) -> None:
+    """--token/--token-file and --tls-cert/--tls-key of a listening process."""
+    g = p.add_argument_group("access (needed to listen on anything but loopback)")
+    g.add_argument("--token-file", metavar="FILE",
+                   help=f"read the access token from the first line of FILE; with a token (this, $PIBR_TOKEN or "
+                        f"--token) every client must send it, also on loopback. Listening on any other address "
+                        f"needs one")
+    g.add_argument("--token", metavar="TEXT", help=TOKEN_HELP)
+    g.add_argument("--tls-cert", metavar="FILE",
+                   help=f"serve TLS (1.2 or newer) with this PEM certificate chain; clients then connect with "
+                        f"--tls-ca or --tls-pin (the {what} prints its certificate's SHA-256 fingerprint)")
+    g.add_argument("--tls-key", metavar="FILE", help="the certificate's PEM private key (unencrypted)")
+
+
+def _token(args):
+    from pibr.protocol.access import resolve_token
+
+    return resolve_token(args.token, args.token_file)
+
+
+def _print_fingerprint(command: str, cert_file: str | None) -> None:
+    if cert_file is not None:
+        from pibr.protocol.tls import certificate_fingerprint
+
+        fp = certificate_fingerprint(cert_file)
+        print(f"pibr {command}: TLS certificate sha256 {fp} (clients may pin it: --tls-pin {fp})", flush=True)
+
+
 def register(sub) -> None:
     from .renderer import DEFAULT_PROJECTION, MAX_EDGE_ANGLE_DEG, PROJECTIONS
 
@@ -45,7 +78,8 @@ def register(sub) -> None:
                    "a scene description (.toml/.json) or an asset file (default: room)")
     p.add_argument("--up", choices=("y", "z", "auto"), default=None,
                    help="an asset file's up axis (default auto: decided from its geometry; see 'pibr scenes --show')")
-    p.add_argument("--host", default="127.0.0.1")
+    p.add_argument("--host", default="127.0.0.1",
+                   help="address to listen on (default 127.0.0.1, this machine only; any other needs a token)")
     p.add_argument("--port", type=int, default=DEFAULT_PORT, help=f"TCP port, 0 for any free one (default {DEFAULT_PORT})")
     p.add_argument("--fps", type=float, default=10.0, help="server frame rate (default 10)")
     p.add_argument("--view-size", type=_size, default=(1024, 1024), metavar="WxH",
@@ -84,6 +118,7 @@ def register(sub) -> None:
     p.add_argument("--max-in-flight", type=int, default=3, metavar="N",
                    help="real clock: render a new frame only while fewer than N sent frames wait to be decoded "
                         "by the client (default 3: enough for a 200 ms round trip at 10 fps)")
+    _add_access_options(p, "server")
     p.set_defaults(func=cmd_serve)
 
     r = sub.add_parser("relay", help="inject latency between clients and a server",
@@ -94,7 +129,22 @@ def register(sub) -> None:
     r.add_argument("--down-ms", type=float, default=64.0, help="server -> client one-way delay (default 64)")
     r.add_argument("--jitter-ms", type=float, default=0.0, help="uniform +- jitter on each direction (default 0)")
     r.add_argument("--kbps", type=float, default=0.0, help="bandwidth cap per direction, 0 = none (default 0)")
-    r.add_argument("--seed", type=int, default=0, help="jitter seed (virtual clock: reproducible)")
+    r.add_argument("--seed", type=int, default=0,
+                   help="jitter seed; each session's jitter follows from it and the client's Hello, so a replay "
+                        "through any relay with the same seed is identical (default 0)")
+    r.add_argument("--max-connections", type=int, default=DEFAULT_MAX_CONNECTIONS, metavar="N",
+                   help=f"clients relayed at once; one more gets an error (default {DEFAULT_MAX_CONNECTIONS})")
+    r.add_argument("--buffer-mib", type=int, default=DEFAULT_BUFFER_BYTES >> 20, metavar="MIB",
+                   help=f"most bytes held per direction of each connection, in MiB: when full, the relay stops "
+                        f"reading that direction's sender (default {DEFAULT_BUFFER_BYTES >> 20}, at least one "
+                        f"message: 17)")
+    _add_access_options(r, "relay")
+    u = r.add_argument_group("TLS towards the server")
+    u.add_argument("--upstream-tls-ca", metavar="FILE",
+                   help="connect to the server with TLS, verifying its certificate against this PEM CA file")
+    u.add_argument("--upstream-tls-pin", metavar="SHA256",
+                   help="connect to the server with TLS, accepting only the certificate with this SHA-256 "
+                        "fingerprint (as 'pibr serve' prints it)")
     r.set_defaults(func=cmd_relay)
 
 
@@ -114,7 +164,9 @@ def cmd_serve(args) -> int:
                           depth_codec=args.depth_codec, max_sessions=args.max_sessions,
                           max_in_flight=args.max_in_flight,
                           edge=EdgeSettings(kbps=args.edge_kbps, temporal=not args.edge_no_temporal,
-                                            perceptual=args.edge_perceptual))
+                                            perceptual=args.edge_perceptual),
+                          token=_token(args), tls_cert=args.tls_cert, tls_key=args.tls_key)
+    _print_fingerprint("serve", config.tls_cert)
     try:
         asyncio.run(run_server(config, _announce("serve")))
     except KeyboardInterrupt:
@@ -133,7 +185,18 @@ def cmd_relay(args) -> int:
         down = LinkParams(args.down_ms, args.jitter_ms, args.kbps)
     except ValueError as exc:
         raise ConfigError(str(exc)) from None
-    config = RelayConfig(parse_host_port(args.listen), parse_host_port(args.upstream), up, down, args.seed)
+    upstream_tls = None
+    if args.upstream_tls_ca is not None or args.upstream_tls_pin is not None:
+        from pibr.protocol.tls import ClientTLS
+
+        upstream_tls = ClientTLS(args.upstream_tls_ca, args.upstream_tls_pin)
+    if not 1 <= args.buffer_mib <= 1 << 20:
+        raise ConfigError(f"--buffer-mib must be in 1..{1 << 20}, got {args.buffer_mib}")
+    config = RelayConfig(parse_host_port(args.listen), parse_host_port(args.upstream), up, down, args.seed,
+                         buffer_bytes=args.buffer_mib << 20, max_connections=args.max_connections,
+                         token=_token(args), tls_cert=args.tls_cert, tls_key=args.tls_key,
+                         upstream_tls=upstream_tls)
+    _print_fingerprint("relay", config.tls_cert)
     try:
         asyncio.run(run_relay(config, _announce("relay")))
     except KeyboardInterrupt:

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from pibr.protocol.access import check_listen_access
 from pibr.protocol.atlas import check_view_size
 from pibr.protocol.errors import ConfigError
 from pibr.protocol.framing import DEFAULT_MAX_MESSAGE_SIZE
@@ -46,6 +47,9 @@ class ServerConfig:
     max_sessions: int = 8
     hello_timeout_s: float = 10.0
     max_in_flight: int = 3              # real clock: frames sent ahead of what the client has decoded
+    token: str | None = None            # every Hello must carry it; required to listen off loopback
+    tls_cert: str | None = None         # PEM certificate chain: serve TLS (with tls_key)
+    tls_key: str | None = None          # PEM key, unencrypted
     proxy_settings: ProxySettings = field(default_factory=ProxySettings)
     edge: EdgeSettings = field(default_factory=EdgeSettings)
 
@@ -77,6 +81,10 @@ class ServerConfig:
             raise ConfigError("max sessions must be at least 1")
         if not (1 <= self.max_in_flight <= 1000):
             raise ConfigError(f"frames in flight must be in 1..1000, got {self.max_in_flight}")
+        check_listen_access("server", self.host, self.token)
+        from pibr.protocol.tls import check_server_files
+
+        check_server_files(self.tls_cert, self.tls_key, "server")
         if not (0 <= self.edge.kbps <= 1e6):
             raise ConfigError(f"edge codec bitrate must be in 0..1000000 kbit/s (0: a fixed threshold), "
                               f"got {self.edge.kbps}")

@@ -8,10 +8,15 @@ from __future__ import annotations
 
 import asyncio
 import errno
+import logging
 import os
 import socket
 
 from pibr.protocol.errors import ListenError
+
+log = logging.getLogger(__name__)
+#: Longest wait at shutdown for the sockets of cancelled handlers to close.
+CLOSE_TIMEOUT_S = 5.0
 
 
 class TrackedListener:
@@ -21,12 +26,16 @@ class TrackedListener:
         self._server: asyncio.AbstractServer | None = None
         self._tasks: set[asyncio.Task] = set()
 
-    async def listen(self, host: str, port: int) -> tuple[str, int]:
-        """Start accepting on ``host:port`` (0: any free port) -> the bound (host, port).
+    async def listen(self, host: str, port: int, ssl=None, ssl_handshake_timeout: float | None = None
+                     ) -> tuple[str, int]:
+        """Start accepting on ``host:port`` (0: any free port) -> the bound (host, port); with
+        ``ssl`` (an SSLContext) every connection is TLS, and one whose TLS handshake fails or
+        takes longer than ``ssl_handshake_timeout`` seconds is dropped before :meth:`handle`.
 
         Raises :class:`ListenError` naming the address when it cannot be bound."""
         try:
-            self._server = await asyncio.start_server(self._run_handler, host, port)
+            self._server = await asyncio.start_server(self._run_handler, host, port, ssl=ssl,
+                                                      ssl_handshake_timeout=ssl_handshake_timeout if ssl else None)
         except OSError as exc:
             hint = {errno.EADDRINUSE: "another process is listening there: stop it or choose another port, "
                                       "0 for any free one",
@@ -57,11 +66,18 @@ class TrackedListener:
             await self._server.serve_forever()
 
     async def close(self) -> None:
-        """Stop accepting, cancel the running handlers and wait for them."""
+        """Stop accepting, cancel the running handlers and wait for them, then for their sockets."""
         if self._server is not None:
             self._server.close()
-            await self._server.wait_closed()
         for task in list(self._tasks):
             task.cancel()
         if self._tasks:
             await asyncio.gather(*self._tasks, return_exceptions=True)
+        if self._server is not None:
+            # Since Python 3.12 wait_closed() waits for every accepted socket to close, so it comes
+            # after the handlers, which close theirs: first, it would wait on a connected peer for ever.
+            try:
+                await asyncio.wait_for(self._server.wait_closed(), CLOSE_TIMEOUT_S)
+            except asyncio.TimeoutError:
+                log.warning("%s: connections still open %g s after closing; leaving them", type(self).__name__,
+                            CLOSE_TIMEOUT_S)

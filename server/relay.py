@@ -1,8 +1,9 @@
 """``pibr relay``: a latency-injecting relay any client and server can sit behind.
 
-For each client connection the relay opens one upstream connection and pumps frames both
-ways through a :class:`~pibr.protocol.link.LinkModel` per direction. It reads the client's
-``Hello`` to learn the session's clock:
+For each client connection the relay reads the client's ``Hello`` (within
+``hello_timeout_s``), then opens one upstream connection and pumps frames both ways through
+a :class:`~pibr.protocol.link.LinkModel` per direction. The Hello tells it the session's
+clock:
 
 * **virtual**: frames are forwarded at once, their header ``vtime_us`` rewritten to the
   modelled arrival time (deterministic: jitter comes from a seeded generator); the
@@ -10,28 +11,55 @@ ways through a :class:`~pibr.protocol.link.LinkModel` per direction. It reads th
   timeline and passes unchanged;
 * **real**: frames are held until their modelled arrival on the wall clock, unchanged.
 
+**Jitter seeds.** A session's link models are seeded from ``--seed`` and the client's Hello
+(all of it but the token), never from how many connections came before: the same client
+run through a relay with the same seed sees the same jitter, first run or tenth, alone or
+beside others (identical Hellos share a jitter sequence).
+
+**Memory.** Each direction of a pair holds at most ``buffer_bytes`` of frames read and not
+yet handed to the kernel; when full, the relay stops reading that direction's sender, so a
+client that does not read stalls its own server stream (TCP back-pressure) and nothing else.
+Besides that budget a direction holds only what its last read brought and is not queued yet
+(at most one message and 64 KiB, the frame being re-stamped twice) and asyncio's read buffer.
+At most ``max_connections`` pairs run at once; one more client gets an ``Error`` ("relay full").
+
+**Access.** The relay forwards the Hello unchanged, token included, so a server with a token
+checks it. A relay given a token (``--token-file``, ``PIBR_TOKEN``; required when it listens
+off loopback) also checks it before connecting upstream: a client without it never reaches
+the server. One token for relay and server is the simple set-up. ``--tls-cert``/``--tls-key``
+make clients connect with TLS; ``--upstream-tls-ca``/``--upstream-tls-pin`` make the relay
+connect to a TLS server.
+
 The relay parses framing (never payloads, except the first ``Hello``), so a peer sending
-garbage gets an ``Error`` and its connection pair is closed; other pairs carry on. Queues
-are bounded: a receiver that does not read stalls only its own sender.
+garbage gets an ``Error`` and its connection pair is closed; other pairs carry on.
 """
 from __future__ import annotations
 
 import asyncio
+import dataclasses
+import hashlib
 import itertools
 import logging
+import ssl
 from dataclasses import dataclass
 
+from pibr.protocol.access import check_listen_access, token_matches
 from pibr.protocol.connection import Connection
-from pibr.protocol.errors import ProtocolError, UnexpectedMessage
-from pibr.protocol.framing import DEFAULT_MAX_MESSAGE_SIZE, FrameReader, encode_frame
+from pibr.protocol.errors import AccessDenied, ConfigError, ProtocolError, TLSError, UnexpectedMessage
+from pibr.protocol.framing import DEFAULT_MAX_MESSAGE_SIZE, HEADER_SIZE, FrameReader, RawFrame, encode_frame
 from pibr.protocol.link import LinkModel, LinkParams
-from pibr.protocol.messages import Clock, Error, Hello, ProxyChunk, Welcome
+from pibr.protocol.messages import Clock, Error, Hello, ProxyChunk, Welcome, parse_message
+from pibr.protocol.tls import ClientTLS, check_server_files
 
+from .byte_queue import ByteBudgetQueue
 from .listener import TrackedListener
 
 log = logging.getLogger(__name__)
 
-QUEUE_FRAMES = 512
+READ_CHUNK = 1 << 16
+#: Default buffer per direction of a pair: two messages of the default size limit.
+DEFAULT_BUFFER_BYTES = 32 * 1024 * 1024
+DEFAULT_MAX_CONNECTIONS = 16
 
 
 @dataclass
@@ -42,6 +70,35 @@ class RelayConfig:
     down: LinkParams = LinkParams(64.0)
     seed: int = 0
     max_message_size: int = DEFAULT_MAX_MESSAGE_SIZE
+    buffer_bytes: int = DEFAULT_BUFFER_BYTES     # per direction of each pair
+    max_connections: int = DEFAULT_MAX_CONNECTIONS
+    hello_timeout_s: float = 10.0                # from accepting (TLS handshake included) to the Hello
+    token: str | None = None                     # clients must send it; required to listen off loopback
+    tls_cert: str | None = None                  # TLS towards clients (with tls_key)
+    tls_key: str | None = None
+    upstream_tls: ClientTLS | None = None        # TLS towards the server
+
+    def __post_init__(self):
+        if not 1 <= self.max_message_size <= 1 << 30:
+            raise ConfigError(f"relay message size limit must be in 1..{1 << 30} bytes, got {self.max_message_size}")
+        if self.buffer_bytes < self.max_message_size + HEADER_SIZE:
+            raise ConfigError(f"relay buffer of {self.buffer_bytes} bytes per direction cannot hold one message of "
+                              f"the {self.max_message_size}-byte limit; give at least "
+                              f"{-(-(self.max_message_size + HEADER_SIZE) // (1 << 20))} MiB")
+        if not 1 <= self.max_connections <= 100_000:
+            raise ConfigError(f"relay connection limit must be in 1..100000, got {self.max_connections}")
+        if not 0 < self.hello_timeout_s <= 3600:
+            raise ConfigError(f"relay Hello timeout must be in (0, 3600] s, got {self.hello_timeout_s}")
+        check_listen_access("relay", self.listen[0], self.token)
+        check_server_files(self.tls_cert, self.tls_key, "relay")
+
+
+def link_seeds(seed: int, hello: Hello) -> tuple[int, int]:
+    """(uplink, downlink) jitter seeds of a session: ``seed`` and the client's Hello without its
+    token, so the same session replays the same jitter however many connections came before."""
+    identity = dataclasses.replace(hello, token="").serialize()
+    digest = hashlib.sha256(b"%d\0" % seed + identity).digest()
+    return int.from_bytes(digest[:8], "little"), int.from_bytes(digest[8:16], "little")
 
 
 class _Pair:
@@ -50,23 +107,54 @@ class _Pair:
     def __init__(self, relay, number, c_reader, c_writer):
         self.relay, self.number = relay, number
         self.c_reader, self.c_writer = c_reader, c_writer
-        cfg = relay.config
-        self.up_model = LinkModel(cfg.up, seed=cfg.seed * 2 + number * 1000)
-        self.down_model = LinkModel(cfg.down, seed=cfg.seed * 2 + 1 + number * 1000)
-        self.clock: asyncio.Future = asyncio.get_running_loop().create_future()
+        self.peer = c_writer.get_extra_info("peername")
+        self.hello: Hello | None = None
+        self.clock: str | None = None
+        self.up_model: LinkModel | None = None
+        self.down_model: LinkModel | None = None
+        #: direction ("up", "down") -> its buffer, once the pumps run
+        self.queues: dict[str, ByteBudgetQueue] = {}
 
     async def run(self) -> None:
         cfg = self.relay.config
+        client_frames = FrameReader(cfg.max_message_size)
         try:
-            s_reader, s_writer = await asyncio.open_connection(*cfg.upstream)
-        except OSError as exc:
-            log.warning("relay %d: upstream %s:%d unreachable: %s", self.number, *cfg.upstream, exc)
-            self._send_error(self.c_writer, Error(1, f"relay: upstream server {cfg.upstream[0]}:{cfg.upstream[1]} "
-                                                     f"is unreachable ({exc})"))
+            # asyncio.timeout, not wait_for: in Python 3.11 wait_for can swallow a cancellation
+            # (the relay closing) that comes as the Hello does, and the pair would run on.
+            async with asyncio.timeout(cfg.hello_timeout_s):
+                first = await self._read_hello(client_frames)
+        except TimeoutError:
+            log.info("relay %d: no Hello from %s within %g s", self.number, self.peer, cfg.hello_timeout_s)
+            await self._refuse(Error(UnexpectedMessage.code, f"relay: no Hello within {cfg.hello_timeout_s:g} s"))
+            return
+        except ProtocolError as exc:
+            log.warning("relay %d: %s from the client %s: %s", self.number, type(exc).__name__, self.peer, exc)
+            await self._refuse(Error(exc.code, f"relay: {exc}"))
+            return
+        except (ConnectionError, EOFError) as exc:
+            log.info("relay %d: client %s left before its Hello (%s)", self.number, self.peer, exc or "closed")
             await _close(self.c_writer)
             return
-        up = asyncio.create_task(self._pump(self.c_reader, s_writer, self.up_model, "up", self.c_writer))
-        down = asyncio.create_task(self._pump(s_reader, self.c_writer, self.down_model, "down", s_writer))
+        if cfg.token is not None and not token_matches(cfg.token, self.hello.token):
+            log.warning("relay %d: bad or missing token from %s", self.number, self.peer)
+            await self._refuse(Error(AccessDenied.code, "relay: bad or missing token"))
+            return
+        self.clock = self.hello.clock
+        up_seed, down_seed = link_seeds(cfg.seed, self.hello)
+        self.up_model, self.down_model = LinkModel(cfg.up, seed=up_seed), LinkModel(cfg.down, seed=down_seed)
+        from pibr.protocol.tls import open_connection
+
+        try:
+            s_reader, s_writer = await open_connection(*cfg.upstream, cfg.upstream_tls, timeout=cfg.hello_timeout_s,
+                                                       what="the upstream server")
+        except (ConnectionError, TLSError) as exc:
+            log.warning("relay %d: %s", self.number, exc)
+            await self._refuse(Error(1, f"relay: {exc}"))
+            return
+        up = asyncio.create_task(self._pump(self.c_reader, s_writer, self.up_model, "up", self.c_writer,
+                                            client_frames, first))
+        down = asyncio.create_task(self._pump(s_reader, self.c_writer, self.down_model, "down", s_writer,
+                                              FrameReader(cfg.max_message_size), []))
         try:
             done, pending = await asyncio.wait({up, down}, return_when=asyncio.FIRST_COMPLETED)
             # One side finished: let the other deliver what it already holds, briefly.
@@ -85,56 +173,82 @@ class _Pair:
             log.info("relay %d: closed (up %d msgs / %d B, down %d msgs / %d B)", self.number,
                      self.up_model.messages, self.up_model.bytes, self.down_model.messages, self.down_model.bytes)
 
+    async def _read_hello(self, frames: FrameReader) -> list[RawFrame]:
+        """Read until the client's first frame, which must be a Hello -> every frame read so far."""
+        while True:
+            data = await self.c_reader.read(READ_CHUNK)
+            if not data:
+                frames.eof()
+                raise EOFError("closed")
+            got = frames.feed(data)
+            if got:
+                if got[0].type != Hello.TYPE:
+                    raise UnexpectedMessage(f"expected the client's Hello first, got type {got[0].type}")
+                self.hello = parse_message(Hello.TYPE, got[0].payload)
+                return got
+
+    async def _refuse(self, err: Error) -> None:
+        self._send_error(self.c_writer, err)
+        await _close(self.c_writer)
+
     def _send_error(self, writer, err: Error) -> None:
         conn = Connection()
         conn.send(err)
         try:
             writer.write(conn.data_to_send())
-        except (ConnectionError, RuntimeError):
+        except (ConnectionError, ssl.SSLError, RuntimeError):
             pass
 
-    async def _pump(self, reader, writer, model: LinkModel, direction: str, source_writer) -> None:
+    def _timed(self, f: RawFrame, model: LinkModel) -> tuple:
+        """(due on the loop's clock or None, bytes to send) for one frame through ``model``."""
+        is_clock = f.type == Clock.TYPE
+        if self.clock == "virtual":
+            if f.type in (Hello.TYPE, Welcome.TYPE, ProxyChunk.TYPE):
+                # The handshake and the proxies sent with it come before the simulated timeline
+                # starts; through the link model they would push the link's FIFO clock past the first ticks.
+                return None, encode_frame(f.type, f.payload, f.vtime_us)
+            return None, encode_frame(f.type, f.payload, model.arrival_us(f.vtime_us, f.wire_size, is_clock))
         loop = asyncio.get_running_loop()
-        frames = FrameReader(self.relay.config.max_message_size)
-        queue: asyncio.Queue = asyncio.Queue(QUEUE_FRAMES)
+        arrive = model.arrival_us(int(loop.time() * 1e6), f.wire_size, is_clock)
+        return arrive / 1e6, encode_frame(f.type, f.payload, f.vtime_us)
+
+    async def _pump(self, reader, writer, model: LinkModel, direction: str, source_writer,
+                    frames: FrameReader, pending: list[RawFrame]) -> None:
+        queue = ByteBudgetQueue(self.relay.config.buffer_bytes)
+        self.queues[direction] = queue
+        # drain() then returns only once the transport has handed every byte on (to the kernel, or
+        # to TLS, which keeps at most 64 KiB), so the queue's count is what the relay holds of a
+        # frame being sent. Not high=0: a TLS transport would then count as full when empty.
+        writer.transport.set_write_buffer_limits(high=1, low=0)
         sender = asyncio.create_task(self._send_loop(queue, writer))
         try:
-            while True:
-                data = await reader.read(1 << 16)
-                if not data:
-                    frames.eof()
-                    break
-                for f in frames.feed(data):
-                    if not self.clock.done():
-                        if direction != "up" or f.type != Hello.TYPE:
-                            raise UnexpectedMessage(f"relay: expected the client's Hello first, got type {f.type}")
-                        self.clock.set_result(Hello.parse(f.payload).clock)
-                    clock = await self.clock
-                    is_clock = f.type == Clock.TYPE
-                    if clock == "virtual" and f.type in (Hello.TYPE, Welcome.TYPE, ProxyChunk.TYPE):
-                        # The handshake and the proxies sent with it come before the simulated
-                        # timeline starts; through the link model they would push the link's
-                        # FIFO clock past the first ticks.
-                        await queue.put((None, encode_frame(f.type, f.payload, f.vtime_us)))
-                    elif clock == "virtual":
-                        arrive = model.arrival_us(f.vtime_us, f.wire_size, is_clock)
-                        await queue.put((None, encode_frame(f.type, f.payload, arrive)))
-                    else:
-                        now_us = int(loop.time() * 1e6)
-                        arrive = model.arrival_us(now_us, f.wire_size, is_clock)
-                        await queue.put((arrive / 1e6, encode_frame(f.type, f.payload, f.vtime_us)))
-        except ProtocolError as exc:
-            log.warning("relay %d: %s from the %s: %s", self.number, type(exc).__name__,
-                        "client" if direction == "up" else "server", exc)
-            self._send_error(source_writer, Error(exc.code, f"relay: {exc}"))
+            try:
+                while True:
+                    for f in pending:
+                        due, data = self._timed(f, model)
+                        if not await queue.put((due, data), len(data)):
+                            return   # the receiver is gone
+                    data = await reader.read(READ_CHUNK)
+                    if not data:
+                        frames.eof()
+                        break
+                    pending = frames.feed(data)
+            except ProtocolError as exc:
+                log.warning("relay %d: %s from the %s: %s", self.number, type(exc).__name__,
+                            "client" if direction == "up" else "server", exc)
+                self._send_error(source_writer, Error(exc.code, f"relay: {exc}"))
+            await queue.put(None, 0)
+            await sender          # deliver what is queued; a cancellation here reaches the sender too
         finally:
-            await queue.put(None)
-            await sender
+            # Cancelled elsewhere (the pair or the relay closing): the sender may be stuck on a
+            # receiver that does not read; it must not outlive the pump.
+            sender.cancel()
+            await asyncio.gather(sender, return_exceptions=True)
 
-    async def _send_loop(self, queue: asyncio.Queue, writer) -> None:
+    async def _send_loop(self, queue: ByteBudgetQueue, writer) -> None:
         loop = asyncio.get_running_loop()
         while True:
-            item = await queue.get()
+            item, nbytes = await queue.get()
             if item is None:
                 return
             due, data = item
@@ -143,16 +257,18 @@ class _Pair:
             try:
                 writer.write(data)
                 await writer.drain()
-            except (ConnectionError, RuntimeError):
+            except (ConnectionError, ssl.SSLError, RuntimeError):
+                await queue.abandon()
                 return
+            await queue.done(nbytes)
 
 
 async def _close(writer) -> None:
     try:
         writer.close()
         await asyncio.wait_for(writer.wait_closed(), 2.0)
-    except (ConnectionError, asyncio.TimeoutError, RuntimeError):
-        pass
+    except (ConnectionError, ssl.SSLError, asyncio.TimeoutError, RuntimeError):
+        writer.transport.abort()   # a peer that does not read would keep a closing socket for ever
 
 
 class Relay(TrackedListener):
@@ -160,20 +276,38 @@ class Relay(TrackedListener):
         super().__init__()
         self.config = config
         self._numbers = itertools.count(1)
+        self.pairs: set[_Pair] = set()
 
     async def start(self) -> tuple[str, int]:
-        host, port = await self.listen(*self.config.listen)
         c = self.config
-        log.info("pibr relay on %s:%d -> %s:%d (up %g ms, down %g ms, jitter %g/%g ms, cap %g/%g kbit/s)",
-                 host, port, *c.upstream, c.up.delay_ms, c.down.delay_ms, c.up.jitter_ms, c.down.jitter_ms,
-                 c.up.kbps, c.down.kbps)
+        tls = None
+        if c.tls_cert is not None:
+            from pibr.protocol.tls import server_context
+
+            tls = server_context(c.tls_cert, c.tls_key)
+        host, port = await self.listen(*c.listen, ssl=tls, ssl_handshake_timeout=c.hello_timeout_s)
+        log.info("pibr relay on %s:%d%s -> %s:%d%s (up %g ms, down %g ms, jitter %g/%g ms, cap %g/%g kbit/s, "
+                 "%d MiB per direction, at most %d connections, %s)", host, port, " (TLS)" if tls else "",
+                 *c.upstream, " (TLS)" if c.upstream_tls else "", c.up.delay_ms, c.down.delay_ms, c.up.jitter_ms,
+                 c.down.jitter_ms, c.up.kbps, c.down.kbps, c.buffer_bytes >> 20, c.max_connections,
+                 "token required" if c.token is not None else "no token")
         return host, port
 
     async def handle(self, reader, writer) -> None:
+        number = next(self._numbers)
+        pair = _Pair(self, number, reader, writer)
+        if len(self.pairs) >= self.config.max_connections:
+            log.warning("relay %d: refused %s: %d connections already", number, pair.peer, len(self.pairs))
+            await pair._refuse(Error(ConfigError.code, f"relay full: {len(self.pairs)} connections already "
+                                                       f"(--max-connections {self.config.max_connections})"))
+            return
+        self.pairs.add(pair)
         try:
-            await _Pair(self, next(self._numbers), reader, writer).run()
+            await pair.run()
         except Exception:  # one pair's bug must not stop the relay; log it loudly
             log.exception("relay: connection pair failed")
+        finally:
+            self.pairs.discard(pair)
 
 
 async def run_relay(config: RelayConfig, ready=None) -> None:

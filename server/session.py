@@ -10,11 +10,13 @@ from __future__ import annotations
 import asyncio
 import logging
 import math
+import ssl
 import time
 from collections import deque
 
+from pibr.protocol.access import token_matches
 from pibr.protocol.connection import Connection, Envelope
-from pibr.protocol.errors import (ConfigError, ProtocolError, SceneError, UnexpectedMessage,
+from pibr.protocol.errors import (AccessDenied, ConfigError, ProtocolError, SceneError, UnexpectedMessage,
                                   UnsupportedVersion)
 from pibr.protocol.messages import (FRAMES_DECODED, PROTOCOL_VERSION, Bye, Clock, Error, Frame, Hello, PayloadKind,
                                     PoseMsg, Stats, Welcome)
@@ -103,7 +105,7 @@ class Session:
             self.conn.send(Error(exc.code, str(exc)))
         except asyncio.TimeoutError:
             self.conn.send(Error(UnexpectedMessage.code, "no Hello within the handshake timeout"))
-        except (ConnectionError, asyncio.IncompleteReadError) as exc:
+        except (ConnectionError, ssl.SSLError, asyncio.IncompleteReadError) as exc:
             log.info("session %d: connection lost: %s", self.id, exc)
         except asyncio.CancelledError:
             # The server is shutting down: say so, close, and end this handler normally.
@@ -117,13 +119,13 @@ class Session:
     async def _close(self) -> None:
         try:
             await asyncio.wait_for(self._flush(), 2.0)
-        except (ConnectionError, asyncio.TimeoutError, RuntimeError):
+        except (ConnectionError, ssl.SSLError, asyncio.TimeoutError, RuntimeError):
             pass  # the peer is gone; nothing more to tell it
         self.writer.close()
         try:
             await asyncio.wait_for(self.writer.wait_closed(), 2.0)
-        except (ConnectionError, asyncio.TimeoutError):
-            pass
+        except (ConnectionError, ssl.SSLError, asyncio.TimeoutError):
+            pass  # TLS: the client may still have been sending when we closed
         if self.producer is not None:
             producer, self.producer = self.producer, None
             await self.server.gl.run(lambda ctx: producer.release())
@@ -139,6 +141,9 @@ class Session:
         hello = env.message
         if not isinstance(hello, Hello):
             raise UnexpectedMessage(f"expected Hello as the first message, got {hello.NAME}")
+        token = self.server.config.token
+        if token is not None and not token_matches(token, hello.token):   # before anything else is told
+            raise AccessDenied("bad or missing token")
         if hello.protocol != PROTOCOL_VERSION:
             raise UnsupportedVersion(f"client speaks protocol {hello.protocol}, this server speaks {PROTOCOL_VERSION}")
         setup = await self.server.setup_session(hello)

@@ -12,12 +12,15 @@ from pibr.server.relay import Relay, RelayConfig
 
 
 @contextlib.asynccontextmanager
-async def server_behind_relay(config: ServerConfig, up_ms: float = 64.0, down_ms: float = 64.0):
-    """Start a server and a relay in front of it; yields the relay's (host, port)."""
+async def server_behind_relay(config: ServerConfig, up_ms: float = 64.0, down_ms: float = 64.0, jitter_ms: float = 0.0,
+                              **relay_kw):
+    """Start a server and a relay in front of it (``relay_kw``: more RelayConfig fields); yields
+    the relay's (host, port)."""
     srv = Server(config)
     host, port = await srv.start()
     stask = asyncio.create_task(srv.serve_forever())
-    relay = Relay(RelayConfig(("127.0.0.1", 0), (host, port), LinkParams(up_ms), LinkParams(down_ms)))
+    relay = Relay(RelayConfig(("127.0.0.1", 0), (host, port), LinkParams(up_ms, jitter_ms), LinkParams(down_ms, jitter_ms),
+                              **relay_kw))
     try:
         rhost, rport = await relay.start()
         rtask = asyncio.create_task(relay.serve_forever())

@@ -77,3 +77,27 @@ async def test_relay_reports_unreachable_upstream():
     task.cancel()
     await asyncio.gather(task, return_exceptions=True)
     await relay.close()
+
+
+async def _replay(host, port) -> list:
+    c = await ClientConnection.open(host, port)
+    cfg = await c.handshake(Hello(clock="virtual", output=OutputConfig(160, 96, 90.0, 30.0)))
+    interval = 33_333
+    frames = await exchange_virtual(c, cfg.viewer_origin, [tick * interval for tick in range(-6, 15)], interval)
+    await c.close()
+    return [(vt, f.frame_id, f.pose_seq, f.render_t_us) for vt, f in frames]
+
+
+async def test_jittered_replays_through_one_relay_are_identical():
+    """Defect 14 with the real server: the second session through the relay sees the same jitter
+    (arrival stamps, and so the poses each frame was rendered with) as the first; another seed
+    does not."""
+    config = ServerConfig(port=0, scene="sphere", view_size=(128, 128), server_delay_ms=20.0, bitrate_kbps=2000)
+    async with server_behind_relay(config, jitter_ms=30.0, seed=11) as (host, port):
+        first = await _replay(host, port)
+        second = await _replay(host, port)
+    async with server_behind_relay(config, jitter_ms=30.0, seed=12) as (host, port):
+        other = await _replay(host, port)
+    assert len(first) > 5 and first == second
+    assert len({vt - render for vt, _, _, render in first}) > 3          # the jitter is there
+    assert [vt for vt, *_ in other] != [vt for vt, *_ in first]
