@@ -19,8 +19,9 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+from . import bounded_json
 from .atlas import ALIGN, MAX_VIEW_PIXELS, MAX_VIEW_SIDE, AtlasLayout, check_view_size
-from .errors import MalformedMessage
+from .errors import JSONError, MalformedMessage
 from .pose import Pose
 
 DEPTH_CODECS = ("h264", "edge")
@@ -129,6 +130,10 @@ class SessionConfig:
         p = "Welcome.config"
         if not isinstance(o, dict):
             raise MalformedMessage(f"{p}: must be an object")
+        try:   # what is not validated field by field (scene info, options) is still finite and shallow
+            bounded_json.check_tree(o, what=p)
+        except JSONError as exc:
+            raise MalformedMessage(str(exc)) from None
         scene = o.get("scene")
         if not isinstance(scene, dict):
             raise MalformedMessage(f"{p}: field 'scene' must be an object")

@@ -83,15 +83,19 @@ def test_valid_configs_round_trip(codec, extra):
 
 
 @pytest.mark.parametrize("path, value, match", [
-    (("atlas", "width"), float("inf"), "atlas: field 'width' must be an integer"),
-    (("atlas", "height"), 10**400, "atlas size .* exceeds the limit"),
-    (("server_fps",), 10**400, "'server_fps' = 1000.* is outside"),
-    (("server_fps",), float("nan"), "'server_fps' = nan is outside"),
-    (("scene", "near"), float("inf"), "'near' = inf is outside"),
-    (("keyint",), 10**400, "'keyint' = 1000.* is outside"),
-    (("primary", "width"), 10**400, "'width' = 1000.* is outside"),
-    (("atlas", "rects", "primary.color"), [0, 0, float("inf"), 64], "must be 4 integers"),
-], ids=["atlas-inf", "atlas-huge", "fps-huge", "fps-nan", "near-inf", "keyint-huge", "width-huge", "rect-inf"])
+    (("atlas", "width"), float("inf"), "atlas.width: inf is not a finite number"),
+    (("atlas", "height"), 10**400, "atlas.height: an integer of more than 100 digits"),
+    (("server_fps",), 10**400, "server_fps: an integer of more than 100 digits"),
+    (("server_fps",), float("nan"), "server_fps: nan is not a finite number"),
+    (("scene", "near"), float("inf"), "scene.near: inf is not a finite number"),
+    (("keyint",), 10**400, "keyint: an integer of more than 100 digits"),
+    (("primary", "width"), 10**400, "primary.width: an integer of more than 100 digits"),
+    (("atlas", "rects", "primary.color"), [0, 0, float("inf"), 64], r"primary.color\[2\]: inf is not a finite"),
+    (("server_fps",), 10**99, "'server_fps' = 1000.* is outside"),
+    (("atlas", "width"), 64.0, "atlas: field 'width' must be an integer"),
+    (("atlas", "height"), 10**99, "atlas size .* exceeds the limit"),
+], ids=["atlas-inf", "atlas-huge", "fps-huge", "fps-nan", "near-inf", "keyint-huge", "width-huge", "rect-inf",
+        "fps-99-digits", "atlas-float", "atlas-99-digits"])
 def test_config_numbers_out_of_range_are_malformed(path, value, match):
     o = _config()
     node = o
@@ -100,6 +104,17 @@ def test_config_numbers_out_of_range_are_malformed(path, value, match):
     node[path[-1]] = value
     with pytest.raises(MalformedMessage, match=match):
         SessionConfig.from_json(o)
+
+
+def test_field_parsers_compare_before_converting():
+    from pibr.protocol.session import _num
+
+    with pytest.raises(MalformedMessage, match="'fps' = 1000.* is outside"):
+        _num({"fps": 10**400}, "fps", 0.1, 1000.0)      # float(10**400) raises OverflowError
+    with pytest.raises(MalformedMessage, match="'n' = <16610-bit integer> is outside"):
+        _num({"n": 10**5000}, "n", 1, 10, int)          # repr() refuses past 4300 digits
+    with pytest.raises(MalformedMessage, match="'width' must be an integer, got inf"):
+        AtlasLayout.from_json({"width": float("inf"), "height": 16, "rects": {}})
 
 
 @pytest.mark.parametrize("token", [b"NaN", b"Infinity", b"-Infinity", b"1e400"])
@@ -160,6 +175,19 @@ def test_edge_codec_bits_must_be_decodable():
     o = _config("edge")
     o["depth_bits"] = 8
     with pytest.raises(MalformedMessage, match="edge codec carries 10..16 bits"):
+        SessionConfig.from_json(o)
+
+
+@pytest.mark.parametrize("where, value, match", [
+    ("scene", {"bounds": [[0, float("nan"), 0], [1, 1, 1]]}, r"scene.bounds\[0\]\[1\]: nan is not a finite number"),
+    ("options", {"k": 10**400}, "options.k: an integer of more than 100 digits"),
+    ("proxies", {"deep": [[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[1]]]]]]]]]]]]]]]]]]]]]]]]]]]]]]]]]]}, "nested deeper than 32"),
+])
+def test_config_values_not_checked_field_by_field_are_still_bounded(where, value, match):
+    # a config built in code (not read by the bounded reader) gets the same checks
+    o = _config()
+    o[where] = {**(o.get(where) or {}), **value}
+    with pytest.raises(MalformedMessage, match=match):
         SessionConfig.from_json(o)
 
 
