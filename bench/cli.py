@@ -366,6 +366,25 @@ def register(sub) -> None:
     so.add_argument("--out", default="out/bench")
     so.set_defaults(func=cmd_bench_soak)
 
+    fz = bs.add_parser("fuzz", help="mutation fuzzing of every parser a peer or a file feeds: documented errors only",
+                       description="Mutates valid inputs (bytes, text, JSON and TOML structure) of the wire decoder, "
+                                   "the edge codec and quadtree decoders, the proxy bundle decoder, the head-trace "
+                                   "importers and the scene loader, runs each in a worker process with a per-input "
+                                   "deadline, and reports per parser the inputs, accepted inputs, documented errors "
+                                   "by class, undocumented exceptions and hangs (both must be 0: the exit status is "
+                                   "1 otherwise; failing inputs are saved), peak memory and inputs/s. Writes "
+                                   "fuzz.json.")
+    fz.add_argument("--inputs", type=_positive_int, default=100_000, help="inputs per parser (default 100000)")
+    fz.add_argument("--seed", type=_non_negative_int, default=0, help="mutation seed (default 0)")
+    fz.add_argument("--parsers", type=_names, default=None, metavar="NAME,...",
+                    help="wire, edge, quadtree, proxy, trace, scene (default: all)")
+    fz.add_argument("--timeout-s", type=_positive, default=10.0,
+                    help="an input running longer than this is a hang (default 10)")
+    fz.add_argument("--replay", default=None, metavar="FILE",
+                    help="run one saved input (OUT/fuzz_inputs/PARSER-KIND-INDEX.*) again and show what it raises")
+    fz.add_argument("--out", default="out/bench")
+    fz.set_defaults(func=cmd_bench_fuzz)
+
     o = bs.add_parser("optimize-offset", help="search the extra view's offset for the fewest holes",
                       description="Exhaustive (or coarse-to-fine) search over forward offset, height and tilt of "
                                   "the extra view, minimising the mean missing-pixel fraction over traces.")
@@ -422,6 +441,18 @@ def cmd_bench_soak(args) -> int:
     print_soak(r)
     print(f"written: {args.out}/soak.json")
     return 0 if r["passed"] else 1
+
+
+def cmd_bench_fuzz(args) -> int:
+    from .fuzz import print_fuzz_table, replay, run_fuzz_bench
+
+    if args.replay is not None:
+        return replay(args.replay)
+    r = run_fuzz_bench(parsers=args.parsers, inputs=args.inputs, seed=args.seed, timeout_s=args.timeout_s,
+                       out_dir=args.out)
+    print_fuzz_table(r)
+    print(f"written: {args.out}/fuzz.json")
+    return 0 if r["ok"] else 1
 
 
 def cmd_bench_split(args) -> int:

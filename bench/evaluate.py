@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import concurrent.futures
 import csv
-import json
 import logging
 import math
 import multiprocessing
@@ -28,7 +27,8 @@ from collections import deque
 
 import numpy as np
 
-from pibr.protocol.errors import ConfigError
+from pibr.protocol import bounded_json
+from pibr.protocol.errors import ConfigError, JSONError
 from pibr.protocol.pose import Pose
 
 from .metrics import error_image, frame_metrics, nearly_uniform, pixels_per_degree
@@ -44,13 +44,18 @@ def read_session(run_dir: str) -> dict:
     """The client's ``session.json`` in ``run_dir`` (a clear error when missing or broken)."""
     path = os.path.join(run_dir, "session.json")
     try:
-        with open(path) as f:
-            return json.load(f)
+        with open(path, "rb") as f:
+            data = f.read(bounded_json.MAX_TEXT_BYTES + 1)
     except FileNotFoundError:
         raise ConfigError(f"{run_dir} holds no client recording (no session.json); run 'pibr client --out DIR' first") \
             from None
-    except json.JSONDecodeError as exc:
-        raise ConfigError(f"{path} is not valid JSON: {exc}") from None
+    try:
+        info = bounded_json.loads(data, what=path)
+    except JSONError as exc:
+        raise ConfigError(f"{exc}; is it a client's session.json?") from None
+    if not isinstance(info, dict) or not isinstance(info.get("session"), dict):
+        raise ConfigError(f"{path}: not a client's session.json (no 'session' object)")
+    return info
 
 
 def _frames(path: str):

@@ -15,6 +15,14 @@ carries them. Layouts (W x H primary view, extra view at W/2 x H/2)::
 Depth rectangles hold the disparity code in luma (chroma 128); the packer writes luma
 directly, so no RGB conversion touches depth. Rectangle corners and sizes are multiples of
 16 so no H.264 macroblock straddles two rectangles.
+
+Size limits, the same for the server's settings and for a Welcome the client receives (a
+hostile server cannot make the client allocate more than the largest real session needs)::
+
+    view side       <= MAX_VIEW_SIDE (8192, the edge codec's and quadtree's limit)
+    view pixels     <= MAX_VIEW_PIXELS (4096 x 4096)
+    atlas side      <= MAX_ATLAS_SIDE (2.5 x 8192: primary colour + depth + the half-size extra view)
+    atlas pixels    <= MAX_ATLAS_PIXELS (2.5 x MAX_VIEW_PIXELS, the largest view's atlas)
 """
 from __future__ import annotations
 
@@ -24,6 +32,10 @@ from .errors import MalformedMessage
 
 ALIGN = 16
 RECT_NAMES = ("primary.color", "primary.depth", "extra.color", "extra.depth")
+MAX_VIEW_SIDE = 8192
+MAX_VIEW_PIXELS = 4096 * 4096
+MAX_ATLAS_SIDE = MAX_VIEW_SIDE * 5 // 2
+MAX_ATLAS_PIXELS = MAX_VIEW_PIXELS * 5 // 2
 
 
 @dataclass(frozen=True)
@@ -37,6 +49,9 @@ class AtlasLayout:
     def __post_init__(self):
         if self.width % ALIGN or self.height % ALIGN or self.width <= 0 or self.height <= 0:
             raise ValueError(f"atlas size must be positive multiples of {ALIGN}, got {self.width}x{self.height}")
+        if max(self.width, self.height) > MAX_ATLAS_SIDE or self.width * self.height > MAX_ATLAS_PIXELS:
+            raise ValueError(f"atlas size {self.width}x{self.height} exceeds the limit of {MAX_ATLAS_SIDE} per side "
+                             f"and {MAX_ATLAS_PIXELS} pixels")
         for name, r in self.rects.items():
             if name not in RECT_NAMES:
                 raise ValueError(f"unknown atlas rectangle {name!r}")
@@ -52,19 +67,42 @@ class AtlasLayout:
 
     @classmethod
     def from_json(cls, o) -> "AtlasLayout":
+        """Layout from its JSON form; MalformedMessage naming the field for anything but
+        integers that obey the limits above."""
+        p = "Welcome.config.atlas"
+        if not isinstance(o, dict) or not isinstance(o.get("rects"), dict):
+            raise MalformedMessage(f"{p}: must be an object with width, height and rects")
+        width, height = _integer(o, "width", p), _integer(o, "height", p)
+        rects = {}
+        for name, r in o["rects"].items():
+            if not (isinstance(r, list) and len(r) == 4 and all(_is_int(x) for x in r)):
+                raise MalformedMessage(f"{p}.rects.{name:.40}: must be 4 integers [x, y, w, h], got {r!r:.60}")
+            rects[name] = tuple(r)
         try:
-            rects = {str(k): tuple(int(x) for x in v) for k, v in o["rects"].items()}
-            if any(len(v) != 4 for v in rects.values()):
-                raise ValueError("an atlas rectangle needs 4 integers")
-            return cls(int(o["width"]), int(o["height"]), rects)
-        except (KeyError, TypeError, ValueError, AttributeError) as exc:
-            raise MalformedMessage(f"Welcome.config.atlas: {exc}") from None
+            return cls(width, height, rects)
+        except ValueError as exc:
+            raise MalformedMessage(f"{p}: {exc}") from None
+
+
+def _is_int(v) -> bool:
+    return isinstance(v, int) and not isinstance(v, bool)
+
+
+def _integer(o: dict, key: str, path: str) -> int:
+    v = o.get(key)
+    if not _is_int(v):
+        raise MalformedMessage(f"{path}: field {key!r} must be an integer, got {v!r:.60}")
+    return v
 
 
 def check_view_size(width: int, height: int, what: str = "view") -> None:
+    """ValueError unless ``width`` x ``height`` is a primary view size a session may have."""
     if width % (2 * ALIGN) or height % (2 * ALIGN) or width < 2 * ALIGN or height < 2 * ALIGN:
         raise ValueError(f"{what} size must be positive multiples of {2 * ALIGN} (so the extra view's half size "
                          f"stays aligned), got {width}x{height}")
+    if max(width, height) > MAX_VIEW_SIDE or width * height > MAX_VIEW_PIXELS:
+        raise ValueError(f"{what} size {width}x{height} exceeds the limit of {MAX_VIEW_SIDE} per side and "
+                         f"{MAX_VIEW_PIXELS} pixels ({int(MAX_VIEW_PIXELS ** 0.5)}x{int(MAX_VIEW_PIXELS ** 0.5)})")
 
 
 def build_layout(primary: tuple, extra: tuple | None, depth_in_atlas: bool) -> AtlasLayout:

@@ -13,6 +13,8 @@
     │   ├── UnexpectedMessage    a valid message at the wrong moment of the session
     │   └── AccessDenied         the Hello's token is missing or not the one configured
     ├── InvalidPose              NaN/inf components or a zero quaternion
+    ├── JSONError                a JSON text breaks the bounded reader's syntax or limits
+    │                            (protocol/bounded_json.py; callers turn it into their own error)
     ├── TraceError               a head-trace file or its columns do not parse (names the line)
     ├── SceneError               unknown scene, unreadable asset, bad scene description
     ├── CodecError               a video or edge-codec payload does not decode
@@ -72,6 +74,11 @@ class AccessDenied(ProtocolError):
 
 class InvalidPose(PibrError, ValueError):
     code = 9
+
+
+class JSONError(PibrError, ValueError):
+    """Not JSON, or JSON past a limit of :mod:`pibr.protocol.bounded_json`; the message names
+    the problem and where (a path such as ``objects[2].position`` or a line)."""
 
 
 class TraceError(PibrError, ValueError):

@@ -17,12 +17,15 @@ import struct
 from dataclasses import dataclass, field
 from typing import ClassVar
 
-from .errors import InvalidPose, MalformedMessage
+from . import bounded_json
+from .errors import InvalidPose, JSONError, MalformedMessage
 from .pose import Pose
 
 PROTOCOL_VERSION = 1
 CLOCKS = ("virtual", "real")
 MAX_TEXT = 4096
+#: Largest JSON body (Hello, Welcome, Stats, Bye); a real Welcome is a few kilobytes.
+MAX_JSON_BODY = 1 << 20
 #: Largest relative distance range a client may ask quadtree leaves to span (Hello.quadtree_threshold).
 MAX_QUADTREE_THRESHOLD = 10.0
 #: Longest access token a Hello may carry (see access.py).
@@ -44,10 +47,11 @@ class Message:
 # ---------------------------------------------------------------- JSON helpers
 
 def _load_json(name: str, payload: bytes) -> dict:
+    """The JSON object of a message body, read by :mod:`.bounded_json` (depth, number and size limits)."""
     try:
-        obj = json.loads(payload.decode("utf-8"))
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise MalformedMessage(f"{name}: payload is not UTF-8 JSON ({exc})") from None
+        obj = bounded_json.loads(payload, what=name, max_bytes=MAX_JSON_BODY)
+    except JSONError as exc:
+        raise MalformedMessage(str(exc)) from None
     if not isinstance(obj, dict):
         raise MalformedMessage(f"{name}: payload must be a JSON object, got {type(obj).__name__}")
     return obj
@@ -68,8 +72,13 @@ def _get(name: str, obj: dict, key: str, kind, default=_MISSING, lo=None, hi=Non
         return default
     v = obj[key]
     if kind is float:
-        ok = isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
-        v = float(v) if ok else v
+        ok = isinstance(v, (int, float)) and not isinstance(v, bool)
+        if ok:
+            try:
+                v = float(v)   # an integer past 1.8e308 raises OverflowError
+            except OverflowError:
+                raise MalformedMessage(f"{name}: field {key!r} is an integer too large for a float") from None
+            ok = math.isfinite(v)
     elif kind is int:
         ok = isinstance(v, int) and not isinstance(v, bool)
     elif kind is dict:

@@ -14,6 +14,9 @@ import numpy as np
 from .pose import quat_from_axis_angle, quat_to_matrix
 
 MOTION_KINDS = ("spin", "orbit", "swing", "slide")
+#: Largest magnitude of any motion value (metres, rad/s, rad): a motion evaluated at any
+#: time a session reaches stays finite (a proxy bundle's motion comes from the wire).
+MAX_MOTION_VALUE = 1e9
 
 
 @dataclass
@@ -41,16 +44,17 @@ class RigidMotion:
         if self.kind not in MOTION_KINDS:
             raise ValueError(f"unknown animation kind {self.kind!r}; choose from {', '.join(MOTION_KINDS)}")
         axis = np.asarray(self.axis, dtype=np.float64)
-        if axis.shape != (3,) or not np.all(np.isfinite(axis)) or np.linalg.norm(axis) < 1e-12:
-            raise ValueError("animation axis must be a finite non-zero 3-vector")
+        if axis.shape != (3,) or not np.all(np.abs(axis) <= MAX_MOTION_VALUE) or np.linalg.norm(axis) < 1e-12:
+            raise ValueError(f"animation axis must be a non-zero 3-vector of finite numbers within "
+                             f"±{MAX_MOTION_VALUE:g}")
         self.axis = tuple(float(x) for x in axis / np.linalg.norm(axis))
         pivot = np.asarray(self.pivot, dtype=np.float64)
-        if pivot.shape != (3,) or not np.all(np.isfinite(pivot)):
-            raise ValueError("animation pivot must be a finite 3-vector")
+        if pivot.shape != (3,) or not np.all(np.abs(pivot) <= MAX_MOTION_VALUE):
+            raise ValueError(f"animation pivot must be a 3-vector of finite numbers within ±{MAX_MOTION_VALUE:g}")
         self.pivot = tuple(float(x) for x in pivot)
         for name in ("speed", "radius", "amplitude", "phase"):
-            if not math.isfinite(float(getattr(self, name))):
-                raise ValueError(f"animation {name} must be finite")
+            if not abs(float(getattr(self, name))) <= MAX_MOTION_VALUE:   # NaN fails too
+                raise ValueError(f"animation {name} must be a finite number within ±{MAX_MOTION_VALUE:g}")
 
     def matrix(self, t: float) -> np.ndarray:
         """(4, 4) motion at time t seconds."""

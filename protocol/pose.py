@@ -32,7 +32,12 @@ def quat_normalize(q) -> np.ndarray:
     q = _as_quats(q)
     if not np.all(np.isfinite(q)):
         raise InvalidPose("quaternion has a NaN or infinite component")
-    n = np.linalg.norm(q, axis=-1, keepdims=True)
+    with np.errstate(over="ignore"):
+        n = np.linalg.norm(q, axis=-1, keepdims=True)
+    if not np.all(np.isfinite(n)):   # components near the float limit overflow the squared norm
+        big = np.max(np.abs(q), axis=-1, keepdims=True)
+        q = np.where(np.isfinite(n), q, q / big)
+        n = np.linalg.norm(q, axis=-1, keepdims=True)
     if np.any(n < MIN_QUAT_NORM):
         raise InvalidPose(f"quaternion norm below {MIN_QUAT_NORM}: a zero quaternion names no rotation")
     q = q / n

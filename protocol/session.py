@@ -19,11 +19,15 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-from .atlas import AtlasLayout
-from .errors import MalformedMessage
+from . import bounded_json
+from .atlas import ALIGN, MAX_VIEW_PIXELS, MAX_VIEW_SIDE, AtlasLayout, check_view_size
+from .errors import JSONError, MalformedMessage
 from .pose import Pose
 
 DEPTH_CODECS = ("h264", "edge")
+#: Clip spheres a session may announce, metres (scene descriptions obey the same ranges).
+NEAR_RANGE = (1e-9, 1e12)
+FAR_RANGE = (1e-9, 1e15)
 
 
 def _num(o, key, lo, hi, kind=float, path="Welcome.config"):
@@ -32,8 +36,10 @@ def _num(o, key, lo, hi, kind=float, path="Welcome.config"):
     v = o[key]
     if isinstance(v, bool) or not isinstance(v, (int, float)) or (kind is int and not isinstance(v, int)):
         raise MalformedMessage(f"{path}: field {key!r} must be a number, got {v!r:.60}")
-    if not math.isfinite(v) or not (lo <= v <= hi):
-        raise MalformedMessage(f"{path}: field {key!r} = {v} is outside [{lo}, {hi}]")
+    if not (lo <= v <= hi) or (isinstance(v, float) and not math.isfinite(v)):  # ints compare exactly, any size
+        huge = isinstance(v, int) and v.bit_length() > 14_000   # repr() refuses past 4300 digits
+        shown = f"<{v.bit_length()}-bit integer>" if huge else f"{v!r:.40}"
+        raise MalformedMessage(f"{path}: field {key!r} = {shown} is outside [{lo}, {hi}]")
     return kind(v)
 
 
@@ -49,7 +55,11 @@ class ViewConfig:
     def from_json(cls, o, path):
         if not isinstance(o, dict):
             raise MalformedMessage(f"{path}: must be an object")
-        return cls(_num(o, "width", 16, 8192, int, path), _num(o, "height", 16, 8192, int, path))
+        view = cls(_num(o, "width", 16, MAX_VIEW_SIDE, int, path), _num(o, "height", 16, MAX_VIEW_SIDE, int, path))
+        if view.width % ALIGN or view.height % ALIGN or view.width * view.height > MAX_VIEW_PIXELS:
+            raise MalformedMessage(f"{path}: view size {view.width}x{view.height} must be multiples of {ALIGN} of at "
+                                   f"most {MAX_VIEW_PIXELS} pixels")
+        return view
 
 
 @dataclass(frozen=True)
@@ -120,11 +130,15 @@ class SessionConfig:
         p = "Welcome.config"
         if not isinstance(o, dict):
             raise MalformedMessage(f"{p}: must be an object")
+        try:   # what is not validated field by field (scene info, options) is still finite and shallow
+            bounded_json.check_tree(o, what=p)
+        except JSONError as exc:
+            raise MalformedMessage(str(exc)) from None
         scene = o.get("scene")
         if not isinstance(scene, dict):
             raise MalformedMessage(f"{p}: field 'scene' must be an object")
-        near = _num(scene, "near", 1e-9, 1e12, path=p + ".scene")
-        far = _num(scene, "far", 1e-9, 1e15, path=p + ".scene")
+        near = _num(scene, "near", *NEAR_RANGE, path=p + ".scene")
+        far = _num(scene, "far", *FAR_RANGE, path=p + ".scene")
         if not near < far:
             raise MalformedMessage(f"{p}.scene: need near < far, got {near} and {far}")
         vo = scene.get("viewer_origin")
@@ -151,17 +165,62 @@ class SessionConfig:
         options = o.get("options", {})
         if not isinstance(options, dict):
             raise MalformedMessage(f"{p}: field 'options' must be an object")
+        primary = ViewConfig.from_json(o.get("primary"), p + ".primary")
+        try:
+            check_view_size(primary.width, primary.height, "primary view")
+        except ValueError as exc:
+            raise MalformedMessage(f"{p}.primary: {exc}") from None
+        if (extra is None) != (offset is None):
+            raise MalformedMessage(f"{p}: an extra view needs an extra_offset and an extra_offset an extra view")
+        atlas = AtlasLayout.from_json(o.get("atlas"))
+        _check_atlas_views(atlas, primary, extra, codec)
+        bits = _num(o, "depth_bits", 1, 16, int) if "depth_bits" in o else 8
+        min_code = _num(o, "depth_min_code", 1, 65534, int) if "depth_min_code" in o else 16
+        _check_depth_transport(near, far, bits, min_code, codec)
         return cls(
             scene=scene, clock=clock,
             server_fps=_num(o, "server_fps", 0.1, 1000.0),
             server_delay_us=_num(o, "server_delay_us", 0, 10_000_000, int),
-            primary=ViewConfig.from_json(o.get("primary"), p + ".primary"),
+            primary=primary,
             extra=extra, extra_offset=offset,
-            atlas=AtlasLayout.from_json(o.get("atlas")),
+            atlas=atlas,
             video_bitrate_kbps=_num(o, "video_bitrate_kbps", 1, 1e7),
             keyint=_num(o, "keyint", 1, 100000, int),
             depth_codec=codec,
-            depth_bits=_num(o, "depth_bits", 1, 16, int) if "depth_bits" in o else 8,
-            depth_min_code=_num(o, "depth_min_code", 1, 65534, int) if "depth_min_code" in o else 16,
+            depth_bits=bits,
+            depth_min_code=min_code,
             motion=bool(o.get("motion", False)), proxies=proxies, options=options,
         )
+
+
+def _check_depth_transport(near: float, far: float, bits: int, min_code: int, codec: str) -> None:
+    """The client builds its quantizer (and, for the edge codec, its decoder) from these."""
+    from .depth import DepthQuantizer
+
+    try:
+        DepthQuantizer(near, far, bits, min_code)
+    except ValueError as exc:
+        raise MalformedMessage(f"Welcome.config: depth quantization: {exc}") from None
+    if codec == "edge":
+        from .edgecodec.bitstream import MAX_BITS, MIN_BITS
+
+        if not MIN_BITS <= bits <= MAX_BITS:
+            raise MalformedMessage(f"Welcome.config: the edge codec carries {MIN_BITS}..{MAX_BITS} bits, "
+                                   f"depth_bits is {bits}")
+
+
+def _check_atlas_views(atlas: AtlasLayout, primary: ViewConfig, extra: ViewConfig | None, codec: str) -> None:
+    """The atlas holds exactly the rectangles the views and the depth transport need, each
+    of its view's size (as :func:`~pibr.protocol.atlas.build_layout` places them)."""
+    views = {"primary": primary, "extra": extra}
+    for name in ("primary.color", "primary.depth", "extra.color", "extra.depth"):
+        view = views[name.split(".")[0]]
+        wanted = view is not None and (name.endswith("color") or codec == "h264")
+        r = atlas.rect(name)
+        if wanted and r is None:
+            raise MalformedMessage(f"Welcome.config.atlas: rectangle {name} is missing")
+        if not wanted and r is not None:
+            raise MalformedMessage(f"Welcome.config.atlas: rectangle {name} has no view or depth to hold")
+        if r is not None and (r[2], r[3]) != (view.width, view.height):
+            raise MalformedMessage(f"Welcome.config.atlas: rectangle {name} is {r[2]}x{r[3]}, its view "
+                                   f"{view.width}x{view.height}")

@@ -29,6 +29,14 @@ CANONICAL_HEADER = ",".join(CANONICAL_COLUMNS)
 #: Header of the pred6dof / HoloLens recordings (Unity, left-handed, .NET ticks).
 PRED6DOF_COLUMNS = ("timestamp", "x", "y", "z", "qx", "qy", "qz", "qw")
 
+#: Limits on what a trace file controls (TraceError past them): a longer span or farther
+#: positions mean a wrong unit, not a head; integer timestamps (ticks, ns since an epoch) are
+#: 64-bit; resampling makes at most MAX_SAMPLES samples.
+MAX_DURATION_S = 1e6
+MAX_POSITION_M = 1e8
+MAX_SAMPLES = 10_000_000
+TIMESTAMP_RANGE = (-2**63, 2**63 - 1)
+
 #: A quaternion this close to unit length is kept bit for bit, so write -> read is exact.
 _UNIT_TOLERANCE = 1e-12
 #: How far from unit length a HeadTrace orientation may be (rounding of stored files).
@@ -90,6 +98,13 @@ class HeadTrace:
             i = int(np.flatnonzero(steps <= 0)[0]) + 1
             raise TraceError(f"{label}: t must be strictly increasing; sample {i} has t={t[i]!r} "
                              f"after t={t[i - 1]!r}")
+        if t[-1] > MAX_DURATION_S:
+            raise TraceError(f"{label}: spans {t[-1]:.6g} s, more than the limit of {MAX_DURATION_S:g} s "
+                             "(are the timestamps in the unit assumed?)")
+        far = np.flatnonzero(np.any(np.abs(p) > MAX_POSITION_M, axis=1))
+        if far.size:
+            raise TraceError(f"{label}: position {p[far[0]].tolist()} at sample {far[0]} is farther than "
+                             f"{MAX_POSITION_M:g} m from the origin on an axis (are the units metres?)")
         norms = np.linalg.norm(q, axis=1)
         off = np.flatnonzero(np.abs(norms - 1.0) > _UNIT_CHECK)
         if off.size:
@@ -172,7 +187,10 @@ class HeadTrace:
             raise TraceError(f"resample rate must be a positive number of Hz, got {rate_hz!r}")
         start, end = self.window(start, duration)
         # A hair of slack so that an end falling exactly on a tick is not lost to rounding.
-        count = int(math.floor((end - start) * rate_hz + 1e-9)) + 1
+        count = math.floor((end - start) * rate_hz + 1e-9) + 1
+        if count > MAX_SAMPLES:
+            raise TraceError(f"resampling {end - start:.6g} s at {rate_hz:g} Hz makes {count} samples, more than "
+                             f"the limit of {MAX_SAMPLES}")
         rel = np.arange(count, dtype=np.float64) / rate_hz
         pos, rot = self.sample(start + rel)
         return HeadTrace(rel, pos, rot, self.name, self.warnings, self.assumptions)
@@ -271,7 +289,8 @@ def unit_quaternions(q, name: str = "trace") -> np.ndarray:
         raise TraceError(f"head trace {name!r}: {exc}") from exc
     if q.ndim != 2:
         return normalised
-    keep = np.abs(np.linalg.norm(q, axis=1) - 1.0) <= _UNIT_TOLERANCE
+    with np.errstate(over="ignore"):   # huge components: not unit, and normalised above
+        keep = np.abs(np.linalg.norm(q, axis=1) - 1.0) <= _UNIT_TOLERANCE
     sign = np.where(np.sum(normalised * q, axis=1) < 0, -1.0, 1.0)
     return np.where(keep[:, None], q * sign[:, None], normalised)
 

@@ -30,13 +30,16 @@ import numpy as np
 
 from .errors import TraceError
 from .pose import quat_conjugate, quat_from_euler, quat_from_matrix, quat_multiply, quat_rotate
-from .trace import (PRED6DOF_COLUMNS, HeadTrace, check_quaternion, header_fields, iter_lines,
+from .trace import (PRED6DOF_COLUMNS, TIMESTAMP_RANGE, HeadTrace, check_quaternion, header_fields, iter_lines,
                     parse_number, row_error)
 
 log = logging.getLogger(__name__)
 
 #: Seconds per unit of each supported timestamp unit.
 TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9, "ticks": 1e-7}
+
+#: Largest 0-based column index ``--columns`` takes.
+MAX_COLUMN_INDEX = 100_000
 
 #: Gaps between samples longer than this are noted in the trace's warnings (tracking loss).
 GAP_WARNING_S = 0.1
@@ -373,7 +376,11 @@ def parse_columns(text: str) -> dict:
         key, value = key.strip(), value.strip()
         if not sep or not key or not value:
             raise TraceError(f"bad column mapping {item!r}: expected KEY=COLUMN, e.g. t=time or px=1")
-        out[key] = int(value) if value.isdigit() else value
+        if value.isascii() and value.isdigit():   # str.isdigit() also takes digits int() refuses ("²")
+            if len(value) > len(str(MAX_COLUMN_INDEX)) or int(value) > MAX_COLUMN_INDEX:
+                raise TraceError(f"bad column mapping {item[:40]!r}: a column index is at most {MAX_COLUMN_INDEX}")
+            value = int(value)
+        out[key] = value
     return out
 
 
@@ -425,7 +432,8 @@ def _expand_columns(columns: dict, rotation: str, quat_order: str, positions: st
                          "e.g. t=time,px=x,py=y,pz=z," +
                          ("qw=qw,qx=qx,qy=qy,qz=qz" if rotation == "quat" else "rx=pitch,ry=yaw,rz=roll"))
     for k, v in spec.items():
-        if isinstance(v, bool) or not isinstance(v, (int, str)) or (isinstance(v, int) and v < 0):
+        bad_index = isinstance(v, int) and not 0 <= v <= MAX_COLUMN_INDEX
+        if isinstance(v, bool) or not isinstance(v, (int, str)) or bad_index:
             raise TraceError(f"column for {k!r} must be a header name or a 0-based index, got {v!r}")
     return spec
 
@@ -454,11 +462,16 @@ def _column_label(key: str, spec: dict, header) -> str:
 
 
 def _parse_time(path, line: int, text: str):
-    """An int when the field is an integer literal (kept exact), else a finite float."""
+    """An int when the field is an integer literal (kept exact; 64-bit, as ticks and epoch
+    nanoseconds are), else a finite float."""
     try:
-        return int(text)
+        stamp = int(text)   # ValueError past 4300 digits too: then float() says it is infinite
     except ValueError:
         return parse_number(path, line, "t", text)
+    if not TIMESTAMP_RANGE[0] <= stamp <= TIMESTAMP_RANGE[1]:
+        raise row_error(path, line, f"column 't': integer timestamp {text[:30]!r}{'...' if len(text) > 30 else ''} "
+                                    "does not fit 64 bits")
+    return stamp
 
 
 def _gap_warnings(path, t: np.ndarray, lines: list[int]) -> list[str]:

@@ -79,6 +79,25 @@ A complete example (``courtyard.toml``)::
     # phase = 0.0
 
 The same structure works as JSON (``{"name": ..., "objects": [{...}, ...]}``).
+
+Limits: every size and number a description controls is bounded, and a description past a
+limit raises SceneError naming the key (the server then never builds a scene its clients
+would refuse, nor one that exhausts memory)::
+
+    file                      at most MAX_DESCRIPTION_BYTES (4 MiB)
+    nesting, number literals  as protocol/bounded_json.py: 32 levels, 100 characters, finite
+                              (TOML: the same checks on what tomllib parsed)
+    any number                |x| <= MAX_MAGNITUDE (1e9: metres, degrees, rad/s, factors)
+    positive numbers          >= MIN_POSITIVE (1e-9)
+    near, far                 a session's ranges: 1e-9 .. 1e12 and .. 1e15 m (protocol/session.py)
+    segments                  3 .. MAX_SEGMENTS (1024: a sphere of a million triangles)
+    objects                   at most MAX_OBJECTS (100,000, a proxy bundle's limit), counting
+                              the pieces assets are split into
+    triangles                 at most MAX_TRIANGLES (30 million) in all; primitives are counted
+                              before they are built
+    split                     0 or MIN_PIECE_TRIANGLES (64) .. 2**31 - 1 (scenes/loaders.py)
+    name, object names        at most MAX_NAME_CHARS (256) characters; description MAX_TEXT (4096)
+    lights                    at most MAX_LIGHTS (8)
 """
 from __future__ import annotations
 
@@ -88,12 +107,23 @@ from pathlib import Path
 
 import numpy as np
 
-from pibr.protocol.errors import InvalidPose, SceneError
+from pibr.protocol import bounded_json
+from pibr.protocol.errors import InvalidPose, JSONError, SceneError
+from pibr.protocol.messages import MAX_TEXT
 from pibr.protocol.pose import Pose, quat_from_axis_angle, quat_from_euler, quat_normalize, quat_to_matrix
+from pibr.protocol.proxy import MAX_OBJECTS
+from pibr.protocol.session import FAR_RANGE, NEAR_RANGE
 
 from .scene import Animation, Light, Material, Mesh, Scene, SceneObject
 
 DESCRIPTION_SUFFIXES = (".toml", ".json")
+MAX_DESCRIPTION_BYTES = 4 * 1024 * 1024
+MAX_MAGNITUDE = 1e9
+MIN_POSITIVE = 1e-9
+MAX_SEGMENTS = 1024
+MAX_TRIANGLES = 30_000_000
+MAX_NAME_CHARS = 256
+MAX_PATH_CHARS = 4096
 
 _TOP_KEYS = ("name", "description", "units", "up", "near", "far", "sky_color", "viewer_origin",
              "extra_view", "extra_view_offset", "view_region", "lights", "objects")
@@ -121,25 +151,40 @@ def is_description_path(path) -> bool:
 
 def load_description(path) -> Scene:
     """Read a ``.toml`` or ``.json`` scene description and build its :class:`Scene`."""
-    import tomllib
-
     path = Path(path).expanduser()
     suffix = path.suffix.lower()
     if suffix not in DESCRIPTION_SUFFIXES:
         raise SceneError(f"{path}: a scene description must be .toml or .json, got {suffix or 'no extension'!r}")
     try:
+        size = path.stat().st_size
+        if size > MAX_DESCRIPTION_BYTES:
+            raise SceneError(f"{path}: a scene description of {size} bytes exceeds the limit of "
+                             f"{MAX_DESCRIPTION_BYTES}")
         text = path.read_text(encoding="utf-8")
     except FileNotFoundError:
         raise SceneError(f"{path}: scene description does not exist") from None
     except (OSError, UnicodeDecodeError) as exc:
         raise SceneError(f"{path}: cannot read scene description: {exc}") from exc
+    return build_scene(parse_description(text, suffix, path), path)
+
+
+def parse_description(text: str, suffix: str, path) -> dict:
+    """The tree of a description's ``text`` (``suffix`` .toml or .json), within the limits of
+    :mod:`pibr.protocol.bounded_json`; SceneError naming ``path`` otherwise."""
+    import tomllib
+
     try:
-        data = tomllib.loads(text) if suffix == ".toml" else json.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise SceneError(f"{path}: invalid TOML: {exc}") from None
-    except json.JSONDecodeError as exc:
-        raise SceneError(f"{path}: invalid JSON: {exc}") from None
-    return build_scene(data, path)
+        if suffix == ".json":
+            return bounded_json.loads(text, what="invalid JSON", max_bytes=MAX_DESCRIPTION_BYTES)
+        bounded_json.check_toml_depth(text, what="invalid TOML")
+        try:
+            data = tomllib.loads(text)
+        except ValueError as exc:   # TOMLDecodeError, or int() refusing a literal of over 4300 digits
+            raise SceneError(f"{path}: invalid TOML: {exc}") from None
+        bounded_json.check_tree(data, what="invalid TOML")
+        return data
+    except JSONError as exc:
+        raise SceneError(f"{path}: {exc}") from None
 
 
 def build_scene(data, path) -> Scene:
@@ -168,34 +213,39 @@ class _Builder:
             self.fail(f"{prefix}{unknown[0]}", f"unknown key; allowed here: {', '.join(allowed)}")
         return value
 
-    def number(self, value, key: str, *, positive=False, minimum=None) -> float:
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+    def number(self, value, key: str, *, positive=False, minimum=None, maximum=MAX_MAGNITUDE) -> float:
+        """A finite number in [minimum (default -MAX_MAGNITUDE), maximum]; ``positive``: at least MIN_POSITIVE."""
+        if not _is_number(value):
             self.fail(key, f"expected a number, got {_show(value)}")
+        lo = MIN_POSITIVE if positive else (-MAX_MAGNITUDE if minimum is None else minimum)
         if positive and value <= 0:
-            self.fail(key, f"must be positive, got {value}")
-        if minimum is not None and value < minimum:
-            self.fail(key, f"must be at least {minimum}, got {value}")
+            self.fail(key, f"must be positive, got {_show(value)}")
+        if value < lo:
+            self.fail(key, f"must be at least {lo:g}, got {_show(value)}")
+        if value > maximum:   # compared before float(): an int of 400 digits does not fit one
+            self.fail(key, f"must be at most {maximum:g}, got {_show(value)}")
         return float(value)
 
-    def integer(self, value, key: str, minimum: int) -> int:
-        if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
-            self.fail(key, f"expected an integer >= {minimum}, got {_show(value)}")
+    def integer(self, value, key: str, minimum: int, maximum: int) -> int:
+        if isinstance(value, bool) or not isinstance(value, int) or not minimum <= value <= maximum:
+            self.fail(key, f"expected an integer in {minimum}..{maximum}, got {_show(value)}")
         return value
 
-    def vector(self, value, key: str, n, *, lo=None, hi=None) -> tuple:
+    def vector(self, value, key: str, n, *, lo=-MAX_MAGNITUDE, hi=MAX_MAGNITUDE) -> tuple:
         counts = (n,) if isinstance(n, int) else tuple(n)
         want = " or ".join(str(c) for c in counts)
-        ok = isinstance(value, (list, tuple)) and len(value) in counts and all(
-            not isinstance(x, bool) and isinstance(x, (int, float)) and math.isfinite(x) for x in value)
+        ok = isinstance(value, (list, tuple)) and len(value) in counts and all(_is_number(x) for x in value)
         if not ok:
             self.fail(key, f"expected {want} numbers, got {_show(value)}")
-        if (lo is not None and min(value) < lo) or (hi is not None and max(value) > hi):
-            self.fail(key, f"values must lie in [{lo}, {hi}], got {_show(value)}")
+        if min(value) < lo or max(value) > hi:
+            self.fail(key, f"values must lie in [{lo:g}, {hi:g}], got {_show(value)}")
         return tuple(float(x) for x in value)
 
-    def string(self, value, key: str) -> str:
+    def string(self, value, key: str, max_chars: int = MAX_NAME_CHARS) -> str:
         if not isinstance(value, str) or not value.strip():
             self.fail(key, f"expected a non-empty string, got {_show(value)}")
+        if len(value) > max_chars:
+            self.fail(key, f"at most {max_chars} characters, got {len(value)}")
         return value
 
     def boolean(self, value, key: str) -> bool:
@@ -218,9 +268,14 @@ class _Builder:
         return value
 
     def file(self, value, key: str) -> Path:
-        p = Path(self.string(value, key)).expanduser()
-        p = p if p.is_absolute() else self.base_dir / p
-        if not p.is_file():
+        text = self.string(value, key, MAX_PATH_CHARS)
+        try:
+            p = Path(text).expanduser()
+            p = p if p.is_absolute() else self.base_dir / p
+            found = p.is_file()
+        except (OSError, ValueError, RuntimeError) as exc:   # a NUL byte, a name too long, ~nobody
+            self.fail(key, f"not a usable file name: {exc}")
+        if not found:
             self.fail(key, f"file {str(p)!r} does not exist")
         return p
 
@@ -248,11 +303,14 @@ class _Builder:
         description = d.get("description", "")
         if not isinstance(description, str):
             self.fail("description", f"expected a string, got {_show(description)}")
+        if len(description) > MAX_TEXT:
+            self.fail("description", f"at most {MAX_TEXT} characters, got {len(description)}")
         self.default_units = self.units(d.get("units", "m"), "units")
         self.default_up = self.choice(d.get("up", "auto"), "up", ("y", "z", "auto"))
         self.notes = []
-        near = self.number(d.get("near", 0.1), "near", positive=True)
-        far = self.number(d.get("far", 1000.0), "far", positive=True)
+        self.triangles = 0
+        near = self.number(d.get("near", 0.1), "near", minimum=NEAR_RANGE[0], maximum=NEAR_RANGE[1])
+        far = self.number(d.get("far", 1000.0), "far", minimum=FAR_RANGE[0], maximum=FAR_RANGE[1])
         if far <= near:
             self.fail("far", f"must be greater than near ({near}), got {far}")
         sky = self.vector(d.get("sky_color", (0.62, 0.76, 0.92)), "sky_color", 3, lo=0.0, hi=1.0)
@@ -264,9 +322,13 @@ class _Builder:
         raw_objects = d.get("objects", [])
         if not isinstance(raw_objects, list):
             self.fail("objects", f"expected a list of tables, got {_show(raw_objects)}")
+        if len(raw_objects) > MAX_OBJECTS:
+            self.fail("objects", f"at most {MAX_OBJECTS} objects, got {len(raw_objects)}")
         used_names: dict[str, int] = {}
         for i, o in enumerate(raw_objects):
             objects.extend(self.object(o, i, used_names))
+            if len(objects) > MAX_OBJECTS:
+                self.fail(f"objects[{i}]", f"the scene has more than {MAX_OBJECTS} objects (asset pieces included)")
 
         kwargs = {}
         if "lights" in d:
@@ -380,8 +442,8 @@ class _Builder:
         scale = t.get("scale", 1.0)
         if isinstance(scale, (list, tuple)):
             scale = np.array(self.vector(scale, f"{key}.scale", 3))
-            if np.any(scale <= 0):
-                self.fail(f"{key}.scale", f"must be positive, got {_show(t['scale'])}")
+            if np.any(scale < MIN_POSITIVE):
+                self.fail(f"{key}.scale", f"must be positive (at least {MIN_POSITIVE:g}), got {_show(t['scale'])}")
         else:
             scale = np.full(3, self.number(scale, f"{key}.scale", positive=True))
         color = self.vector(t["color"], f"{key}.color", (3, 4), lo=0.0, hi=1.0) if "color" in t else None
@@ -402,6 +464,7 @@ class _Builder:
             return [SceneObject(name, mesh, material, placement, animation)]
 
         parts = self.asset(t, key, asset, name, scale)
+        self.count_triangles(f"{key}.asset", sum(p.mesh.triangle_count for p in parts))
         if texture is not None and all(p.mesh.uvs is None for p in parts):
             self.fail(f"{key}.texture", f"asset {asset.name!r} has no texture coordinates to map a texture with")
         objects = []
@@ -424,9 +487,13 @@ class _Builder:
         center = self.choice(t["center"], f"{key}.center", ("bounds", "base")) if "center" in t else None
         split = None
         if "split" in t:
+            from .loaders import MAX_PIECE_TRIANGLES, MIN_PIECE_TRIANGLES
+
             split = t["split"]
-            if isinstance(split, bool) or not isinstance(split, int) or split < 0:
-                self.fail(f"{key}.split", f"expected a whole number of triangles (0: none), got {_show(split)}")
+            if isinstance(split, bool) or not isinstance(split, int) or not (
+                    split == 0 or MIN_PIECE_TRIANGLES <= split <= MAX_PIECE_TRIANGLES):
+                self.fail(f"{key}.split", f"expected a whole number of triangles, 0 (none) or "
+                                          f"{MIN_PIECE_TRIANGLES}..{MAX_PIECE_TRIANGLES}, got {_show(split)}")
         try:
             return load_asset(path, up=up, units=units, fit_size=fit, center=center, scale=scale, name=name,
                               notes=self.notes, split=split)
@@ -439,12 +506,14 @@ class _Builder:
         if kind in ("box", "plane"):
             n = 3 if kind == "box" else 2
             size = np.array(self.vector(t.get("size", (1.0,) * n), f"{key}.size", n))
-            if np.any(size <= 0):
-                self.fail(f"{key}.size", f"must be positive, got {_show(t['size'])}")
+            if np.any(size < MIN_POSITIVE):
+                self.fail(f"{key}.size", f"must be positive (at least {MIN_POSITIVE:g}), got {_show(t['size'])}")
             mesh = box_mesh(size * scale) if kind == "box" else plane_mesh(size * scale[[0, 2]])
         else:
             radius = self.number(t.get("radius", 0.5), f"{key}.radius", positive=True)
-            segments = self.integer(t.get("segments", 32), f"{key}.segments", 3)
+            segments = self.integer(t.get("segments", 32), f"{key}.segments", 3, MAX_SEGMENTS)
+            rings = max(segments // 2, 2)
+            self.count_triangles(f"{key}.segments", segments * (2 * rings - 2) if kind == "sphere" else 4 * segments)
             if kind == "sphere":
                 mesh = sphere_mesh(radius, segments)
             else:
@@ -454,6 +523,11 @@ class _Builder:
         if uv_scale != 1.0:
             mesh = Mesh(mesh.vertices, mesh.faces, mesh.normals, mesh.uvs * uv_scale, mesh.colors)
         return mesh
+
+    def count_triangles(self, key: str, n: int) -> None:
+        self.triangles += n
+        if self.triangles > MAX_TRIANGLES:
+            self.fail(key, f"the scene would have more than {MAX_TRIANGLES} triangles")
 
     def animation(self, value, key: str, position: np.ndarray) -> Animation:
         t = self.table(value, key, _ANIMATION_KEYS)
@@ -474,8 +548,19 @@ class _Builder:
             self.fail(key, str(exc))
 
 
+def _is_number(value) -> bool:
+    """An int or a finite float (an int of any size: it is compared, never converted, first)."""
+    return (isinstance(value, int) and not isinstance(value, bool)) or (isinstance(value, float)
+                                                                        and math.isfinite(value))
+
+
 def _show(value) -> str:
-    text = json.dumps(value) if isinstance(value, (list, dict, str, int, float, bool)) else repr(value)
+    if isinstance(value, int) and not isinstance(value, bool) and value.bit_length() > 200:
+        return f"an integer of {value.bit_length()} bits"   # str() refuses past 4300 digits
+    try:
+        text = json.dumps(value) if isinstance(value, (list, dict, str, int, float, bool)) else repr(value)
+    except (ValueError, TypeError, RecursionError):   # not JSON (a TOML date, a huge int inside a list, ...)
+        text = f"a {type(value).__name__}"
     return text if len(text) <= 60 else text[:57] + "..."
 
 
@@ -541,16 +626,15 @@ def sphere_mesh(radius: float, segments: int = 32) -> Mesh:
     t, p = np.meshgrid(theta, phi, indexing="ij")
     n = np.stack([np.sin(t) * np.sin(p), np.cos(t), np.sin(t) * np.cos(p)], axis=-1).reshape(-1, 3)
     uv = np.stack([p / (2 * np.pi), 1 - t / np.pi], axis=-1).reshape(-1, 2)
-    faces = []
     cols = segments + 1
-    for i in range(rings):
-        for j in range(segments):
-            a, b, c, d = i * cols + j, i * cols + j + 1, (i + 1) * cols + j, (i + 1) * cols + j + 1
-            if i > 0:
-                faces.append((a, c, b))
-            if i < rings - 1:
-                faces.append((b, c, d))
-    f = np.array(faces)
+    i, j = np.meshgrid(np.arange(rings), np.arange(segments), indexing="ij")
+    a, c = i * cols + j, (i + 1) * cols + j
+    b, d = a + 1, c + 1
+    # Per quad (ring i, column j) the upper triangle (not at the north pole), then the lower
+    # (not at the south pole), in ring-major order.
+    quads = np.stack([np.stack([a, c, b], -1), np.stack([b, c, d], -1)], axis=2)   # (rings, segments, 2, 3)
+    keep = np.stack([i > 0, i < rings - 1], axis=2)
+    f = quads[keep]
     v = n * radius
     mesh = Mesh(v, _orient(v, f, n), n, uv)
     return _drop_unused(mesh)

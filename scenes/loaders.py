@@ -34,6 +34,9 @@ log = logging.getLogger(__name__)
 
 #: Longest texture side after loading; larger images are downscaled (aspect kept).
 MAX_TEXTURE_SIZE = 2048
+#: Range of ``split`` (triangles per piece; 0 keeps meshes whole): smaller pieces would turn one
+#: mesh into more objects than a scene (or a proxy bundle) may hold.
+MIN_PIECE_TRIANGLES, MAX_PIECE_TRIANGLES = 64, 2**31 - 1
 
 #: Metres per unit, for ``units=``.
 UNIT_SCALES = {
@@ -215,8 +218,10 @@ def load_asset(path, *, up: str = "auto", units=None, fit_size: float | None = N
     from .split import DEFAULT_PIECE_TRIANGLES, split_arrays
 
     split = DEFAULT_PIECE_TRIANGLES if split is None else split
-    if isinstance(split, bool) or not isinstance(split, int) or split < 0:
-        raise SceneError(f"{path}: split must be a whole number of triangles (0: none), got {split!r}")
+    if isinstance(split, bool) or not isinstance(split, int) or not (
+            split == 0 or MIN_PIECE_TRIANGLES <= split <= MAX_PIECE_TRIANGLES):
+        raise SceneError(f"{path}: split must be a whole number of triangles, 0 (none) or "
+                         f"{MIN_PIECE_TRIANGLES}..{MAX_PIECE_TRIANGLES}, got {split!r:.40}")
     objects = []
     layers = decal_layers(parts)
     if split:

@@ -24,7 +24,8 @@ from typing import Callable
 
 import numpy as np
 
-from pibr.protocol.errors import SceneError
+from pibr.protocol import bounded_json
+from pibr.protocol.errors import JSONError, SceneError
 
 from .lod import DEFAULT_MAX_ITERATIONS, LodResult, simplify_encaging
 from .scene import Mesh
@@ -102,8 +103,8 @@ def _decode(path: Path, key: str) -> LodResult:
     except (OSError, EOFError, KeyError, ValueError, zipfile.BadZipFile) as exc:
         raise ValueError(f"unreadable: {type(exc).__name__}: {exc}") from exc
     try:
-        meta = json.loads(arrays["meta"].tobytes().decode())
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        meta = bounded_json.loads(arrays["meta"].tobytes(), what="metadata")
+    except JSONError as exc:
         raise ValueError(f"bad metadata: {exc}") from exc
     if not isinstance(meta, dict) or meta.get("format") != FORMAT_VERSION or meta.get("key") != key:
         raise ValueError("metadata does not match the file name's key or format version")

@@ -105,3 +105,11 @@ def test_pose_array_round_trip_and_shape_errors():
     with pytest.raises(InvalidPose, match=r"shape \(3,\)"):
         Pose.make((1, 2))
     assert quat_multiply([1, 0, 0, 0], [0, 1, 0, 0]).tolist() == [0, 1, 0, 0]
+
+
+def test_normalise_survives_components_whose_squares_overflow():
+    q = quat_normalize([1.0, 0.0, 1e308, 0.0])
+    assert np.allclose(q, [0.0, 0.0, 1.0, 0.0]) and np.all(np.isfinite(q))
+    batch = quat_normalize([[1e308, 1e308, 0.0, 0.0], [0.0, 2.0, 0.0, 0.0]])
+    assert np.allclose(batch, [[np.sqrt(0.5), np.sqrt(0.5), 0, 0], [0, 1, 0, 0]])
+    assert Pose.make((0, 0, 0), (-1e308, 0, 0, 0)).orientation == (1.0, 0.0, 0.0, 0.0)

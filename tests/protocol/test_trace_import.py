@@ -210,3 +210,72 @@ def test_a_late_window_starts_at_the_viewer_origin_facing_its_way():
     assert placement(trace, 30.0, origin, "none") == Pose.identity()
     with pytest.raises(TraceError, match="unknown anchor"):
         placement(trace, 30.0, origin, "middle")
+
+
+# ---------------------------------------------------------------- issue 13, defect 15: numbers a trace file controls
+
+PRED_HEADER = "timestamp,x,y,z,qx,qy,qz,qw\n"
+
+
+@pytest.mark.parametrize("stamp", [str(2**63), str(-2**63 - 1), "9" * 401])
+def test_pred6dof_timestamps_past_64_bits_are_trace_errors(tmp_path, stamp):
+    path = write(tmp_path / "p.csv", PRED_HEADER + "0,0,0,0,0,0,0,1\n" + stamp + ",0,0,0,0,0,0,1\n")
+    with pytest.raises(TraceError, match=r"line 3: column 't': integer timestamp .* does not fit 64 bits"):
+        import_pred6dof(path)
+
+
+def test_csv_timestamps_past_64_bits_are_trace_errors(tmp_path):
+    path = write(tmp_path / "c.csv", "t,px,py,pz,qw,qx,qy,qz\n0,0,0,0,1,0,0,0\n" + "9" * 401 + ",0,0,0,1,0,0,0\n")
+    with pytest.raises(TraceError, match="line 3: column 't': integer timestamp '999"):
+        import_csv(path, {"t": "t", "p": 1, "q": 4})
+    path = write(tmp_path / "d.csv", "t,px,py,pz,qw,qx,qy,qz\n0,0,0,0,1,0,0,0\n" + "9" * 5000 + ",0,0,0,1,0,0,0\n")
+    with pytest.raises(TraceError, match="line 3: column 't' is infinite"):
+        import_csv(path, {"t": "t", "p": 1, "q": 4})
+
+
+def test_largest_64_bit_ticks_still_import(tmp_path):
+    start = 2**63 - 1 - 10_000_000
+    path = write(tmp_path / "p.csv", PRED_HEADER + f"{start},0,0,0,0,0,0,1\n{2**63 - 1},0,0,0,0,0,0,1\n")
+    assert import_pred6dof(path).duration == pytest.approx(1.0)
+
+
+@pytest.mark.parametrize("text, match", [
+    ("t=" + "1" * 5000, "a column index is at most 100000"),
+    ("t=100001", "a column index is at most 100000"),
+])
+def test_column_indices_are_bounded(text, match):
+    with pytest.raises(TraceError, match=match):
+        parse_columns(text)
+
+
+def test_unicode_digits_are_header_names_not_indices():
+    assert parse_columns("t=²,px=٣") == {"t": "²", "px": "٣"}   # str.isdigit() is true, int() refuses them
+    assert parse_columns("t=12") == {"t": 12}
+
+
+def test_columns_option_with_a_huge_index_is_a_trace_error_on_the_command_line(tmp_path, capsys):
+    path = write(tmp_path / "c.csv", "0 0 0 0 1 0 0 0\n1 0 0 0 1 0 0 0\n")
+    assert run_cli(["trace", "show", str(path), "--columns", "t=" + "1" * 5000 + ",p=1,q=4"]) == 2
+    assert "a column index is at most" in capsys.readouterr().err
+
+
+def test_span_positions_and_resampling_are_bounded(tmp_path):
+    from pibr.protocol.trace import MAX_DURATION_S, MAX_POSITION_M, MAX_SAMPLES, HeadTrace
+
+    ticks = int(MAX_DURATION_S * 1e7) + 10
+    path = write(tmp_path / "p.csv", PRED_HEADER + f"0,0,0,0,0,0,0,1\n{ticks},0,0,0,0,0,0,1\n")
+    with pytest.raises(TraceError, match="more than the limit of .* s .are the timestamps in the unit assumed"):
+        import_pred6dof(path)
+    path = write(tmp_path / "c.csv", f"t,px,py,pz,qw,qx,qy,qz\n0,0,0,{MAX_POSITION_M * 2},1,0,0,0\n")
+    with pytest.raises(TraceError, match="farther than"):
+        load_trace(path)
+    trace = HeadTrace(np.array([0.0, 1000.0]), np.zeros((2, 3)), np.tile([1.0, 0, 0, 0], (2, 1)))
+    with pytest.raises(TraceError, match=f"more than the limit of {MAX_SAMPLES}"):
+        trace.resample(1e5)
+    assert len(trace.resample(10.0)) == 10_001
+
+
+def test_huge_quaternion_components_normalise(tmp_path):
+    path = write(tmp_path / "c.csv", "t,px,py,pz,qw,qx,qy,qz\n0,0,0,0,1e300,0,1e300,0\n1,0,0,0,1,0,0,0\n")
+    trace = load_trace(path)
+    assert trace.orientations[0] == pytest.approx([math.sqrt(0.5), 0, math.sqrt(0.5), 0])

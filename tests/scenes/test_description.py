@@ -204,9 +204,9 @@ INVALID = [
     ('[[objects]]\nasset = "models/missing.obj"', "objects[0].asset: file"),
     ('[[objects]]\nbuiltin = "box"\nradius = 2', "objects[0].radius: unknown key; allowed here:"),
     ('[[objects]]\nbuiltin = "box"\nsize = [1, 0, 1]', "objects[0].size: must be positive"),
-    ('[[objects]]\nbuiltin = "sphere"\nsegments = 2', "objects[0].segments: expected an integer >= 3, got 2"),
+    ('[[objects]]\nbuiltin = "sphere"\nsegments = 2', "objects[0].segments: expected an integer in 3..1024, got 2"),
     ('[[objects]]\nbuiltin = "box"\nscale = -1', "objects[0].scale: must be positive, got -1"),
-    ('[[objects]]\nbuiltin = "box"\ncolor = [2, 0, 0]', "objects[0].color: values must lie in [0.0, 1.0]"),
+    ('[[objects]]\nbuiltin = "box"\ncolor = [2, 0, 0]', "objects[0].color: values must lie in [0, 1]"),
     ('[[objects]]\nbuiltin = "box"\nrotation_deg = [1, 2, 3]\nquaternion = [1, 0, 0, 0]',
      "objects[0].quaternion: give either quaternion or rotation_deg, not both"),
     ('[[objects]]\nbuiltin = "box"\ntexture = "nope.png"', "objects[0].texture: file"),
@@ -216,7 +216,7 @@ INVALID = [
      "objects[1].name: 'a' is already used by objects[0]"),
     ('[[objects]]\nbuiltin = "box"\n[objects.animation]\nkind = "wobble"', "objects[0].animation.kind: expected one of"),
     ('[[objects]]\nbuiltin = "box"\n[objects.animation]\nkind = "spin"\naxis = [0, 0, 0]',
-     "objects[0].animation: animation axis must be a finite non-zero 3-vector"),
+     "objects[0].animation: animation axis must be a non-zero 3-vector"),
     ('[[objects]]\nbuiltin = "box"\n[objects.animation]\nspeed = 1', "objects[0].animation.kind: required"),
     ('objects = 3', "objects: expected a list of tables, got 3"),
     ('name = "x"\nname2 = ', "invalid TOML"),
@@ -367,3 +367,109 @@ def test_module_docstring_example_is_valid(tmp_path):
     lo, hi = scene.objects[1].world_bounds()
     assert hi[1] - lo[1] == pytest.approx(2.0) and lo[1] == pytest.approx(0.0)  # fit_size, base, Z-up
     assert len(scene.lights) == 3 and scene.is_dynamic
+
+
+# ---------------------------------------------------------------- issue 13, defect 16: bounds on what a file controls
+
+HOSTILE = [
+    ("bad.json", '{"objects": ' + "[" * 100_000 + "]" * 100_000 + "}", "invalid JSON: nested deeper than 32 levels"),
+    ("bad.toml", "objects = " + "[" * 100_000 + "]" * 100_000, "invalid TOML: nested deeper than 32 levels"),
+    ("bad.toml", "near = {a = " * 3000 + "1" + "}" * 3000, "nested deeper than 32 levels"),
+    ("bad.json", '{"near": ' + "1" * 5000 + "}", "near: a number of 5000 characters"),
+    ("bad.toml", "near = " + "1" * 5000, "invalid TOML: "),
+    ("bad.toml", "near = " + "1" * 401, "near: an integer of more than 100 digits"),
+    ("bad.json", '{"near": 1' + "0" * 400 + "}", "near: a number of 401 characters"),
+    ("bad.toml", "near = 1e400", "near: inf is not a finite number"),
+    ("bad.toml", "far = nan", "far: nan is not a finite number"),
+    ("bad.json", '{"far": Infinity}', "far: Infinity is not a finite number"),
+    ("bad.toml", "near = 10000000000000000000000000", "near: must be at most 1e+12"),
+    ("bad.toml", "far = 1e300", "far: must be at most 1e+15"),
+    ("bad.toml", "near = 1e-300", "near: must be at least 1e-09"),
+    ("bad.toml", "[viewer_origin]\nposition = [0, 1, 0]\nquaternion = [1, 0, 1e308, 0]",
+     "viewer_origin.quaternion: values must lie in [-1e+09, 1e+09]"),
+    ("bad.toml", "[[objects]]\nbuiltin = \"sphere\"\nsegments = 1000000",
+     "objects[0].segments: expected an integer in 3..1024"),
+    ("bad.toml", "[[objects]]\nbuiltin = \"cylinder\"\nsegments = 9223372036854775808",
+     "objects[0].segments: expected an integer in 3..1024"),
+    ("bad.toml", "[[objects]]\nbuiltin = \"box\"\nposition = [1e300, 0, 0]", "objects[0].position: values must lie in"),
+    ("bad.toml", "[[objects]]\nbuiltin = \"box\"\nscale = 1e-300", "objects[0].scale: must be at least 1e-09"),
+    ("bad.toml", "[[objects]]\nbuiltin = \"box\"\nsize = [1, 1e-300, 1]", "objects[0].size: must be positive"),
+    ("bad.toml", "[[objects]]\nbuiltin = \"box\"\n[objects.animation]\nkind = \"spin\"\nspeed = 1e300",
+     "objects[0].animation.speed: must be at most 1e+09"),
+    ("bad.toml", "[[lights]]\nkind = \"point\"\nposition = [0, 0, 0]\nintensity = 1e30",
+     "lights[0].intensity: must be at most 1e+09"),
+    ("bad.toml", "[[objects]]\nasset = \"models/tower.obj\"\nsplit = 1", "objects[0].split: expected a whole number"),
+    ("bad.toml", "[[objects]]\nasset = \"models/tower.obj\"\nsplit = 9223372036854775808", "objects[0].split"),
+    ("bad.toml", '[[objects]]\nbuiltin = "box"\ntexture = "a\\u0000b"', "objects[0].texture: file"),
+    ("bad.toml", f'[[objects]]\nbuiltin = "box"\ntexture = "{"x" * 5000}"', "objects[0].texture: at most 4096"),
+    ("bad.toml", f'name = "{"n" * 300}"', "name: at most 256 characters, got 300"),
+    ("bad.toml", f'description = "{"d" * 5000}"', "description: at most 4096 characters, got 5000"),
+    ("bad.toml", f'[[objects]]\nname = "{"o" * 300}"\nbuiltin = "box"', "objects[0].name: at most 256 characters"),
+]
+
+
+@pytest.mark.parametrize("name, text, message", HOSTILE, ids=[m.split(":")[0][:40] for _, _, m in HOSTILE])
+def test_hostile_descriptions_raise_scene_error_naming_the_problem(assets, name, text, message):
+    path = assets / name
+    path.write_text(text)
+    with pytest.raises(SceneError) as info:
+        load_description(path)
+    assert str(info.value).startswith(f"{path}: ")
+    assert message in str(info.value)
+
+
+def test_object_count_and_triangle_budget(assets, monkeypatch):
+    from pibr.scenes import description
+
+    path = assets / "many.toml"
+    path.write_text('[[objects]]\nbuiltin = "box"\n' * 3)
+    monkeypatch.setattr(description, "MAX_OBJECTS", 2)
+    with pytest.raises(SceneError, match="objects: at most 2 objects, got 3"):
+        load_description(path)
+    monkeypatch.setattr(description, "MAX_OBJECTS", 100)
+    path.write_text('[[objects]]\nbuiltin = "sphere"\nsegments = 1024\n' * 2)
+    monkeypatch.setattr(description, "MAX_TRIANGLES", 1_500_000)   # one sphere of 1024 segments fits, two do not
+    with pytest.raises(SceneError, match=r"objects\[1\].segments: the scene would have more than 1500000 triangles"):
+        load_description(path)
+
+
+def test_largest_sphere_builds_quickly(assets):
+    from pibr.scenes.description import MAX_SEGMENTS, sphere_mesh
+
+    mesh = sphere_mesh(1.0, MAX_SEGMENTS)
+    rings = MAX_SEGMENTS // 2
+    assert len(mesh.faces) == MAX_SEGMENTS * (2 * rings - 2)
+
+
+@pytest.mark.parametrize("segments", [3, 4, 7, 32])
+def test_sphere_faces_keep_their_order(segments):
+    """The vectorised UV sphere makes exactly the triangles, in the order, of the loop it replaced."""
+    from pibr.scenes.description import _drop_unused, _orient, sphere_mesh
+
+    rings = max(segments // 2, 2)
+    theta, phi = np.linspace(0, np.pi, rings + 1), np.linspace(0, 2 * np.pi, segments + 1)
+    t, p = np.meshgrid(theta, phi, indexing="ij")
+    n = np.stack([np.sin(t) * np.sin(p), np.cos(t), np.sin(t) * np.cos(p)], axis=-1).reshape(-1, 3)
+    uv = np.stack([p / (2 * np.pi), 1 - t / np.pi], axis=-1).reshape(-1, 2)
+    faces, cols = [], segments + 1
+    for i in range(rings):
+        for j in range(segments):
+            a, b, c, d = i * cols + j, i * cols + j + 1, (i + 1) * cols + j, (i + 1) * cols + j + 1
+            if i > 0:
+                faces.append((a, c, b))
+            if i < rings - 1:
+                faces.append((b, c, d))
+    f = np.array(faces)
+    reference = _drop_unused(Mesh(n * 0.7, _orient(n * 0.7, f, n), n, uv))
+    mesh = sphere_mesh(0.7, segments)
+    assert np.array_equal(mesh.faces, reference.faces) and np.array_equal(mesh.vertices, reference.vertices)
+
+
+def test_limits_are_documented():
+    from pibr.scenes import description
+
+    doc = description.__doc__
+    for name in ("MAX_DESCRIPTION_BYTES", "MAX_MAGNITUDE", "MIN_POSITIVE", "MAX_SEGMENTS", "MAX_OBJECTS",
+                 "MAX_TRIANGLES", "MIN_PIECE_TRIANGLES", "MAX_NAME_CHARS", "MAX_LIGHTS"):
+        assert name in doc, name
+    assert f"3 .. MAX_SEGMENTS ({description.MAX_SEGMENTS}:" in doc

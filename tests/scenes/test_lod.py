@@ -313,3 +313,17 @@ def test_lod_bench_writes_json_and_table(tmp_path, capsys, cache_dir):
     print_lod_table(result)
     out = capsys.readouterr().out
     assert "spot_triangulated" in out and "total" in out
+
+
+def test_cache_metadata_is_read_with_the_bounded_reader(tmp_path):
+    """A cache file whose metadata nests deeply is damage (ValueError), not a RecursionError."""
+    faces = np.zeros((1, 3), np.int64)
+    verts = np.zeros((3, 3))
+    for meta, problem in ((b"[" * 100_000 + b"]" * 100_000, "nested deeper than 32 levels"),
+                          (b'{"enclosed_fraction": NaN}', "NaN is not a finite number"),
+                          (b'{"iterations": ' + b"9" * 5000 + b"}", "a number of 5000 characters")):
+        path = tmp_path / "entry.npz"
+        np.savez(path, proxy_vertices=verts, proxy_faces=faces, box_vertices=verts, box_faces=faces,
+                 meta=np.frombuffer(meta, np.uint8))
+        with pytest.raises(ValueError, match=f"bad metadata: metadata: .*{problem}"):
+            lod_cache._decode(path, "key")
