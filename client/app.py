@@ -311,12 +311,12 @@ class Client:
 
     async def _receive_proxies(self, t_welcome: float) -> None:
         """The proxy bundle follows the Welcome: collect, decompress and parse it (off the loop)."""
-        from pibr.protocol.proxy import BundleAssembler, decode_bundle, decompress_bundle
+        from pibr.protocol.proxy import BundleAssembler, BundleInfo, decode_bundle, decompress_bundle
 
-        info = self.session.proxies
-        if not info:
+        if not self.session.proxies:
             raise UnexpectedMessage("asked for proxies, but the server's Welcome announces none")
-        assembler = BundleAssembler()
+        info = BundleInfo.from_json(self.session.proxies)
+        assembler = BundleAssembler(info)
         while not assembler.complete:
             env = await self.conn.recv(timeout=600)
             if not isinstance(env.message, ProxyChunk):
@@ -325,7 +325,8 @@ class Client:
         t_received = time.monotonic()
         data = assembler.data()
         loop = asyncio.get_running_loop()
-        self.proxies = await loop.run_in_executor(None, lambda: decode_bundle(decompress_bundle(data)))
+        self.proxies = await loop.run_in_executor(
+            None, lambda: decode_bundle(decompress_bundle(data, info.raw_bytes, info.objects)))
         self.proxy_stats = {"bytes": len(data), "chunks": assembler.count, "objects": len(self.proxies),
                             "transfer_ms": (t_received - t_welcome) * 1e3,
                             "decode_ms": (time.monotonic() - t_received) * 1e3}
