@@ -31,7 +31,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from pibr.protocol.errors import ConfigError, UnexpectedMessage
+from pibr.protocol.errors import ConfigError, MalformedMessage, UnexpectedMessage
 from pibr.protocol.gl import GLThread
 from pibr.protocol.messages import (FRAMES_DECODED, Clock, Frame, Hello, OutputConfig, PayloadKind, PoseMsg,
                                     ProxyChunk, Stats)
@@ -72,6 +72,7 @@ class ClientConfig:
     lossless: bool = True
     video: bool = True       # False: records only (no MP4 / lossless copy), the least work per tick
     warmup_s: float = 60.0   # real clock: longest wait for the first frame before the clock starts
+    receive_timeout_s: float = 30.0  # longest silence from the server while waiting for it
     progress: str = "bar"    # bar, lines (machine-readable on stdout), none
     tau: float = 0.1         # proxy IBR: relative depth error accepted as the same surface
     lod_pixels: float = 6.0  # proxy IBR: on-screen edge length that selects an object's LoD
@@ -98,6 +99,8 @@ class ClientConfig:
 
         if self.anchor not in ANCHORS:
             raise ConfigError(f"anchor must be one of {', '.join(ANCHORS)}, got {self.anchor!r}")
+        if not (0 < self.receive_timeout_s <= 86400):
+            raise ConfigError(f"receive timeout must be in (0, 86400] s, got {self.receive_timeout_s}")
         if self.preroll_s < 0:
             raise ConfigError("preroll must be >= 0")
         if not (0 < self.tau < 10):
@@ -115,6 +118,23 @@ class ClientConfig:
             check_token_text(self.token)
         if not (16 <= self.width <= 8192 and 16 <= self.height <= 8192 and 1 <= self.fov_deg <= 170):
             raise ConfigError(f"output {self.width}x{self.height} at {self.fov_deg} degrees is out of range")
+
+
+def _check_atlas(session) -> None:
+    """Before anything is allocated at the atlas's size: it must be the protocol's layout of the
+    announced views (protocol.atlas.build_layout), so a Welcome cannot make it bigger than they need."""
+    from pibr.protocol.atlas import build_layout
+
+    extra = None if session.extra is None else (session.extra.width, session.extra.height)
+    try:
+        expected = build_layout((session.primary.width, session.primary.height), extra,
+                                depth_in_atlas=session.depth_codec == "h264")
+    except ValueError as exc:
+        raise MalformedMessage(f"Welcome.config: the views have no atlas layout ({exc})") from None
+    if session.atlas != expected:
+        raise MalformedMessage(f"Welcome.config.atlas: {session.atlas.width}x{session.atlas.height} with "
+                               f"{session.atlas.rects} is not the layout of its views ({expected.width}x"
+                               f"{expected.height} with {expected.rects})")
 
 
 @dataclass
@@ -251,7 +271,8 @@ class Client:
         cfg = self.cfg
         trace, self._duration = self._trace_poses()
         loop = asyncio.get_running_loop()
-        self.conn = await ClientConnection.open(cfg.host, cfg.port, tls=cfg.tls)
+        self.conn = await ClientConnection.open(cfg.host, cfg.port, tls=cfg.tls,
+                                                receive_timeout_s=cfg.receive_timeout_s)
         t_hello = time.monotonic()
         hello = Hello(client="pibr-client/0.1", scene=cfg.scene, clock=cfg.clock,
                       output=OutputConfig(cfg.width, cfg.height, cfg.fov_deg, cfg.rate_hz),
@@ -263,6 +284,7 @@ class Client:
             handshake_ms = (t_welcome - t_hello) * 1e3
             if self.session.clock != cfg.clock:
                 raise UnexpectedMessage(f"server runs the {self.session.clock} clock, we asked for {cfg.clock}")
+            _check_atlas(self.session)
             if hello.want_proxies:
                 await self._receive_proxies(t_welcome)
             self._decoder = H264Decoder(self.session.atlas.width, self.session.atlas.height)
@@ -318,7 +340,7 @@ class Client:
         info = BundleInfo.from_json(self.session.proxies)
         assembler = BundleAssembler(info)
         while not assembler.complete:
-            env = await self.conn.recv(timeout=600)
+            env = await self.conn.recv()
             if not isinstance(env.message, ProxyChunk):
                 raise UnexpectedMessage(f"expected ProxyChunk, got {env.message.NAME}")
             assembler.add(env.message)
