@@ -32,8 +32,6 @@ from .quadtree import quadtree_payload
 log = logging.getLogger(__name__)
 
 READ_CHUNK = 1 << 16
-#: Real clock: skip rendering while this many bytes still wait for a slow client.
-SLOW_CLIENT_BACKLOG = 2 * 1024 * 1024
 
 
 class SessionClosed(Exception):
@@ -60,6 +58,8 @@ class Session:
         self._accepted = asyncio.get_running_loop().time()
         self._hello_deadline: asyncio.Timeout | None = None
         self._evicted_among = 0                     # > 0: dropped as the oldest of this many pending
+        self._unsent_since: float | None = None     # real clock: since when a frame waits to leave
+        self._unsent_bytes = 0
 
     # ------------------------------------------------------------------ I/O
 
@@ -299,6 +299,21 @@ class Session:
         decoded = self.client_stats.get(FRAMES_DECODED)
         return decoded is not None and self.frames_sent - decoded >= self.server.config.max_in_flight
 
+    def _previous_frame_unsent(self, now: float) -> bool:
+        """Real clock: part of the last frame still waits in our buffer for a slow connection. A
+        new frame now would queue behind it and be stale when it arrives; the next tick renders
+        the newest pose instead, so a slow reader gets the newest frame, not a backlog. Raises
+        PeerTimeout when the client has read nothing for the idle timeout."""
+        unsent = self.writer.transport.get_write_buffer_size()
+        if not unsent:
+            self._unsent_since = None
+            return False
+        if self._unsent_since is None or unsent < self._unsent_bytes:   # still draining
+            self._unsent_since, self._unsent_bytes = now, unsent
+        elif now - self._unsent_since > self.idle_timeout_s:
+            raise PeerTimeout(f"the client read nothing for {self.idle_timeout_s:g} s")
+        return True
+
     async def _run_real(self) -> None:
         """Wall clock: render at the server's own rate with the newest pose received."""
         interval = 1.0 / self.config.server_fps
@@ -317,7 +332,7 @@ class Session:
                     receiver.result()  # re-raises the receiver's error, or SessionClosed
                     return
                 if newest[0] is not None:
-                    if self.writer.transport.get_write_buffer_size() > SLOW_CLIENT_BACKLOG:
+                    if self._previous_frame_unsent(loop.time()):
                         self.frames_skipped += 1
                     elif self._client_behind():
                         self.frames_held += 1
