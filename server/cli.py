@@ -120,11 +120,12 @@ def register(sub) -> None:
                    help="connections still to send their Hello; beyond N the oldest is dropped (default 64)")
     p.add_argument("--hello-timeout-s", type=float, default=10.0, metavar="S",
                    help="a connection must send its whole Hello within S seconds (default 10)")
-    p.add_argument("--idle-timeout-s", type=float, default=30.0, metavar="S",
+    p.add_argument("--idle-timeout-s", type=float, default=15.0, metavar="S",
                    help="real clock: close a session whose client sends no pose for S seconds, or reads nothing "
-                        "for as long (default 30)")
-    p.add_argument("--idle-timeout-virtual-s", type=float, default=60.0, metavar="S",
-                   help="virtual clock: the same; longer because a client may work long on each tick (default 60)")
+                        "for as long (default 15; a client sends a pose every output tick)")
+    p.add_argument("--idle-timeout-virtual-s", type=float, default=30.0, metavar="S",
+                   help="virtual clock: the same; longer because a client may work long on each tick (default 30; "
+                        "the longest wait measured, every method at 960x540 on a loaded 2-core machine, was 5.4 s)")
     p.add_argument("--max-clock-lead-s", type=float, default=10.0, metavar="S",
                    help="virtual clock: a client's clock may run at most S seconds (plus one frame interval and "
                         "the server delay) ahead of the next frame (default 10)")

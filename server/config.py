@@ -47,8 +47,8 @@ class ServerConfig:
     max_sessions: int = 8               # sessions past their Hello
     max_pending: int = 64               # connections yet to send a Hello; beyond, the oldest is dropped
     hello_timeout_s: float = 10.0       # from connecting to a whole Hello
-    idle_timeout_s: float = 30.0        # real clock: longest wait for the client's next pose or clock
-    idle_timeout_virtual_s: float = 60.0  # virtual clock: the same (a client may work long per tick)
+    idle_timeout_s: float = 15.0        # real clock: longest wait for the client's next pose or clock
+    idle_timeout_virtual_s: float = 30.0  # virtual clock: the same (a client may work long per tick)
     max_clock_lead_s: float = 10.0      # virtual clock: how far a client's clock may run ahead of the frames
     max_in_flight: int = 3              # real clock: frames sent ahead of what the client has decoded
     token: str | None = None            # every Hello must carry it; required to listen off loopback
