@@ -124,13 +124,20 @@ class Server(TrackedListener):
     async def get_scene(self, spec: str):
         """The scene ``spec`` names, loaded once per server. Each scene loads on its own: a session
         for a loaded scene never waits on another scene's load."""
-        from pibr.scenes.registry import available_scenes, load_scene
+        from pibr.scenes.registry import load_scene
+
+        spec = self.check_scene(spec)
+        return await self._once(self._scenes, spec, load_scene, spec)
+
+    def check_scene(self, spec: str) -> str:
+        """The scene a Hello's ``spec`` names (empty: the default); SceneError if not served here."""
+        from pibr.scenes.registry import available_scenes
 
         spec = spec or self.config.scene
         allowed = set(available_scenes()) | {self.config.scene}
         if spec not in allowed:
             raise SceneError(f"scene {spec!r} is not served here; available: {', '.join(sorted(allowed))}")
-        return await self._once(self._scenes, spec, load_scene, spec)
+        return spec
 
     @staticmethod
     async def _once(cache: dict, key, fn, *args):

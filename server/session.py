@@ -115,6 +115,7 @@ class Session:
         log.info("session %d: connection from %s", self.id, self.peer)
         try:
             hello = await self._receive_hello()
+            self.server.check_scene(hello.scene)   # a Hello the server cannot serve takes no slot
             self.server.admit(self)
             await self._set_up(hello)
             if hello.clock == "virtual":

@@ -135,6 +135,9 @@ async def test_idle_connections_before_hello_take_no_slot():
         with pytest.raises(RemoteError, match="server full: 1 sessions already") as err:
             await _welcomed(host, port, timeout=10.0)
         assert err.value.code == ConfigError.code
+        # A Hello the server cannot serve is told so, full or not: it never takes a slot.
+        with pytest.raises(RemoteError, match="scene 'atlantis' is not served here"):
+            await _welcomed(host, port, Hello(scene="atlantis"), timeout=10.0)
         await served.close()
     finally:
         for _, writer in idle:
