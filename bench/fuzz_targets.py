@@ -206,6 +206,7 @@ def _session_configs() -> list[dict]:
     """Welcome configs as the server plans them: the room scene with the h264 atlas and an
     extra view, the edge codec with motion and a quadtree, a single-view session."""
     from pibr.protocol.messages import Hello
+    from pibr.protocol.proxy import BundleInfo
     from pibr.scenes.registry import load_scene
     from pibr.server.config import ServerConfig
     from pibr.server.session_plan import plan_session
@@ -216,7 +217,7 @@ def _session_configs() -> list[dict]:
                        (ServerConfig(view_size=(96, 64), extra_view="on", depth_codec="edge"),
                         Hello(depth_codec="edge", quadtree_threshold=0.1)),
                        (ServerConfig(view_size=(64, 32), extra_view="off"), Hello(clock="real"))):
-        config, _ = plan_session(cfg, sphere, hello, {"count": 1, "bytes": 1000})
+        config, _ = plan_session(cfg, sphere, hello, BundleInfo(1, 1000, 2000, 1024, {"proxy": 12}).to_json())
         out.append(config.to_json())
     return out
 
@@ -369,8 +370,8 @@ def _quadtree_fields(body: bytes) -> tuple:
 
 # ============================================================================ proxy bundle
 
-#: The decompressed size a session announces for the fuzzed bundles (the client's ceiling).
-_PROXY_LIMIT = 1 << 20
+#: The chunk size of the fuzzed bundles' ProxyChunk seeds.
+_PROXY_CHUNK_BYTES = 4096
 
 
 class ProxyTarget(Target):
@@ -384,7 +385,7 @@ class ProxyTarget(Target):
     def build(self) -> None:
         from pibr.protocol.framing import encode_frame
         from pibr.protocol.messages import ProxyChunk
-        from pibr.protocol.proxy import ProxyObject, compress_bundle, encode_bundle, split_chunks
+        from pibr.protocol.proxy import BundleInfo, ProxyObject, compress_bundle, encode_bundle, split_chunks
         from pibr.scenes.description import box_mesh
         from pibr.scenes.lod import simplify_encaging
         from pibr.scenes.registry import load_scene
@@ -405,10 +406,13 @@ class ProxyTarget(Target):
         raw = encode_bundle(objects)
         packed = compress_bundle(raw)
         chunked = b"".join(encode_frame(ProxyChunk.TYPE, ProxyChunk(i, n, len(packed), p).serialize())
-                           for parts in [split_chunks(packed, 4096)] for n in [len(parts)]
+                           for parts in [split_chunks(packed, _PROXY_CHUNK_BYTES)] for n in [len(parts)]
                            for i, p in enumerate(parts))
+        # What a Welcome announced for each kind of input: the client assembles and inflates within it.
+        self.announced = {"zstd": (len(raw), len(objects)), "zstd-small": (len(small), len(objects) - 1),
+                          "chunks": BundleInfo(len(objects), len(packed), len(raw), _PROXY_CHUNK_BYTES, {})}
         self.seeds = [Seed("raw", raw, fields=_bundle_fields(raw)), Seed("raw", small, fields=_bundle_fields(small)),
-                      Seed("zstd", packed), Seed("zstd", compress_bundle(small)),
+                      Seed("zstd", packed), Seed("zstd-small", compress_bundle(small)),
                       Seed("chunks", chunked, fields=_chunk_fields(chunked))]
 
     def run(self, kind, data) -> None:
@@ -417,18 +421,19 @@ class ProxyTarget(Target):
         from pibr.protocol.proxy import BundleAssembler, decode_bundle, decompress_bundle
 
         if kind == "chunks":
+            info = self.announced["chunks"]
             conn = Connection()
             conn.receive_data(data)
             conn.receive_eof()
-            assembler = BundleAssembler()
+            assembler = BundleAssembler(info)
             for env in conn.events_received():
                 if isinstance(env.message, ProxyChunk) and not assembler.complete:
                     assembler.add(env.message)
             if conn.error is not None:
                 raise conn.error
-            data = assembler.data()
-        if kind != "raw":
-            data = decompress_bundle(data, max_size=_PROXY_LIMIT)
+            data = decompress_bundle(assembler.data(), info.raw_bytes, info.objects)
+        elif kind != "raw":
+            data = decompress_bundle(data, *self.announced[kind])
         for obj in decode_bundle(data):
             for t in (0.0, 1.5):
                 if not np.all(np.isfinite(obj.world_matrix(t))):

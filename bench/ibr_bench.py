@@ -217,7 +217,7 @@ def load_proxies(scene, progress=False):
     from pibr.server.proxies import build_bundle
 
     bundle = build_bundle(scene, progress=progress)
-    return decode_bundle(decompress_bundle(bundle.compressed)), bundle
+    return decode_bundle(decompress_bundle(bundle.compressed, bundle.raw_bytes)), bundle
 
 
 def evaluate_methods(sim: Simulation, samples, variants: dict, with_quality=True, bar=None) -> dict:

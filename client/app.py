@@ -10,9 +10,11 @@ result. Two clocks (DESIGN.md, Time and latency):
   inputs give bit-identical recordings on any machine.
 * **real**: ticks follow the wall clock at the output rate, from when the first frame has
   been decoded and drawn once by every method (the warm-up compiles shaders). Frames are
-  decoded as they arrive and each is reported to the server, which keeps only a few frames
-  ahead; a tick whose work ends after the next deadline makes the display skip ticks, each
-  counted as a missed deadline and recorded as a repeat of the last image.
+  taken off the socket as they arrive and decoded whenever the decoder is free, all that have
+  arrived at once with only the newest converted for display; what was decoded is reported to
+  the server, which keeps only a few frames ahead. A tick whose work ends after the next
+  deadline makes the display skip ticks, each counted as a missed deadline and recorded as a
+  repeat of the last image.
 
 The client knows the scene only from the wire (``Welcome``; proxies when a method asks).
 """
@@ -31,7 +33,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from pibr.protocol.errors import ConfigError, UnexpectedMessage
+from pibr.protocol.errors import ConfigError, MalformedMessage, UnexpectedMessage
 from pibr.protocol.gl import GLThread
 from pibr.protocol.messages import (FRAMES_DECODED, Clock, Frame, Hello, OutputConfig, PayloadKind, PoseMsg,
                                     ProxyChunk, Stats)
@@ -72,6 +74,7 @@ class ClientConfig:
     lossless: bool = True
     video: bool = True       # False: records only (no MP4 / lossless copy), the least work per tick
     warmup_s: float = 60.0   # real clock: longest wait for the first frame before the clock starts
+    receive_timeout_s: float = 30.0  # longest silence from the server while waiting for it
     progress: str = "bar"    # bar, lines (machine-readable on stdout), none
     tau: float = 0.1         # proxy IBR: relative depth error accepted as the same surface
     lod_pixels: float = 6.0  # proxy IBR: on-screen edge length that selects an object's LoD
@@ -98,6 +101,8 @@ class ClientConfig:
 
         if self.anchor not in ANCHORS:
             raise ConfigError(f"anchor must be one of {', '.join(ANCHORS)}, got {self.anchor!r}")
+        if not (0 < self.receive_timeout_s <= 86400):
+            raise ConfigError(f"receive timeout must be in (0, 86400] s, got {self.receive_timeout_s}")
         if self.preroll_s < 0:
             raise ConfigError("preroll must be >= 0")
         if not (0 < self.tau < 10):
@@ -115,6 +120,23 @@ class ClientConfig:
             check_token_text(self.token)
         if not (16 <= self.width <= 8192 and 16 <= self.height <= 8192 and 1 <= self.fov_deg <= 170):
             raise ConfigError(f"output {self.width}x{self.height} at {self.fov_deg} degrees is out of range")
+
+
+def _check_atlas(session) -> None:
+    """Before anything is allocated at the atlas's size: it must be the protocol's layout of the
+    announced views (protocol.atlas.build_layout), so a Welcome cannot make it bigger than they need."""
+    from pibr.protocol.atlas import build_layout
+
+    extra = None if session.extra is None else (session.extra.width, session.extra.height)
+    try:
+        expected = build_layout((session.primary.width, session.primary.height), extra,
+                                depth_in_atlas=session.depth_codec == "h264")
+    except ValueError as exc:
+        raise MalformedMessage(f"Welcome.config: the views have no atlas layout ({exc})") from None
+    if session.atlas != expected:
+        raise MalformedMessage(f"Welcome.config.atlas: {session.atlas.width}x{session.atlas.height} with "
+                               f"{session.atlas.rects} is not the layout of its views ({expected.width}x"
+                               f"{expected.height} with {expected.rects})")
 
 
 @dataclass
@@ -251,7 +273,8 @@ class Client:
         cfg = self.cfg
         trace, self._duration = self._trace_poses()
         loop = asyncio.get_running_loop()
-        self.conn = await ClientConnection.open(cfg.host, cfg.port, tls=cfg.tls)
+        self.conn = await ClientConnection.open(cfg.host, cfg.port, tls=cfg.tls,
+                                                receive_timeout_s=cfg.receive_timeout_s)
         t_hello = time.monotonic()
         hello = Hello(client="pibr-client/0.1", scene=cfg.scene, clock=cfg.clock,
                       output=OutputConfig(cfg.width, cfg.height, cfg.fov_deg, cfg.rate_hz),
@@ -263,6 +286,7 @@ class Client:
             handshake_ms = (t_welcome - t_hello) * 1e3
             if self.session.clock != cfg.clock:
                 raise UnexpectedMessage(f"server runs the {self.session.clock} clock, we asked for {cfg.clock}")
+            _check_atlas(self.session)
             if hello.want_proxies:
                 await self._receive_proxies(t_welcome)
             self._decoder = H264Decoder(self.session.atlas.width, self.session.atlas.height)
@@ -311,21 +335,22 @@ class Client:
 
     async def _receive_proxies(self, t_welcome: float) -> None:
         """The proxy bundle follows the Welcome: collect, decompress and parse it (off the loop)."""
-        from pibr.protocol.proxy import BundleAssembler, decode_bundle, decompress_bundle
+        from pibr.protocol.proxy import BundleAssembler, BundleInfo, decode_bundle, decompress_bundle
 
-        info = self.session.proxies
-        if not info:
+        if not self.session.proxies:
             raise UnexpectedMessage("asked for proxies, but the server's Welcome announces none")
-        assembler = BundleAssembler()
+        info = BundleInfo.from_json(self.session.proxies)
+        assembler = BundleAssembler(info)
         while not assembler.complete:
-            env = await self.conn.recv(timeout=600)
+            env = await self.conn.recv()
             if not isinstance(env.message, ProxyChunk):
                 raise UnexpectedMessage(f"expected ProxyChunk, got {env.message.NAME}")
             assembler.add(env.message)
         t_received = time.monotonic()
         data = assembler.data()
         loop = asyncio.get_running_loop()
-        self.proxies = await loop.run_in_executor(None, lambda: decode_bundle(decompress_bundle(data)))
+        self.proxies = await loop.run_in_executor(
+            None, lambda: decode_bundle(decompress_bundle(data, info.raw_bytes, info.objects)))
         self.proxy_stats = {"bytes": len(data), "chunks": assembler.count, "objects": len(self.proxies),
                             "transfer_ms": (t_received - t_welcome) * 1e3,
                             "decode_ms": (time.monotonic() - t_received) * 1e3}
@@ -333,21 +358,31 @@ class Client:
                  len(self.proxies), len(data) / 1e6, assembler.count, self.proxy_stats["transfer_ms"],
                  self.proxy_stats["decode_ms"])
 
-    async def _decode(self, frame: Frame, arrival_us: int) -> None:
-        data = frame.payload(PayloadKind.H264_ATLAS)
-        if data is None:
-            raise UnexpectedMessage(f"frame {frame.frame_id} carries no H.264 atlas")
+    async def _decode(self, frames: list) -> None:
+        """Decode ``frames`` [(Frame, arrival us)], oldest first, and make the last the newest.
+
+        Every frame's streams are decoded (each refers to the one before), but only the last is
+        converted and its depth reconstructed: a frame that is already stale when it is decoded
+        is never shown. (Skipping stale frames instead would need a keyframe each time: 4.5x the
+        bytes of a P-frame at 1024x1024, where decoding one costs 3 ms.)"""
+        for frame, _ in frames:
+            if frame.payload(PayloadKind.H264_ATLAS) is None:
+                raise UnexpectedMessage(f"frame {frame.frame_id} carries no H.264 atlas")
         loop = asyncio.get_running_loop()
 
         def decode():  # every frame, in order: both decoders keep state from the previous frame
-            image = self._decoder.decode(data)
-            depth = self._depth_decoder.decode(frame) if self._depth_decoder is not None else None
+            for i, (frame, _) in enumerate(frames):
+                newest = i == len(frames) - 1
+                image = self._decoder.decode(frame.payload(PayloadKind.H264_ATLAS), convert=newest)
+                depth = (self._depth_decoder.decode(frame, reconstruct=newest)
+                         if self._depth_decoder is not None else None)
             return image, depth
 
         image, distances = await loop.run_in_executor(self._decode_pool, decode)
+        frame, arrival_us = frames[-1]
         self._newest = _Decoded(frame, arrival_us, image, distances)
-        self.frames_received += 1
-        self._arrivals_us.append(arrival_us)
+        self.frames_received += len(frames)
+        self._arrivals_us.extend(arrival for _, arrival in frames)
 
     async def _display(self, tick: int, t_us: int, pose: Pose) -> None:
         """Render all methods for the tick and record them. Recorded times are in client time;
@@ -401,9 +436,12 @@ class Client:
                     inbox.append(env)
                 elif not isinstance(env.message, (Clock, Stats)):
                     raise UnexpectedMessage(f"unexpected {env.message.NAME} from the server")
+            usable = []
             while inbox and inbox[0].vtime_us <= t_us:
                 env = inbox.popleft()
-                await self._decode(env.message, env.vtime_us)
+                usable.append((env.message, env.vtime_us))
+            if usable:
+                await self._decode(usable)
             if tick >= 0:
                 await self._display(tick, t_us, pose)
                 progress.step()
@@ -485,16 +523,41 @@ class Client:
                             missed=1, age_ms=age, **dict(zip(POSE_FIELDS, pose.as_array()))))
 
     async def _receive_real(self, origin: float) -> None:
-        """Decode every frame as it arrives (arrival stamped from ``origin``, the receiver's start)
-        and tell the server how many are decoded, so it never runs far ahead (FRAMES_DECODED)."""
+        """Two tasks: one takes every message off the socket as it comes (arrival stamped from
+        ``origin``, the receiver's start), never waiting on decoding; the other, whenever it is
+        free, takes all frames that have arrived, tells the server how many it has taken
+        (FRAMES_DECODED, so the server never runs far ahead) and decodes them, showing the newest
+        (see :meth:`_decode`). A slow client thus shows the newest frame, not the oldest of a backlog."""
+        inbox = FrameInbox()
+        reader = asyncio.create_task(self._read_frames(inbox, origin), name="client-reader")
+        decoder = asyncio.create_task(self._decode_frames(inbox), name="client-decoder")
+        try:
+            done, _ = await asyncio.wait({reader, decoder}, return_when=asyncio.FIRST_COMPLETED)
+            for task in done:
+                task.result()   # re-raises what ended it
+        finally:
+            for task in (reader, decoder):
+                task.cancel()
+            await asyncio.gather(reader, decoder, return_exceptions=True)
+
+    async def _read_frames(self, inbox: "FrameInbox", origin: float) -> None:
         loop = asyncio.get_running_loop()
         while True:
             env = await self.conn.recv()
             if isinstance(env.message, Frame):
-                await self._decode(env.message, int((loop.time() - origin) * 1e6))
-                await self.conn.send(Stats({FRAMES_DECODED: self.frames_received}))
+                await inbox.put(env.message, int((loop.time() - origin) * 1e6), env.wire_size)
             elif not isinstance(env.message, (Clock, Stats)):
                 raise UnexpectedMessage(f"unexpected {env.message.NAME} from the server")
+
+    async def _decode_frames(self, inbox: "FrameInbox") -> None:
+        taken = 0
+        while True:
+            frames = await inbox.take_all()
+            taken += len(frames)
+            # Reported before decoding: the server may render the next frames meanwhile, so the
+            # next batch's newest is fresh (reported after, it would be a batch old).
+            await self.conn.send(Stats({FRAMES_DECODED: taken}))
+            await self._decode(frames)
 
     def _write_session(self, result: ClientResult, trace) -> None:
         os.makedirs(self.cfg.out_dir, exist_ok=True)
@@ -509,6 +572,34 @@ class Client:
         }
         with open(os.path.join(self.cfg.out_dir, "session.json"), "w") as f:
             json.dump(info, f, indent=2, default=str)
+
+
+class FrameInbox:
+    """Frames received and not yet decoded, bounded in bytes: :meth:`put` waits while it holds
+    ``max_bytes`` (the server keeps only a few frames ahead, so a full inbox means the server
+    ignores FRAMES_DECODED); :meth:`take_all` waits for at least one and takes them all."""
+
+    def __init__(self, max_bytes: int = 64 << 20):
+        self.max_bytes = max_bytes
+        self._frames: list = []
+        self._bytes = 0
+        self._changed = asyncio.Event()
+
+    async def put(self, frame: Frame, arrival_us: int, size: int) -> None:
+        while self._frames and self._bytes + size > self.max_bytes:
+            self._changed.clear()
+            await self._changed.wait()
+        self._frames.append((frame, arrival_us))
+        self._bytes += size
+        self._changed.set()
+
+    async def take_all(self) -> list:
+        while not self._frames:
+            self._changed.clear()
+            await self._changed.wait()
+        frames, self._frames, self._bytes = self._frames, [], 0
+        self._changed.set()
+        return frames
 
 
 async def run_client(config: ClientConfig) -> ClientResult:

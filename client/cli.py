@@ -65,6 +65,9 @@ def register(sub) -> None:
     p.add_argument("--lod-level", choices=("original", "proxy", "box"), default=None,
                    help="proxy: draw this level for every object instead of choosing by distance")
     p.add_argument("--progress", choices=("bar", "lines", "none"), default="bar")
+    p.add_argument("--receive-timeout-s", type=_positive_float, default=30.0, metavar="S",
+                   help="give up when the server sends nothing for S seconds while the client waits for it "
+                        "(default 30; the Welcome may take longer: up to 120 s while the server loads a scene)")
     g = p.add_argument_group("access (a server or relay with a token or TLS)")
     g.add_argument("--token-file", metavar="FILE",
                    help="send the access token on the first line of FILE (default: $PIBR_TOKEN, if set)")
@@ -169,8 +172,8 @@ def cmd_client(args) -> int:
                        scene=args.scene, depth_codec=args.depth_codec or "", lossless=not args.no_lossless,
                        video=not args.no_video,
                        progress=args.progress, tau=args.tau, lod_pixels=args.lod_pixels,
-                       lod_level=args.lod_level, options=method_knobs(args),
-                       token=resolve_token(args.token, args.token_file), tls=tls)
+                       lod_level=args.lod_level, receive_timeout_s=args.receive_timeout_s,
+                       options=method_knobs(args), token=resolve_token(args.token, args.token_file), tls=tls)
     from .connection import ServerClosed
 
     try:

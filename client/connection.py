@@ -10,7 +10,7 @@ import ssl
 from collections import deque
 
 from pibr.protocol.connection import Connection, Envelope
-from pibr.protocol.errors import AccessDenied, RemoteError, TLSError, UnexpectedMessage
+from pibr.protocol.errors import AccessDenied, PeerTimeout, RemoteError, TLSError, UnexpectedMessage
 from pibr.protocol.framing import DEFAULT_MAX_MESSAGE_SIZE
 from pibr.protocol.messages import Bye, Error, Hello, Message, Welcome
 from pibr.protocol.session import SessionConfig
@@ -24,7 +24,11 @@ class ServerClosed(Exception):
 
 
 class ClientConnection:
-    def __init__(self, reader, writer, max_message_size: int = DEFAULT_MAX_MESSAGE_SIZE):
+    """``receive_timeout_s``: longest silence (no byte from the server) a :meth:`recv` waits
+    through before raising :class:`PeerTimeout`; None waits for ever."""
+
+    def __init__(self, reader, writer, max_message_size: int = DEFAULT_MAX_MESSAGE_SIZE,
+                 receive_timeout_s: float | None = None, peer: str = "the server"):
         self.reader, self.writer = reader, writer
         self.conn = Connection(max_message_size)
         self._pending: deque[Envelope] = deque()
@@ -32,6 +36,8 @@ class ClientConnection:
         self.config: SessionConfig | None = None
         self.bytes_received = 0
         self.tls: ClientTLS | None = None
+        self.receive_timeout_s = receive_timeout_s
+        self.peer = peer
 
     @classmethod
     async def open(cls, host: str, port: int, timeout: float = 10.0, tls: ClientTLS | None = None,
@@ -39,7 +45,7 @@ class ClientConnection:
         """Connect (over TLS when ``tls`` says how to verify the server). Raises ConnectionError,
         or TLSError naming why the server's certificate was refused."""
         reader, writer = await open_connection(host, port, tls, timeout, what="pibr server")
-        conn = cls(reader, writer, **kw)
+        conn = cls(reader, writer, peer=f"pibr server {host}:{port}", **kw)
         conn.tls = tls
         return conn
 
@@ -50,7 +56,9 @@ class ClientConnection:
             await self.writer.drain()
 
     async def recv(self, timeout: float | None = None) -> Envelope:
-        """Next message; raises RemoteError on the server's Error, ServerClosed at its end."""
+        """Next message; raises RemoteError on the server's Error, ServerClosed at its end and
+        PeerTimeout when the server sends nothing for ``timeout`` (default: the receive timeout)."""
+        timeout = self.receive_timeout_s if timeout is None else timeout
         while not self._pending:
             if self.conn.failed:
                 await self._flush_quietly()
@@ -60,6 +68,8 @@ class ClientConnection:
                 data = await (asyncio.wait_for(read, timeout) if timeout else read)
             except ssl.SSLError as exc:
                 raise TLSError(f"the TLS connection to the server broke: {exc.reason or exc}") from None
+            except asyncio.TimeoutError:
+                raise PeerTimeout(f"{self.peer} sent nothing for {timeout:g} s") from None
             if not data:
                 self.conn.receive_eof()
                 if self.conn.error is not None:
@@ -79,7 +89,9 @@ class ClientConnection:
         """Send Hello, wait for Welcome (the server may first load and prepare the scene)."""
         await self.send(hello)
         try:
-            env = await self.recv(timeout)
+            env = await self.recv(max(timeout, self.receive_timeout_s or 0))
+        except PeerTimeout as exc:
+            raise PeerTimeout(f"{exc} after our Hello: no Welcome") from None
         except RemoteError as exc:
             if exc.code == AccessDenied.code:
                 raise AccessDenied(f"{exc.text}: give the server's token with PIBR_TOKEN or --token-file") from None

@@ -27,12 +27,15 @@ class EdgeDepthStreamDecoder:
         self.workspace = DiffusionWorkspace()  # this stream's: the streams decode on threads of their own
         self._prev: tuple[DecodedSamples, Pose] | None = None
 
-    def decode(self, payload: bytes, pose: Pose) -> tuple[np.ndarray, DecodedSamples]:
-        """-> (dense distance (h, w) float32, 0 = sky; the decoded samples)."""
+    def decode(self, payload: bytes, pose: Pose, reconstruct: bool = True) -> tuple[np.ndarray | None, DecodedSamples]:
+        """-> (dense distance (h, w) float32, 0 = sky; the decoded samples). ``reconstruct`` False:
+        the samples only (the next frame is coded against them), no diffusion: distance None."""
         warped = warp_samples(self._prev[0], self._prev[1], pose, self.quantizer) if self._prev else None
         samples = self.decoder.decode(payload, None if warped is None else warped.edges,
                                       None if warped is None else warped.values)
         self._prev = (samples, pose)
+        if not reconstruct:
+            return None, samples
         return reconstruct_depth(samples, self.quantizer, self.edge_aware, self.workspace), samples
 
 
@@ -57,14 +60,15 @@ class EdgeDepthDecoder:
             self._helper.shutdown(wait=True)
             self._helper = None
 
-    def decode(self, frame: Frame) -> dict:
+    def decode(self, frame: Frame, reconstruct: bool = True) -> dict | None:
+        """-> {view: distance}, or None when not ``reconstruct`` (samples decoded for the next frames only)."""
         poses = {"primary": frame.primary_pose, "extra": frame.extra_pose}
         jobs = {}
         for name, (stream, kind) in self.streams.items():
             payload = frame.payload(kind)
             if payload is None or poses[name] is None:
                 raise CodecError(f"frame {frame.frame_id} lacks the {name} view's edge-coded depth")
-            jobs[name] = (stream, payload, poses[name])
+            jobs[name] = (stream, payload, poses[name], reconstruct)
         extra = self._helper.submit(jobs["extra"][0].decode, *jobs["extra"][1:]) if "extra" in jobs else None
         out = {}
         try:
@@ -75,4 +79,4 @@ class EdgeDepthDecoder:
                 concurrent.futures.wait([extra])
         if extra is not None:
             out["extra"] = extra.result()[0]
-        return out
+        return out if reconstruct else None

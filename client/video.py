@@ -34,7 +34,8 @@ class YUVImage:
 
 
 class H264Decoder:
-    """Decodes one session's access units in order. Every frame must be fed, keyframe first."""
+    """Decodes one session's access units in order. Every frame must be fed, keyframe first:
+    a frame nobody will see is still decoded (the next ones refer to it), just not converted."""
 
     name = "h264"
 
@@ -46,8 +47,11 @@ class H264Decoder:
         self._ctx = av.CodecContext.create("h264", "r")
         self._ctx.thread_type = "NONE"  # frame threading would delay output by a frame per thread
         self.frames = 0
+        self.converted = 0    # pictures turned into YUVImage
 
-    def decode(self, data: bytes) -> YUVImage:
+    def decode(self, data: bytes, convert: bool = True) -> YUVImage | None:
+        """Decode one access unit; -> its picture, or None when ``convert`` is False (a stale frame
+        decoded only to keep the reference chain)."""
         try:
             frames = self._ctx.decode(self._av.Packet(data))
         except self._av.error.FFmpegError as exc:
@@ -59,6 +63,9 @@ class H264Decoder:
         if (frame.width, frame.height) != (self.width, self.height):
             raise CodecError(f"H.264 picture is {frame.width}x{frame.height}, the session's atlas is "
                              f"{self.width}x{self.height}")
+        if not convert:
+            return None
+        self.converted += 1
         if frame.format.name not in ("yuv420p", "yuvj420p"):
             frame = frame.reformat(format="yuv420p")
         buf = frame.to_ndarray()

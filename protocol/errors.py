@@ -11,7 +11,8 @@
     │   ├── MalformedMessage     the payload does not parse as its message type
     │   ├── TruncatedMessage     the connection ended in the middle of a frame
     │   ├── UnexpectedMessage    a valid message at the wrong moment of the session
-    │   └── AccessDenied         the Hello's token is missing or not the one configured
+    │   ├── AccessDenied         the Hello's token is missing or not the one configured
+    │   └── PeerTimeout          the peer sent nothing (or no whole message) within a deadline
     ├── InvalidPose              NaN/inf components or a zero quaternion
     ├── JSONError                a JSON text breaks the bounded reader's syntax or limits
     │                            (protocol/bounded_json.py; callers turn it into their own error)
@@ -72,6 +73,13 @@ class AccessDenied(ProtocolError):
     code = 13
 
 
+class PeerTimeout(ProtocolError, TimeoutError):
+    """The peer was silent past a deadline: the server's handshake and idle timeouts, the
+    client's receive timeout. The message names the peer and how long it was silent."""
+
+    code = 14
+
+
 class InvalidPose(PibrError, ValueError):
     code = 9
 
@@ -115,7 +123,7 @@ ERROR_CODES = {
     cls.code: cls
     for cls in (ProtocolError, BadMagic, UnsupportedVersion, MessageTooLarge, UnknownMessageType,
                 MalformedMessage, TruncatedMessage, UnexpectedMessage, InvalidPose, SceneError,
-                CodecError, ConfigError, AccessDenied)
+                CodecError, ConfigError, AccessDenied, PeerTimeout)
 }
 
 

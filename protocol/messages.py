@@ -412,9 +412,9 @@ class ProxyChunk(Message):
 
 # ---------------------------------------------------------------- control
 
-#: Stats key a real-clock client sends after decoding each frame: how many it has decoded. The
-#: server keeps at most a few frames ahead of it, so a slow client gets fresh frames, not a
-#: queue of stale ones.
+#: Stats key a real-clock client sends whenever it takes the frames that arrived to decode them
+#: (all, showing the newest): how many it has taken. The server keeps at most a few frames ahead
+#: of it, so a slow client gets fresh frames, not a queue of stale ones.
 FRAMES_DECODED = "frames_decoded"
 
 

@@ -5,7 +5,8 @@ meshes — the original and the simplified *encaging* proxy (the third level, th
 the bounding box). Positions only: the client rasterises proxies for depth and
 back-projection; colour comes from the transmitted views.
 
-Layout (little-endian), then zstd-compressed and cut into ``ProxyChunk`` messages::
+Layout (little-endian), then zstd-compressed and cut into ``ProxyChunk`` messages, all
+``chunk_bytes`` long but the last (see :class:`BundleInfo`, what the ``Welcome`` announces)::
 
     b"PXB1" u32 object_count
     per object:
@@ -14,7 +15,8 @@ Layout (little-endian), then zstd-compressed and cut into ``ProxyChunk`` message
         6 f64 bounds (min xyz, max xyz; object space)
         2 x mesh: u32 vertex_count, u32 face_count, f32 vertices (n, 3), u32 faces (m, 3)
 
-Every count is checked against limits and the bytes left before anything is allocated.
+Every count is checked against limits and the bytes left before anything is allocated;
+decompression never produces more than the announced uncompressed size.
 """
 from __future__ import annotations
 
@@ -31,6 +33,13 @@ MAX_OBJECTS = 100_000
 MAX_VERTICES = 20_000_000
 MAX_BUNDLE_BYTES = 1 << 30
 CHUNK_BYTES = 1 << 20
+#: Smallest chunk a bundle may be cut into, and most chunks one bundle may take.
+MIN_CHUNK_BYTES = 1 << 10
+MAX_CHUNKS = 1 << 16
+#: The magic and the object count, checked before the rest is decompressed.
+HEADER_BYTES = 8
+#: Most bytes decompressed in one step.
+DECOMPRESS_STEP = 1 << 20
 LEVELS = ("original", "proxy", "box")
 
 
@@ -152,51 +161,179 @@ def compress_bundle(raw: bytes, level: int = 9) -> bytes:
     return zstandard.ZstdCompressor(level=level).compress(raw)
 
 
-def decompress_bundle(data: bytes, max_size: int = MAX_BUNDLE_BYTES) -> bytes:
-    """zstd frame -> raw bundle, refusing output larger than ``max_size``."""
+def _check_header(head: bytes, objects: int | None) -> None:
+    """The first 8 uncompressed bytes: magic and object count (against the announcement)."""
+    if head[:4] != MAGIC:
+        raise MalformedMessage(f"proxy bundle: bad magic {bytes(head[:4])!r} in the first decompressed bytes")
+    (count,) = struct.unpack("<I", head[4:8])
+    if count > MAX_OBJECTS:
+        raise MalformedMessage(f"proxy bundle: {count} objects exceed the limit of {MAX_OBJECTS}")
+    if objects is not None and count != objects:
+        raise MalformedMessage(f"proxy bundle: holds {count} objects, the Welcome announced {objects}")
+
+
+def decompress_bundle(data: bytes, raw_size: int, objects: int | None = None) -> bytes:
+    """zstd frame -> raw bundle of exactly ``raw_size`` bytes (what the Welcome announced).
+
+    Streaming, with ``raw_size`` as the ceiling: the zstd header's content size and window
+    must fit it, the magic and object count are checked in the first 8 decompressed bytes,
+    and decompression stops as soon as the output would pass ``raw_size``, so a small frame
+    that inflates to gigabytes costs no more than the announced size."""
     import zstandard
 
+    if not HEADER_BYTES <= raw_size <= MAX_BUNDLE_BYTES:
+        raise MalformedMessage(f"proxy bundle: announced size {raw_size} is outside [{HEADER_BYTES}, "
+                               f"{MAX_BUNDLE_BYTES}]")
     try:
         params = zstandard.get_frame_parameters(data)
-        if params.content_size > max_size:
-            raise MalformedMessage(f"proxy bundle: {params.content_size} bytes uncompressed exceed {max_size}")
-        return zstandard.ZstdDecompressor().decompress(data, max_output_size=max_size)
+        if params.content_size != zstandard.CONTENTSIZE_UNKNOWN and params.content_size != raw_size:
+            raise MalformedMessage(f"proxy bundle: the zstd header declares {params.content_size} bytes "
+                                   f"uncompressed, the Welcome announced {raw_size}")
+        # The decoder's window (its largest allocation) need not exceed the whole bundle.
+        window = min(1 << 27, max(1 << 10, 1 << (raw_size - 1).bit_length()))
+        if params.window_size > window:
+            raise MalformedMessage(f"proxy bundle: the zstd frame asks for a {params.window_size}-byte window, "
+                                   f"more than the {raw_size} bytes the Welcome announced need")
+        reader = zstandard.ZstdDecompressor(max_window_size=window).stream_reader(data)
+        head = reader.read(HEADER_BYTES)
+        if len(head) != HEADER_BYTES:
+            raise MalformedMessage(f"proxy bundle: decompresses to fewer than {HEADER_BYTES} bytes")
+        _check_header(head, objects)
+        out = bytearray(raw_size)   # only now: the header matches the announcement
+        out[:HEADER_BYTES] = head
+        view, pos = memoryview(out), HEADER_BYTES
+        while pos < raw_size:
+            n = reader.readinto(view[pos:pos + DECOMPRESS_STEP])
+            if not n:
+                raise MalformedMessage(f"proxy bundle: decompresses to {pos} bytes, the Welcome announced "
+                                       f"{raw_size}")
+            pos += n
+        view.release()
+        if reader.read(1):
+            raise MalformedMessage(f"proxy bundle: decompresses to more than the {raw_size} bytes the Welcome "
+                                   f"announced")
     except zstandard.ZstdError as exc:
         raise MalformedMessage(f"proxy bundle: zstd: {exc}") from None
+    return bytes(out)
 
 
 def split_chunks(data: bytes, chunk_bytes: int = CHUNK_BYTES) -> list[bytes]:
-    return [data[i:i + chunk_bytes] for i in range(0, len(data), chunk_bytes)] or [b""]
+    """Cut the compressed bundle into chunks: every one ``chunk_bytes`` long but the last,
+    none empty (a zstd frame is never empty)."""
+    if not data:
+        raise ValueError("a compressed proxy bundle is never empty")
+    return [data[i:i + chunk_bytes] for i in range(0, len(data), chunk_bytes)]
+
+
+def _field(o: dict, key: str, lo: int, hi: int, path: str) -> int:
+    v = o.get(key)
+    if isinstance(v, bool) or not isinstance(v, int):
+        raise MalformedMessage(f"{path}: field {key!r} must be an integer, got {v!r:.40}")
+    if not lo <= v <= hi:
+        raise MalformedMessage(f"{path}: field {key!r} = {v} is outside [{lo}, {hi}]")
+    return v
+
+
+@dataclass(frozen=True)
+class BundleInfo:
+    """What a Welcome announces about the proxy bundle that follows it (``SessionConfig.proxies``).
+
+    objects     : objects in the bundle
+    bytes       : compressed size, the sum of the chunks' data
+    raw_bytes   : uncompressed size, the decompression ceiling
+    chunk_bytes : data bytes of every chunk but the last (which holds the rest, at least 1)
+    triangles   : level -> total triangles (informational)
+
+    The chunk count is implied: ceil(bytes / chunk_bytes), at most ``MAX_CHUNKS``.
+    """
+
+    objects: int
+    bytes: int
+    raw_bytes: int
+    chunk_bytes: int
+    triangles: dict
+
+    def __post_init__(self):
+        if not (0 <= self.objects <= MAX_OBJECTS and 1 <= self.bytes <= MAX_BUNDLE_BYTES
+                and HEADER_BYTES <= self.raw_bytes <= MAX_BUNDLE_BYTES
+                and MIN_CHUNK_BYTES <= self.chunk_bytes <= MAX_BUNDLE_BYTES):
+            raise ValueError(f"proxy bundle of {self.objects} objects, {self.bytes} bytes ({self.raw_bytes} "
+                             f"uncompressed) in chunks of {self.chunk_bytes} bytes is out of range")
+        if self.chunks > MAX_CHUNKS:
+            raise ValueError(f"proxy bundle of {self.bytes} bytes needs {self.chunks} chunks of {self.chunk_bytes} "
+                             f"bytes, more than the limit of {MAX_CHUNKS}")
+
+    @property
+    def chunks(self) -> int:
+        return -(-self.bytes // self.chunk_bytes)
+
+    def chunk_size(self, index: int) -> int:
+        """Data bytes chunk ``index`` must carry."""
+        return self.chunk_bytes if index < self.chunks - 1 else self.bytes - (self.chunks - 1) * self.chunk_bytes
+
+    def to_json(self) -> dict:
+        return {"objects": self.objects, "bytes": self.bytes, "raw_bytes": self.raw_bytes,
+                "chunk_bytes": self.chunk_bytes, "chunks": self.chunks, "triangles": dict(self.triangles)}
+
+    @classmethod
+    def from_json(cls, o, path: str = "Welcome.config.proxies") -> "BundleInfo":
+        if not isinstance(o, dict):
+            raise MalformedMessage(f"{path}: must be an object")
+        objects = _field(o, "objects", 0, MAX_OBJECTS, path)
+        size = _field(o, "bytes", 1, MAX_BUNDLE_BYTES, path)
+        raw = _field(o, "raw_bytes", HEADER_BYTES, MAX_BUNDLE_BYTES, path)
+        chunk_bytes = _field(o, "chunk_bytes", MIN_CHUNK_BYTES, MAX_BUNDLE_BYTES, path)
+        chunks = _field(o, "chunks", 1, MAX_CHUNKS, path)
+        if chunks != -(-size // chunk_bytes):
+            raise MalformedMessage(f"{path}: {chunks} chunks do not carry {size} bytes in chunks of {chunk_bytes}")
+        triangles = o.get("triangles", {})
+        if not isinstance(triangles, dict) or len(triangles) > len(LEVELS):
+            raise MalformedMessage(f"{path}: field 'triangles' must map at most {len(LEVELS)} levels to counts")
+        for level in triangles:
+            _field(triangles, level, 0, MAX_VERTICES * MAX_OBJECTS, f"{path}.triangles")
+        return cls(objects, size, raw, chunk_bytes, triangles)
 
 
 class BundleAssembler:
-    """Collects ``ProxyChunk`` messages in order; :attr:`complete` when all arrived."""
+    """Collects the ``ProxyChunk`` messages of an announced bundle; :attr:`complete` when all arrived.
 
-    def __init__(self, max_size: int = MAX_BUNDLE_BYTES):
-        self.max_size = max_size
-        self._parts: list[bytes] = []
-        self.count = None
-        self.total = None
+    Each chunk must match the announcement (count, total size, its own exact size), arrive
+    once and carry data; chunks are kept as they come and joined once, so assembly is linear."""
+
+    def __init__(self, info: BundleInfo):
+        self.info = info
+        self._parts: list[bytes | None] = [None] * info.chunks
+        self.received = 0
+
+    @property
+    def count(self) -> int:
+        return self.info.chunks
 
     def add(self, chunk) -> None:
-        if self.count is None:
-            self.count, self.total = chunk.count, chunk.total_size
-            if self.total > self.max_size:
-                raise MalformedMessage(f"proxy bundle of {self.total} bytes exceeds the limit of {self.max_size}")
-        if (chunk.count, chunk.total_size) != (self.count, self.total):
-            raise MalformedMessage("ProxyChunk: count or total size changed between chunks")
-        if chunk.index != len(self._parts):
-            raise MalformedMessage(f"ProxyChunk: expected chunk {len(self._parts)}, got {chunk.index}")
-        self._parts.append(chunk.data)
-        if sum(len(p) for p in self._parts) > self.total:
-            raise MalformedMessage("ProxyChunk: more data than the announced total size")
+        info = self.info
+        if chunk.count != info.chunks:
+            raise MalformedMessage(f"ProxyChunk: count {chunk.count} differs from the {info.chunks} chunks the "
+                                   f"Welcome announced")
+        if chunk.total_size != info.bytes:
+            raise MalformedMessage(f"ProxyChunk: total size {chunk.total_size} differs from the {info.bytes} bytes "
+                                   f"the Welcome announced")
+        if not 0 <= chunk.index < info.chunks:
+            raise MalformedMessage(f"ProxyChunk: index {chunk.index} is outside 0..{info.chunks - 1}")
+        if self._parts[chunk.index] is not None:
+            raise MalformedMessage(f"ProxyChunk: chunk {chunk.index} arrived twice")
+        if not chunk.data:
+            raise MalformedMessage(f"ProxyChunk: chunk {chunk.index} is empty")
+        if len(chunk.data) != info.chunk_size(chunk.index):
+            raise MalformedMessage(f"ProxyChunk: chunk {chunk.index} carries {len(chunk.data)} bytes, the "
+                                   f"announcement implies {info.chunk_size(chunk.index)}")
+        self._parts[chunk.index] = chunk.data
+        self.received += 1
 
     @property
     def complete(self) -> bool:
-        return self.count is not None and len(self._parts) == self.count
+        return self.received == self.info.chunks
 
     def data(self) -> bytes:
-        data = b"".join(self._parts)
-        if len(data) != self.total:
-            raise MalformedMessage(f"proxy bundle: {len(data)} bytes received, {self.total} announced")
-        return data
+        if not self.complete:
+            raise MalformedMessage(f"proxy bundle: {self.received} of {self.info.chunks} chunks received")
+        return b"".join(self._parts)

@@ -23,6 +23,7 @@ from . import bounded_json
 from .atlas import ALIGN, MAX_VIEW_PIXELS, MAX_VIEW_SIDE, AtlasLayout, check_view_size
 from .errors import JSONError, MalformedMessage
 from .pose import Pose
+from .proxy import BundleInfo
 
 DEPTH_CODECS = ("h264", "edge")
 #: Clip spheres a session may announce, metres (scene descriptions obey the same ranges).
@@ -77,7 +78,7 @@ class SessionConfig:
     depth_codec      : "h264" (8-bit disparity in the atlas) or "edge" (edge codec payloads)
     depth_bits, depth_min_code : quantization of the depth transport
     motion           : the frame carries motion of moving objects
-    proxies          : {"count": objects, "bytes": compressed size} or None when none are sent
+    proxies          : the proxy bundle's announcement (proxy.BundleInfo as JSON) or None when none are sent
     """
 
     scene: dict
@@ -160,8 +161,8 @@ class SessionConfig:
         if codec not in DEPTH_CODECS:
             raise MalformedMessage(f"{p}: depth_codec must be one of {', '.join(DEPTH_CODECS)}, got {codec!r:.40}")
         proxies = o.get("proxies")
-        if proxies is not None and not isinstance(proxies, dict):
-            raise MalformedMessage(f"{p}: field 'proxies' must be an object or null")
+        if proxies is not None:
+            BundleInfo.from_json(proxies, p + ".proxies")   # the bounds the client assembles and inflates within
         options = o.get("options", {})
         if not isinstance(options, dict):
             raise MalformedMessage(f"{p}: field 'options' must be an object")

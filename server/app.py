@@ -17,9 +17,10 @@ import numpy as np
 
 from pibr.protocol.errors import ConfigError, SceneError
 from pibr.protocol.gl import GLThread
-from pibr.protocol.messages import Error, Hello
+from pibr.protocol.messages import Hello
 
 from .config import ServerConfig
+from .fair_queue import FairQueue
 from .listener import TrackedListener
 from .pipeline import FrameProducer
 from .session import Session
@@ -35,16 +36,20 @@ class Server(TrackedListener):
     def __init__(self, config: ServerConfig):
         super().__init__()
         self.config = config
+        #: sessions past a valid Hello: these count toward ``max_sessions``
         self.sessions: dict[int, Session] = {}
+        #: connections still to send their Hello, oldest first (bounded by ``max_pending``)
+        self.pending: dict[int, Session] = {}
         self._ids = itertools.count(1)
-        self._scenes: dict[str, object] = {}
-        self._scene_lock = asyncio.Lock()
+        self._scenes: dict[str, asyncio.Future] = {}    # spec -> its load (one per scene)
         self._renderers: dict = {}  # touched only on the GL thread
-        self._bundles: dict = {}    # scene id -> ProxyBundle
-        self._bundle_lock = asyncio.Lock()
+        self._bundles: dict[int, asyncio.Future] = {}   # id(scene) -> its ProxyBundle's build
         self.gl: GLThread | None = None
-        self.encode_pool = concurrent.futures.ThreadPoolExecutor(max_workers=max(2, os.cpu_count() or 2),
-                                                                 thread_name_prefix="pibr-encode")
+        workers = max(2, os.cpu_count() or 2)
+        self.encode_pool = concurrent.futures.ThreadPoolExecutor(max_workers=workers, thread_name_prefix="pibr-encode")
+        #: the GL thread and the encoder pool, shared fairly between sessions (fair_queue.py)
+        self.gl_queue = FairQueue(1)
+        self.encode_queue = FairQueue(workers)
         self.recent_timings = deque(maxlen=100)
 
     # ------------------------------------------------------------------ lifecycle
@@ -79,39 +84,75 @@ class Server(TrackedListener):
         self.encode_pool.shutdown(wait=False, cancel_futures=True)
 
     async def handle(self, reader, writer) -> None:
-        session_id = next(self._ids)
-        if len(self.sessions) >= self.config.max_sessions:
-            from pibr.protocol.connection import Connection
+        await Session(self, reader, writer, next(self._ids)).run()
 
-            conn = Connection()
-            conn.send(Error(ConfigError.code, f"server full: {len(self.sessions)} sessions already"))
-            writer.write(conn.data_to_send())
-            try:
-                await writer.drain()
-            finally:
-                writer.close()
-            return
-        session = Session(self, reader, writer, session_id)
-        self.sessions[session_id] = session
-        try:
-            await session.run()
-        finally:
-            self.sessions.pop(session_id, None)
+    # ------------------------------------------------------------------ admission
+
+    def add_pending(self, session: Session) -> None:
+        """A new connection waits for its Hello outside the session slots. Past ``max_pending``
+        such connections the oldest is dropped, so idle peers cannot keep others out."""
+        self.pending[session.id] = session
+        while len(self.pending) > self.config.max_pending:
+            oldest = next(iter(self.pending.values()))
+            del self.pending[oldest.id]
+            oldest.evict(len(self.pending) + 1)
+
+    def admit(self, session: Session) -> None:
+        """After a valid Hello: take a session slot, or ConfigError when all are taken."""
+        self.pending.pop(session.id, None)
+        if len(self.sessions) >= self.config.max_sessions:
+            raise ConfigError(f"server full: {len(self.sessions)} sessions already")
+        self.sessions[session.id] = session
+
+    def release(self, session: Session) -> None:
+        self.pending.pop(session.id, None)
+        self.sessions.pop(session.id, None)
+        self.gl_queue.forget(session.id)
+        self.encode_queue.forget(session.id)
+
+    async def render(self, session_id: int, fn, *args):
+        """``fn(ctx, *args)`` on the GL thread, in this session's fair turn."""
+        return await self.gl_queue.run(session_id, lambda: self.gl.run(fn, *args))
+
+    async def encode(self, session_id: int, fn, *args):
+        """``fn(*args)`` in the encoder pool, in this session's fair turn."""
+        loop = asyncio.get_running_loop()
+        return await self.encode_queue.run(session_id, lambda: loop.run_in_executor(self.encode_pool, fn, *args))
 
     # ------------------------------------------------------------------ sessions
 
     async def get_scene(self, spec: str):
-        from pibr.scenes.registry import available_scenes, load_scene
+        """The scene ``spec`` names, loaded once per server. Each scene loads on its own: a session
+        for a loaded scene never waits on another scene's load."""
+        from pibr.scenes.registry import load_scene
+
+        spec = self.check_scene(spec)
+        return await self._once(self._scenes, spec, load_scene, spec)
+
+    def check_scene(self, spec: str) -> str:
+        """The scene a Hello's ``spec`` names (empty: the default); SceneError if not served here."""
+        from pibr.scenes.registry import available_scenes
 
         spec = spec or self.config.scene
         allowed = set(available_scenes()) | {self.config.scene}
         if spec not in allowed:
             raise SceneError(f"scene {spec!r} is not served here; available: {', '.join(sorted(allowed))}")
-        async with self._scene_lock:
-            if spec not in self._scenes:
-                loop = asyncio.get_running_loop()
-                self._scenes[spec] = await loop.run_in_executor(None, load_scene, spec)
-            return self._scenes[spec]
+        return spec
+
+    @staticmethod
+    async def _once(cache: dict, key, fn, *args):
+        """``fn(*args)`` in a worker thread once per key; concurrent callers share the one run, a
+        caller that gives up does not cancel it, and a failure is not cached (the next caller retries)."""
+        future = cache.get(key)
+        if future is None:
+            future = asyncio.get_running_loop().run_in_executor(None, fn, *args)
+            cache[key] = future
+
+            def forget_failure(f):
+                if (f.cancelled() or f.exception() is not None) and cache.get(key) is f:
+                    del cache[key]
+            future.add_done_callback(forget_failure)
+        return await asyncio.shield(future)
 
     def _renderer(self, ctx, scene):
         from .renderer import Renderer
@@ -123,27 +164,25 @@ class Server(TrackedListener):
         return self._renderers[key]
 
     async def get_bundle(self, scene):
-        """The scene's proxy bundle, built (or read from the LoD cache) once per server."""
-        async with self._bundle_lock:
-            if id(scene) not in self._bundles:
-                from .proxies import build_bundle
+        """The scene's proxy bundle, built (or read from the LoD cache) once per server and scene."""
+        from .proxies import build_bundle
 
-                loop = asyncio.get_running_loop()
-                self._bundles[id(scene)] = await loop.run_in_executor(None, build_bundle, scene,
-                                                                      self.config.proxy_settings)
-            return self._bundles[id(scene)]
+        return await self._once(self._bundles, id(scene), build_bundle, scene, self.config.proxy_settings)
 
-    async def setup_session(self, hello: Hello):
+    async def setup_session(self, session_id: int, hello: Hello):
         """Scene, session parameters, GL producer, encoders (and proxy bundle) for a client's Hello."""
         scene = await self.get_scene(hello.scene)
         bundle = await self.get_bundle(scene) if hello.want_proxies else None
-        config, spec = plan_session(self.config, scene, hello,
-                                    bundle.info(self.proxy_chunk_bytes) if bundle is not None else None)
+        try:
+            proxies = bundle.info(self.proxy_chunk_bytes) if bundle is not None else None
+        except ValueError as exc:   # a bundle too big for the protocol's chunk limit
+            raise ConfigError(f"proxies of scene {scene.name!r}: {exc}") from None
+        config, spec = plan_session(self.config, scene, hello, proxies)
 
         def make_producer(ctx):
             return FrameProducer(ctx, self._renderer(ctx, scene), spec)
 
-        producer = await self.gl.run(make_producer)
+        producer = await self.render(session_id, make_producer)
         cfg = self.config
         encoder = H264Encoder(spec.layout.width, spec.layout.height, cfg.fps, cfg.bitrate_kbps, cfg.keyint, cfg.preset,
                               deterministic=hello.clock == "virtual")

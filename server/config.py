@@ -44,8 +44,12 @@ class ServerConfig:
     server_delay_ms: float = 20.0       # virtual clock: render + encode time model
     depth_codec: str = "h264"
     max_message_size: int = DEFAULT_MAX_MESSAGE_SIZE
-    max_sessions: int = 8
-    hello_timeout_s: float = 10.0
+    max_sessions: int = 8               # sessions past their Hello
+    max_pending: int = 64               # connections yet to send a Hello; beyond, the oldest is dropped
+    hello_timeout_s: float = 10.0       # from connecting to a whole Hello
+    idle_timeout_s: float = 15.0        # real clock: longest wait for the client's next pose or clock
+    idle_timeout_virtual_s: float = 30.0  # virtual clock: the same (a client may work long per tick)
+    max_clock_lead_s: float = 10.0      # virtual clock: how far a client's clock may run ahead of the frames
     max_in_flight: int = 3              # real clock: frames sent ahead of what the client has decoded
     token: str | None = None            # every Hello must carry it; required to listen off loopback
     tls_cert: str | None = None         # PEM certificate chain: serve TLS (with tls_key)
@@ -79,6 +83,13 @@ class ServerConfig:
             raise ConfigError(f"depth codec must be h264 or edge, got {self.depth_codec!r}")
         if self.max_sessions < 1:
             raise ConfigError("max sessions must be at least 1")
+        if self.max_pending < 1:
+            raise ConfigError("max pending connections must be at least 1")
+        for value, what in ((self.hello_timeout_s, "hello timeout"), (self.idle_timeout_s, "idle timeout"),
+                            (self.idle_timeout_virtual_s, "virtual-clock idle timeout"),
+                            (self.max_clock_lead_s, "clock lead")):
+            if not (0 < value <= 86400):
+                raise ConfigError(f"{what} must be in (0, 86400] s, got {value}")
         if not (1 <= self.max_in_flight <= 1000):
             raise ConfigError(f"frames in flight must be in 1..1000, got {self.max_in_flight}")
         check_listen_access("server", self.host, self.token)

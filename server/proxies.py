@@ -8,7 +8,7 @@ import time
 from dataclasses import dataclass
 
 from pibr.protocol.messages import ProxyChunk
-from pibr.protocol.proxy import ProxyObject, compress_bundle, encode_bundle, split_chunks
+from pibr.protocol.proxy import BundleInfo, ProxyObject, compress_bundle, encode_bundle, split_chunks
 
 log = logging.getLogger(__name__)
 
@@ -32,8 +32,8 @@ class ProxyBundle:
         return [ProxyChunk(i, len(parts), len(self.compressed), p) for i, p in enumerate(parts)]
 
     def info(self, chunk_bytes: int) -> dict:
-        return {"objects": self.objects, "bytes": len(self.compressed), "raw_bytes": self.raw_bytes,
-                "chunks": len(split_chunks(self.compressed, chunk_bytes)), "triangles": self.triangles}
+        """What the Welcome announces (protocol.proxy.BundleInfo) when sent in ``chunk_bytes`` chunks."""
+        return BundleInfo(self.objects, len(self.compressed), self.raw_bytes, chunk_bytes, self.triangles).to_json()
 
 
 def build_bundle(scene, settings: ProxySettings = ProxySettings(), progress: bool = False) -> ProxyBundle:

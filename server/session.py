@@ -1,9 +1,15 @@
 """One client's session: handshake, then frames on the virtual or the real clock.
 
 The session drives the sans-I/O :class:`~pibr.protocol.connection.Connection` with its own
-socket. Rendering runs on the server's GL thread and encoding in its worker pool; a slow
-or misbehaving client only ever stalls its own session. Any protocol error closes this
-connection with an ``Error`` naming the problem.
+socket. Rendering runs on the server's GL thread and encoding in its worker pool, both shared
+fairly between sessions (fair_queue.py); a slow or misbehaving client only ever stalls its own
+session. Any protocol error closes this connection with an ``Error`` naming the problem.
+
+Deadlines no peer can stretch: the whole Hello within ``hello_timeout_s`` of connecting (a
+connection counts toward ``max_sessions`` only once its Hello is valid; until then the server
+keeps at most ``max_pending`` of them and drops the oldest); after it, each pose or clock within
+the clock's idle timeout, and every byte we send read within it too. On the virtual clock a
+client's clock may run at most ``max_clock_lead_s`` ahead of the next frame it asks for.
 """
 from __future__ import annotations
 
@@ -16,8 +22,8 @@ from collections import deque
 
 from pibr.protocol.access import token_matches
 from pibr.protocol.connection import Connection, Envelope
-from pibr.protocol.errors import (AccessDenied, ConfigError, ProtocolError, SceneError, UnexpectedMessage,
-                                  UnsupportedVersion)
+from pibr.protocol.errors import (AccessDenied, ConfigError, PeerTimeout, ProtocolError, SceneError,
+                                  UnexpectedMessage, UnsupportedVersion)
 from pibr.protocol.messages import (FRAMES_DECODED, PROTOCOL_VERSION, Bye, Clock, Error, Frame, Hello, PayloadKind,
                                     PoseMsg, Stats, Welcome)
 
@@ -26,8 +32,6 @@ from .quadtree import quadtree_payload
 log = logging.getLogger(__name__)
 
 READ_CHUNK = 1 << 16
-#: Real clock: skip rendering while this many bytes still wait for a slow client.
-SLOW_CLIENT_BACKLOG = 2 * 1024 * 1024
 
 
 class SessionClosed(Exception):
@@ -50,6 +54,12 @@ class Session:
         self.tick_overruns = 0
         self.client_stats: dict = {}
         self._pending: deque = deque()
+        self.idle_timeout_s: float | None = None   # set by the Hello's clock
+        self._accepted = asyncio.get_running_loop().time()
+        self._hello_deadline: asyncio.Timeout | None = None
+        self._evicted_among = 0                     # > 0: dropped as the oldest of this many pending
+        self._unsent_since: float | None = None     # real clock: since when a frame waits to leave
+        self._unsent_bytes = 0
 
     # ------------------------------------------------------------------ I/O
 
@@ -57,10 +67,25 @@ class Session:
         data = self.conn.data_to_send()
         if data:
             self.writer.write(data)
-            await self.writer.drain()
+            try:
+                async with asyncio.timeout(self.idle_timeout_s):
+                    await self.writer.drain()
+            except TimeoutError:
+                raise PeerTimeout(f"the client read nothing for {self.idle_timeout_s:g} s") from None
 
-    async def _recv(self, timeout: float | None = None) -> Envelope:
-        """Next message from the client; raises SessionClosed at its end, ProtocolError on bad input."""
+    async def _recv(self) -> Envelope:
+        """Next pose or clock (or other message) from the client; raises SessionClosed at its end,
+        ProtocolError on bad input and PeerTimeout when none arrives within the idle timeout
+        (``Stats`` do not count: they are taken in passing)."""
+        try:
+            async with asyncio.timeout(self.idle_timeout_s):
+                return await self._next_message()
+        except TimeoutError as exc:
+            if isinstance(exc, PeerTimeout):
+                raise
+            raise PeerTimeout(f"no message from the client for {self.idle_timeout_s:g} s (idle timeout)") from None
+
+    async def _next_message(self) -> Envelope:
         while True:
             self._pending.extend(self.conn.events_received())
             if self._pending:
@@ -76,8 +101,7 @@ class Session:
                 return env
             if self.conn.failed:
                 raise self.conn.error
-            read = self.reader.read(READ_CHUNK)
-            data = await (asyncio.wait_for(read, timeout) if timeout else read)
+            data = await self.reader.read(READ_CHUNK)
             if not data:
                 self.conn.receive_eof()
                 if self.conn.error is not None:
@@ -90,7 +114,10 @@ class Session:
     async def run(self) -> None:
         log.info("session %d: connection from %s", self.id, self.peer)
         try:
-            hello = await self._handshake()
+            hello = await self._receive_hello()
+            self.server.check_scene(hello.scene)   # a Hello the server cannot serve takes no slot
+            self.server.admit(self)
+            await self._set_up(hello)
             if hello.clock == "virtual":
                 await self._run_virtual()
             else:
@@ -103,8 +130,6 @@ class Session:
         except (SceneError, ConfigError) as exc:
             log.warning("session %d: %s", self.id, exc)
             self.conn.send(Error(exc.code, str(exc)))
-        except asyncio.TimeoutError:
-            self.conn.send(Error(UnexpectedMessage.code, "no Hello within the handshake timeout"))
         except (ConnectionError, ssl.SSLError, asyncio.IncompleteReadError) as exc:
             log.info("session %d: connection lost: %s", self.id, exc)
         except asyncio.CancelledError:
@@ -114,7 +139,14 @@ class Session:
             log.exception("session %d: internal error", self.id)
             self.conn.send(Error(1, f"internal server error: {type(exc).__name__}: {exc}"))
         finally:
+            self.server.release(self)   # the slot is free as soon as the peer learns why it ends
             await self._close()
+
+    def evict(self, waiting: int) -> None:
+        """Drop this connection, the oldest of ``waiting`` still to send a Hello."""
+        self._evicted_among = waiting
+        if self._hello_deadline is not None:
+            self._hello_deadline.reschedule(asyncio.get_running_loop().time())
 
     async def _close(self) -> None:
         try:
@@ -135,9 +167,20 @@ class Session:
                  "decoded, %d tick overruns)", self.id, self.frames_sent, self.frames_skipped, self.frames_held,
                  self.tick_overruns)
 
-    async def _handshake(self) -> Hello:
-        env = await self._recv(timeout=self.server.config.hello_timeout_s)
-        t_hello = time.monotonic()
+    async def _receive_hello(self) -> Hello:
+        """The client's Hello, whole within ``hello_timeout_s`` of connecting, however it trickles in."""
+        limit = self.server.config.hello_timeout_s
+        try:
+            async with asyncio.timeout_at(self._accepted + limit) as self._hello_deadline:
+                self.server.add_pending(self)
+                env = await self._next_message()
+        except TimeoutError:
+            if self._evicted_among:
+                raise PeerTimeout(f"server busy: {self._evicted_among} connections are waiting to send a Hello; "
+                                  f"this one, the oldest, is dropped") from None
+            raise PeerTimeout(f"no complete Hello within {limit:g} s of connecting") from None
+        finally:
+            self._hello_deadline = None
         hello = env.message
         if not isinstance(hello, Hello):
             raise UnexpectedMessage(f"expected Hello as the first message, got {hello.NAME}")
@@ -146,7 +189,14 @@ class Session:
             raise AccessDenied("bad or missing token")
         if hello.protocol != PROTOCOL_VERSION:
             raise UnsupportedVersion(f"client speaks protocol {hello.protocol}, this server speaks {PROTOCOL_VERSION}")
-        setup = await self.server.setup_session(hello)
+        return hello
+
+    async def _set_up(self, hello: Hello) -> None:
+        """Prepare the session, send the Welcome (and the proxies when asked for)."""
+        t_hello = time.monotonic()
+        cfg = self.server.config
+        self.idle_timeout_s = cfg.idle_timeout_virtual_s if hello.clock == "virtual" else cfg.idle_timeout_s
+        setup = await self.server.setup_session(self.id, hello)
         self.config, self.producer, self.encoder, self.depth_encoder, bundle = setup
         self.quadtree_threshold = hello.quadtree_threshold
         setup_us = int((time.monotonic() - t_hello) * 1e6)
@@ -159,22 +209,19 @@ class Session:
                 await self._flush()
         log.info("session %d: scene %s, %s clock, %dx%d output at %g Hz", self.id, self.config.scene["name"],
                  hello.clock, hello.output.width, hello.output.height, hello.output.rate_hz)
-        return hello
 
     # ------------------------------------------------------------------ frames
 
     async def _send_frame(self, pose_msg: PoseMsg, t_us: int, vtime_us: int, force_keyframe: bool = False) -> None:
-        produced = await self.server.gl.run(lambda ctx: self.producer.produce(pose_msg.pose, t_us * 1e-6))
-        loop = asyncio.get_running_loop()
+        produced = await self.server.render(self.id, lambda ctx: self.producer.produce(pose_msg.pose, t_us * 1e-6))
         t0 = time.perf_counter()
-        jobs = [loop.run_in_executor(self.server.encode_pool, self.encoder.encode, produced.yuv, force_keyframe)]
+        jobs = [self.server.encode(self.id, self.encoder.encode, produced.yuv, force_keyframe)]
         if self.quadtree_threshold > 0:   # the views' quadtrees, built beside the H.264 encode
-            jobs.append(loop.run_in_executor(self.server.encode_pool, quadtree_payload, produced.distances,
-                                             self.quadtree_threshold))
+            jobs.append(self.server.encode(self.id, quadtree_payload, produced.distances, self.quadtree_threshold))
         (data, key), *quadtree = await asyncio.gather(*jobs)
         payloads = [(PayloadKind.H264_ATLAS, data)]
         if self.depth_encoder is not None:
-            payloads += await loop.run_in_executor(self.server.encode_pool, self.depth_encoder.encode, produced)
+            payloads += await self.server.encode(self.id, self.depth_encoder.encode, produced)
         payloads += [(PayloadKind.QUADTREE, q) for q in quadtree]
         encode_ms = (time.perf_counter() - t0) * 1e3   # H.264 and, with the edge codec, depth (and quadtrees)
         frame = Frame(frame_id=self.frames_sent, render_t_us=t_us, pose_t_us=pose_msg.t_us, pose_seq=pose_msg.seq,
@@ -195,6 +242,9 @@ class Session:
         """
         interval = self.config.frame_interval_us
         delay = self.config.server_delay_us
+        # A client's clock runs ahead of the next frame by its own tick and the link's delays; past
+        # this it only makes the session render frames nobody waits for, as fast as it can.
+        max_lead_us = int(round(self.server.config.max_clock_lead_s * 1e6)) + interval + delay
         horizon = None          # every later client message has a virtual time >= this
         poses = deque()         # (arrival vtime, PoseMsg) not yet in effect
         current = None
@@ -213,6 +263,10 @@ class Session:
             env = await self._recv()
             if horizon is not None and env.vtime_us < horizon:
                 raise UnexpectedMessage(f"virtual time went backwards ({env.vtime_us} us after {horizon} us)")
+            if k is not None and env.vtime_us - k * interval > max_lead_us:
+                lead = (env.vtime_us - k * interval) / 1e6
+                raise UnexpectedMessage(f"the client's clock ({env.vtime_us} us) runs {lead:g} s ahead of the next "
+                                        f"frame ({k * interval} us), more than the {max_lead_us / 1e6:g} s allowed")
             horizon = env.vtime_us
             if isinstance(env.message, PoseMsg):
                 poses.append((env.vtime_us, env.message))
@@ -246,6 +300,21 @@ class Session:
         decoded = self.client_stats.get(FRAMES_DECODED)
         return decoded is not None and self.frames_sent - decoded >= self.server.config.max_in_flight
 
+    def _previous_frame_unsent(self, now: float) -> bool:
+        """Real clock: part of the last frame still waits in our buffer for a slow connection. A
+        new frame now would queue behind it and be stale when it arrives; the next tick renders
+        the newest pose instead, so a slow reader gets the newest frame, not a backlog. Raises
+        PeerTimeout when the client has read nothing for the idle timeout."""
+        unsent = self.writer.transport.get_write_buffer_size()
+        if not unsent:
+            self._unsent_since = None
+            return False
+        if self._unsent_since is None or unsent < self._unsent_bytes:   # still draining
+            self._unsent_since, self._unsent_bytes = now, unsent
+        elif now - self._unsent_since > self.idle_timeout_s:
+            raise PeerTimeout(f"the client read nothing for {self.idle_timeout_s:g} s")
+        return True
+
     async def _run_real(self) -> None:
         """Wall clock: render at the server's own rate with the newest pose received."""
         interval = 1.0 / self.config.server_fps
@@ -264,7 +333,7 @@ class Session:
                     receiver.result()  # re-raises the receiver's error, or SessionClosed
                     return
                 if newest[0] is not None:
-                    if self.writer.transport.get_write_buffer_size() > SLOW_CLIENT_BACKLOG:
+                    if self._previous_frame_unsent(loop.time()):
                         self.frames_skipped += 1
                     elif self._client_behind():
                         self.frames_held += 1

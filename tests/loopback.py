@@ -49,3 +49,51 @@ async def exchange_virtual(conn, origin, pose_times_us, interval_us: int) -> lis
             if isinstance(env.message, Frame):
                 frames.append((env.vtime_us, env.message))
     return frames
+
+
+
+class ScriptedPeer:
+    """One connection of :func:`scripted_server`, driven by hand through a sans-I/O Connection."""
+
+    def __init__(self, reader, writer):
+        from collections import deque
+
+        from pibr.protocol.connection import Connection
+
+        self.reader, self.writer = reader, writer
+        self.conn = Connection()
+        self._inbox = deque()
+
+    async def send(self, message, vtime_us: int = 0) -> None:
+        self.conn.send(message, vtime_us)
+        self.writer.write(self.conn.data_to_send())
+        await self.writer.drain()
+
+    async def recv(self, timeout: float = 10.0):
+        """The next message (None at the end of the stream)."""
+        while not self._inbox:
+            data = await asyncio.wait_for(self.reader.read(65536), timeout)
+            if not data:
+                return None
+            self.conn.receive_data(data)
+            self._inbox.extend(e.message for e in self.conn.events_received())
+        return self._inbox.popleft()
+
+
+@contextlib.asynccontextmanager
+async def scripted_server(script):
+    """A hand-written server on loopback: ``await script(peer)`` per connection, with a
+    :class:`ScriptedPeer`. Yields (host, port). For hostile or broken servers."""
+
+    async def handle(reader, writer):
+        try:
+            await script(ScriptedPeer(reader, writer))
+        finally:
+            writer.close()
+
+    srv = await asyncio.start_server(handle, "127.0.0.1", 0)
+    try:
+        yield srv.sockets[0].getsockname()[:2]
+    finally:
+        srv.close()
+        await srv.wait_closed()

@@ -183,3 +183,20 @@ def test_bench_ibr_shows_its_defaults_and_takes_its_variants(capsys):
     assert args.speed_sizes == ((640, 360),)
     assert main(["bench", "ibr", "--lod-levels", "tiny"]) == 2
     assert "--lod-levels: unknown level(s) tiny" in capsys.readouterr().err
+
+
+def test_timeouts_and_limits_are_options(capsys):
+    """Issue 13: the server's deadlines and limits and the client's receive timeout."""
+    args = build_parser().parse_args(["serve", "--max-pending", "5", "--hello-timeout-s", "2", "--idle-timeout-s", "3",
+                                      "--idle-timeout-virtual-s", "4", "--max-clock-lead-s", "1.5"])
+    assert (args.max_pending, args.hello_timeout_s, args.idle_timeout_s, args.idle_timeout_virtual_s,
+            args.max_clock_lead_s) == (5, 2.0, 3.0, 4.0, 1.5)
+    assert build_parser().parse_args(["client", "--receive-timeout-s", "7"]).receive_timeout_s == 7.0
+    with pytest.raises(SystemExit):
+        build_parser().parse_args(["client", "--receive-timeout-s", "0"])
+    assert "must be a positive number" in capsys.readouterr().err
+    for argv, message in [(["--idle-timeout-s", "0"], "idle timeout must be in (0, 86400] s"),
+                          (["--max-pending", "0"], "max pending connections must be at least 1"),
+                          (["--max-clock-lead-s", "-1"], "clock lead must be in (0, 86400] s")]:
+        assert main(["serve", "--port", "0", *argv]) == 2
+        assert message in capsys.readouterr().err

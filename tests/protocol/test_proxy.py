@@ -6,8 +6,8 @@ from hypothesis import strategies as st
 from pibr.protocol.errors import MalformedMessage
 from pibr.protocol.messages import ProxyChunk
 from pibr.protocol.motion import RigidMotion
-from pibr.protocol.proxy import (BundleAssembler, ProxyObject, compress_bundle, decode_bundle, decompress_bundle,
-                                 encode_bundle, split_chunks)
+from pibr.protocol.proxy import (MAX_CHUNKS, MIN_CHUNK_BYTES, BundleAssembler, BundleInfo, ProxyObject,
+                                 compress_bundle, decode_bundle, decompress_bundle, encode_bundle, split_chunks)
 
 
 def _objects():
@@ -24,7 +24,8 @@ def _objects():
 
 def test_round_trip():
     objs = _objects()
-    back = decode_bundle(decompress_bundle(compress_bundle(encode_bundle(objs))))
+    raw = encode_bundle(objs)
+    back = decode_bundle(decompress_bundle(compress_bundle(raw), len(raw), objects=2))
     assert [o.name for o in back] == ["tetra", "fan"]
     for a, b in zip(objs, back):
         np.testing.assert_array_equal(a.transform, b.transform)
@@ -79,27 +80,145 @@ def test_garbage_never_crashes(data):
             pass
 
 
-def test_zstd_bomb_refused():
+def _zeros_frame(prefix: bytes, size: int, content_size: bool, window_log: int = 20) -> bytes:
+    """A small zstd frame that inflates to ``prefix`` + zeros, ``size`` bytes in all, built
+    without ever holding the inflated bytes."""
     import zstandard
 
-    bomb = zstandard.ZstdCompressor().compress(b"\0" * (2 << 20))
-    with pytest.raises(MalformedMessage, match="exceed"):
-        decompress_bundle(bomb, max_size=1 << 20)
+    params = zstandard.ZstdCompressionParameters.from_level(1, window_log=window_log,
+                                                            write_content_size=content_size)
+    cobj = zstandard.ZstdCompressor(compression_params=params).compressobj(size=size if content_size else -1)
+    parts = [cobj.compress(prefix)]
+    zeros = bytes(1 << 20)
+    left = size - len(prefix)
+    while left > 0:
+        parts.append(cobj.compress(zeros[:min(left, len(zeros))]))
+        left -= len(zeros)
+    parts.append(cobj.flush())
+    return b"".join(parts)
 
 
-def test_assembler_checks_order_and_sizes():
-    data = compress_bundle(encode_bundle(_objects()))
-    parts = split_chunks(data, 100)
-    a = BundleAssembler()
-    for i, p in enumerate(parts):
-        a.add(ProxyChunk(i, len(parts), len(data), p))
+def _peak_bytes(fn):
+    """fn() -> (its exception, the peak of Python allocations while it ran)."""
+    import tracemalloc
+
+    tracemalloc.start()
+    try:
+        fn()
+    except MalformedMessage as exc:
+        error = exc
+    else:
+        error = None
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    return error, peak
+
+
+def test_gigabyte_bomb_is_refused_from_its_header():
+    """The 32,789-byte frame of 1 GiB of zeros (issue 13, defect 5): its header declares more
+    than the announced size, so nothing is inflated."""
+    bomb = _zeros_frame(b"", 1 << 30, content_size=True)
+    assert len(bomb) < 33_000
+    error, peak = _peak_bytes(lambda: decompress_bundle(bomb, 870))
+    assert error is not None and "declares 1073741824 bytes uncompressed, the Welcome announced 870" in str(error)
+    assert peak < 1 << 20
+
+
+@pytest.mark.parametrize("prefix, match", [
+    (b"", "bad magic"),                                     # zeros: wrong from the first bytes
+    (b"PXB1" + (5).to_bytes(4, "little"), "holds 5 objects, the Welcome announced 2"),
+    (b"PXB1" + (2).to_bytes(4, "little"), "more than the 2097152 bytes"),   # a valid start, then too much
+])
+def test_bombs_without_a_declared_size_stop_at_the_announced_size(prefix, match):
+    bomb = _zeros_frame(prefix, 256 << 20, content_size=False)
+    error, peak = _peak_bytes(lambda: decompress_bundle(bomb, 2 << 20, objects=2))
+    assert error is not None and match in str(error), error
+    assert peak < (2 << 20) + (3 << 20)     # the announced 2 MiB and one decompression step, never 256 MiB
+
+
+def test_a_window_larger_than_the_announced_bundle_is_refused():
+    bomb = _zeros_frame(b"PXB1", 16 << 20, content_size=False, window_log=23)
+    with pytest.raises(MalformedMessage, match="8388608-byte window, more than the 2097152 bytes"):
+        decompress_bundle(bomb, 2 << 20)
+
+
+def test_short_output_is_refused():
+    import zstandard
+
+    raw = encode_bundle(_objects())
+    frame = zstandard.ZstdCompressor(write_content_size=False).compress(raw)
+    with pytest.raises(MalformedMessage, match=f"decompresses to {len(raw)} bytes, the Welcome announced"):
+        decompress_bundle(frame, len(raw) + 100)
+
+
+def _info(data: bytes, chunk_bytes: int = MIN_CHUNK_BYTES) -> BundleInfo:
+    return BundleInfo(2, len(data), 870, chunk_bytes, {})
+
+
+def test_assembler_accepts_the_announced_chunks_in_any_order():
+    data = bytes(range(256)) * 9                      # 2304 bytes: chunks of 1024, 1024, 256
+    info = _info(data)
+    parts = split_chunks(data, info.chunk_bytes)
+    assert info.chunks == len(parts) == 3
+    a = BundleAssembler(info)
+    for i in (2, 0, 1):
+        assert not a.complete
+        a.add(ProxyChunk(i, 3, len(data), parts[i]))
     assert a.complete and a.data() == data
-    b = BundleAssembler()
-    with pytest.raises(MalformedMessage, match="expected chunk 0"):
-        b.add(ProxyChunk(1, len(parts), len(data), parts[1]))
-    c = BundleAssembler(max_size=10)
-    with pytest.raises(MalformedMessage, match="exceeds"):
-        c.add(ProxyChunk(0, 1, 11, b"x"))
+
+
+@pytest.mark.parametrize("chunk, match", [
+    (ProxyChunk(0, (1 << 32) - 1, 2304, b""), "count 4294967295 differs from the 3 chunks"),
+    (ProxyChunk(0, 3, 1 << 30, b"x" * 1024), "total size 1073741824 differs from the 2304 bytes"),
+    (ProxyChunk(1, 3, 2304, b""), "chunk 1 is empty"),
+    (ProxyChunk(2, 3, 2304, b"x" * 1024), "chunk 2 carries 1024 bytes, the announcement implies 256"),
+    (ProxyChunk(0, 3, 2304, b"x" * 1025), "chunk 0 carries 1025 bytes, the announcement implies 1024"),
+    (ProxyChunk(3, 3, 2304, b"x"), "index 3 is outside 0..2"),
+])
+def test_assembler_refuses_chunks_the_announcement_does_not_allow(chunk, match):
+    with pytest.raises(MalformedMessage, match=match):
+        BundleAssembler(_info(bytes(2304))).add(chunk)
+
+
+def test_assembler_refuses_a_chunk_twice_and_data_before_completion():
+    a = BundleAssembler(_info(bytes(2304)))
+    a.add(ProxyChunk(0, 3, 2304, bytes(1024)))
+    with pytest.raises(MalformedMessage, match="chunk 0 arrived twice"):
+        a.add(ProxyChunk(0, 3, 2304, bytes(1024)))
+    with pytest.raises(MalformedMessage, match="1 of 3 chunks received"):
+        a.data()
+
+
+def test_the_announcement_bounds_the_chunk_count():
+    """40,000 chunks of one byte, or 2**32-1 chunks, cannot be announced (issue 13, defect 6)."""
+    good = BundleInfo(1, 40_000, 870, MIN_CHUNK_BYTES, {}).to_json()
+    assert BundleInfo.from_json(good).chunks == 40
+    for change, match in [({"chunk_bytes": 1, "chunks": 40_000}, "'chunk_bytes' = 1 is outside"),
+                          ({"chunks": (1 << 32) - 1}, "'chunks' = 4294967295 is outside"),
+                          ({"chunks": 41}, "41 chunks do not carry 40000 bytes"),
+                          ({"raw_bytes": 1 << 40}, "'raw_bytes' = 1099511627776 is outside"),
+                          ({"bytes": 0}, "'bytes' = 0 is outside"),
+                          ({"objects": 10 ** 9}, "'objects' = 1000000000 is outside"),
+                          ({"raw_bytes": 1e3}, "'raw_bytes' must be an integer")]:
+        with pytest.raises(MalformedMessage, match=match):
+            BundleInfo.from_json(good | change)
+    with pytest.raises(ValueError, match=f"more than the limit of {MAX_CHUNKS}"):
+        BundleInfo(1, (MAX_CHUNKS + 1) * MIN_CHUNK_BYTES, 870, MIN_CHUNK_BYTES, {})
+
+
+def test_welcome_config_validates_the_proxy_announcement():
+    from pibr.protocol.atlas import build_layout
+    from pibr.protocol.session import SessionConfig, ViewConfig
+
+    cfg = SessionConfig(scene={"name": "t", "near": 0.1, "far": 100.0, "viewer_origin": [0, 1.6, 0, 1, 0, 0, 0]},
+                        clock="virtual", server_fps=10.0, server_delay_us=20_000, primary=ViewConfig(64, 64),
+                        extra=None, extra_offset=None, atlas=build_layout((64, 64), None, True),
+                        video_bitrate_kbps=1000.0, keyint=30).to_json()
+    cfg["proxies"] = BundleInfo(1, 40_000, 870, MIN_CHUNK_BYTES, {"proxy": 12}).to_json()
+    assert SessionConfig.from_json(cfg).proxies["chunks"] == 40
+    cfg["proxies"]["chunks"] = (1 << 32) - 1
+    with pytest.raises(MalformedMessage, match="Welcome.config.proxies: field 'chunks'"):
+        SessionConfig.from_json(cfg)
 
 
 def test_motion_round_trip_and_validation():

@@ -1,0 +1,103 @@
+"""Fair sharing of one worker between sessions (issue 13, defect 11): a session that queues job
+after job cannot make a newcomer wait behind all of them."""
+import asyncio
+
+import pytest
+
+from pibr.server.fair_queue import FairQueue
+
+
+async def _job(log: list, name: str, seconds: float = 0.01):
+    log.append(name)
+    await asyncio.sleep(seconds)
+    return name
+
+
+async def test_a_newcomer_goes_next_not_behind_every_busy_session():
+    queue = FairQueue(1)
+    log: list = []
+    stop = asyncio.Event()
+
+    async def busy(key):
+        while not stop.is_set():
+            await queue.run(key, lambda: _job(log, key))
+
+    hogs = [asyncio.create_task(busy(f"busy{i}")) for i in range(7)]
+    while len(log) < 30:                      # every busy session has a job queued
+        await asyncio.sleep(0.005)
+    assert queue.waiting == 6
+    started = len(log)
+    assert await queue.run("newcomer", lambda: _job(log, "newcomer")) == "newcomer"
+    # First come, first served it would start after the 6 queued jobs; fairly, right after the running one.
+    assert log[started] == "newcomer"
+    stop.set()
+    await asyncio.gather(*hogs)
+
+
+async def test_busy_sessions_share_the_worker_by_the_time_their_jobs_take():
+    """Measured by a clock each job advances by its cost: 'b' takes twice as long per job as 'a'
+    and 'c', so while all three are busy it gets half as many turns."""
+    now = [0.0]
+    queue = FairQueue(1, clock=lambda: now[0])
+    log: list = []
+    cost = {"a": 1.0, "b": 2.0, "c": 1.0}
+
+    async def job(key):
+        log.append(key)
+        await asyncio.sleep(0)
+        now[0] += cost[key]
+
+    async def session(key, jobs):
+        for _ in range(jobs):
+            await queue.run(key, lambda: job(key))
+
+    await asyncio.gather(*(session(k, 20) for k in "abc"))
+    # Equal time while all are busy: a and c twice per b; then b alone finishes its jobs.
+    assert "".join(log) == "abcacb" + "acacb" * 9 + "b" * 9
+
+
+async def test_slots_bound_concurrency_and_a_cancelled_wait_passes_its_turn_on():
+    queue = FairQueue(2)
+    running = 0
+    peak = 0
+    gate = asyncio.Event()
+
+    async def job():
+        nonlocal running, peak
+        running += 1
+        peak = max(peak, running)
+        await gate.wait()
+        running -= 1
+
+    tasks = [asyncio.create_task(queue.run(i, job)) for i in range(5)]
+    await asyncio.sleep(0.01)
+    assert running == 2 and queue.waiting == 3
+    tasks[2].cancel()                           # gives up while waiting
+    await asyncio.sleep(0.01)
+    assert queue.waiting == 2
+    gate.set()
+    results = await asyncio.gather(*tasks, return_exceptions=True)
+    assert isinstance(results[2], asyncio.CancelledError) and peak == 2 and running == 0
+    assert queue.waiting == 0
+
+
+async def test_a_wait_cancelled_just_as_its_turn_comes_is_skipped():
+    """The server cancels every session at shutdown: a waiter cancelled while the running job
+    ends (which drops its cancelled turn) must leave quietly, and the queue stays usable."""
+    queue = FairQueue(1)
+    gate = asyncio.Event()
+    first = asyncio.create_task(queue.run("a", gate.wait))
+    await asyncio.sleep(0)
+    second = asyncio.create_task(queue.run("b", gate.wait))
+    await asyncio.sleep(0)
+    assert queue.waiting == 1
+    gate.set()          # 'a' resumes first and ends its job ...
+    second.cancel()     # ... after 'b' was cancelled: its turn is dropped, not given
+    results = await asyncio.gather(first, second, return_exceptions=True)
+    assert results[0] is True and isinstance(results[1], asyncio.CancelledError)
+    assert queue.waiting == 0 and await queue.run("c", lambda: asyncio.sleep(0, "ok")) == "ok"
+
+
+def test_a_queue_needs_a_slot():
+    with pytest.raises(ValueError):
+        FairQueue(0)

@@ -1,0 +1,96 @@
+"""Issue 13, deliverable 3, the server's side: on the real clock a frame is rendered only when the
+one before has left, so a slow reader's backlog never holds more than one frame (rendered from
+an old pose); the next frame is rendered from the newest pose once there is room."""
+import asyncio
+import socket
+
+import pytest
+
+from pibr.protocol.connection import Connection
+from pibr.protocol.messages import Hello, OutputConfig, PoseMsg
+from pibr.protocol.pose import Pose
+from pibr.server.app import Server
+from pibr.server.config import ServerConfig
+
+pytestmark = pytest.mark.gl
+
+
+async def test_a_slow_reader_never_has_more_than_one_frame_waiting_in_the_server():
+    srv = Server(ServerConfig(port=0, scene="sphere", view_size=(128, 128), fps=40.0, bitrate_kbps=8000, keyint=1,
+                              extra_view="off"))
+    host, port = await srv.start()
+    task = asyncio.create_task(srv.serve_forever())
+    try:
+        sock = socket.socket()
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)   # the reader's kernel holds little
+        sock.connect((host, port))    # a plain socket nobody reads from
+        conn = Connection()
+        conn.send(Hello(client="slow", scene="sphere", clock="real", output=OutputConfig(64, 48, 90.0, 30.0)))
+        sock.sendall(conn.data_to_send())
+        while not srv.sessions:
+            await asyncio.sleep(0.01)
+        session = next(iter(srv.sessions.values()))
+        while session.config is None or session.writer.transport is None:
+            await asyncio.sleep(0.01)
+        server_sock = session.writer.transport.get_extra_info("socket")
+        server_sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, 4096)  # and so does the server's
+        sizes = [session.conn.bytes_sent]
+        send = session.conn.send
+
+        def recording_send(message, vtime_us=0):
+            send(message, vtime_us)
+            sizes.append(session.conn.bytes_sent)
+        session.conn.send = recording_send
+        conn.send(PoseMsg(0, 0, Pose.make((0, 1.6, 0))))
+        sock.sendall(conn.data_to_send())
+
+        backlog = 0
+        for _ in range(1000):                     # the reader never reads: until 10 ticks were skipped
+            await asyncio.sleep(0.01)
+            backlog = max(backlog, session.writer.transport.get_write_buffer_size())
+            if session.frames_skipped >= 10:
+                break
+        frame_bytes = [b - a for a, b in zip(sizes, sizes[1:])]
+        assert session.frames_skipped >= 10 and session.frames_sent >= 2
+        assert 0 < backlog <= max(frame_bytes)    # one frame at most, not a queue of them
+        sock.close()
+    finally:
+        task.cancel()
+        await asyncio.gather(task, return_exceptions=True)
+        await srv.close()
+
+
+async def test_a_real_clock_client_that_sends_poses_but_reads_nothing_loses_its_slot():
+    """Issue 13, defect 9 on the real clock: poses keep coming, but nothing sent is read for the
+    idle timeout; the session ends and its slot is free."""
+    srv = Server(ServerConfig(port=0, scene="sphere", view_size=(128, 128), fps=40.0, keyint=1, extra_view="off",
+                              idle_timeout_s=0.5))
+    host, port = await srv.start()
+    task = asyncio.create_task(srv.serve_forever())
+    try:
+        sock = socket.socket()
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+        sock.connect((host, port))
+        sock.setblocking(False)
+        conn = Connection()
+        conn.send(Hello(client="deaf", scene="sphere", clock="real", output=OutputConfig(64, 48, 90.0, 30.0)))
+        loop = asyncio.get_running_loop()
+        await loop.sock_sendall(sock, conn.data_to_send())
+        while not srv.sessions:
+            await asyncio.sleep(0.01)
+        session = next(iter(srv.sessions.values()))
+        while session.config is None:
+            await asyncio.sleep(0.01)
+        session.writer.transport.get_extra_info("socket").setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, 4096)
+        for i in range(1000):                     # a pose every 20 ms, until the server gives up
+            conn.send(PoseMsg(i, i * 20_000, Pose.make((0, 1.6, 0))))
+            await loop.sock_sendall(sock, conn.data_to_send())
+            if not srv.sessions:
+                break
+            await asyncio.sleep(0.02)
+        assert not srv.sessions and session.frames_skipped > 0
+        sock.close()
+    finally:
+        task.cancel()
+        await asyncio.gather(task, return_exceptions=True)
+        await srv.close()
