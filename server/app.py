@@ -38,6 +38,7 @@ class Server(TrackedListener):
         self.config = config
         #: sessions past a valid Hello: these count toward ``max_sessions``
         self.sessions: dict[int, Session] = {}
+        self._slot_waiters: dict[int, asyncio.Future] = {}   # Hellos waiting for a slot, oldest first
         #: connections still to send their Hello, oldest first (bounded by ``max_pending``)
         self.pending: dict[int, Session] = {}
         self._ids = itertools.count(1)
@@ -97,18 +98,45 @@ class Server(TrackedListener):
             del self.pending[oldest.id]
             oldest.evict(len(self.pending) + 1)
 
-    def admit(self, session: Session) -> None:
-        """After a valid Hello: take a session slot, or ConfigError when all are taken."""
+    async def admit(self, session: Session) -> None:
+        """After a valid Hello: take a session slot, waiting up to ``admit_wait_s`` for one to
+        free (first come, first served); ConfigError when none does.
+
+        A session whose client has just left may not have noticed yet (it learns when it next
+        reads or writes, which can be a render later), so a client that reconnects at once
+        would otherwise be told the server is full."""
         self.pending.pop(session.id, None)
-        if len(self.sessions) >= self.config.max_sessions:
-            raise ConfigError(f"server full: {len(self.sessions)} sessions already")
+        if len(self.sessions) >= self.config.max_sessions or self._slot_waiters:
+            loop = asyncio.get_running_loop()
+            self._slot_waiters[session.id] = loop.create_future()
+            try:
+                async with asyncio.timeout(self.config.admit_wait_s):
+                    while True:
+                        await self._slot_waiters[session.id]
+                        if len(self.sessions) < self.config.max_sessions:
+                            break
+                        self._slot_waiters[session.id] = loop.create_future()   # keeps its place
+            except TimeoutError:
+                raise ConfigError(f"server full: {len(self.sessions)} sessions already (waited "
+                                  f"{self.config.admit_wait_s:g} s for one to end)") from None
+            finally:
+                del self._slot_waiters[session.id]
+                self._wake_next()   # runs once this one is counted below: no await in between
         self.sessions[session.id] = session
+
+    def _wake_next(self) -> None:
+        """A slot is free: wake the longest-waiting Hello (it checks again when it runs)."""
+        if len(self.sessions) < self.config.max_sessions and self._slot_waiters:
+            first = next(iter(self._slot_waiters.values()))
+            if not first.done():
+                first.set_result(None)
 
     def release(self, session: Session) -> None:
         self.pending.pop(session.id, None)
         self.sessions.pop(session.id, None)
         self.gl_queue.forget(session.id)
         self.encode_queue.forget(session.id)
+        self._wake_next()
 
     async def render(self, session_id: int, fn, *args):
         """``fn(ctx, *args)`` on the GL thread, in this session's fair turn."""

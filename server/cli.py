@@ -116,6 +116,9 @@ def register(sub) -> None:
     p.add_argument("--edge-no-temporal", action="store_true", help="edge codec: no temporal context")
     p.add_argument("--max-sessions", type=int, default=8,
                    help="sessions served at once, counted from a valid Hello (default 8)")
+    p.add_argument("--admit-wait-s", type=float, default=5.0, metavar="S",
+                   help="a Hello that finds every session slot taken waits up to S seconds for one to free, "
+                        "first come first served, before 'server full' (default 5; 0: refuse at once)")
     p.add_argument("--max-pending", type=int, default=64, metavar="N",
                    help="connections still to send their Hello; beyond N the oldest is dropped (default 64)")
     p.add_argument("--hello-timeout-s", type=float, default=10.0, metavar="S",
@@ -176,7 +179,8 @@ def cmd_serve(args) -> int:
                           preset=args.preset, projection=args.projection, max_edge_deg=args.max_edge_deg,
                           server_delay_ms=args.server_delay_ms,
                           depth_codec=args.depth_codec, max_sessions=args.max_sessions,
-                          max_pending=args.max_pending, hello_timeout_s=args.hello_timeout_s,
+                          max_pending=args.max_pending, admit_wait_s=args.admit_wait_s,
+                          hello_timeout_s=args.hello_timeout_s,
                           idle_timeout_s=args.idle_timeout_s, idle_timeout_virtual_s=args.idle_timeout_virtual_s,
                           max_clock_lead_s=args.max_clock_lead_s,
                           max_in_flight=args.max_in_flight,

@@ -45,6 +45,7 @@ class ServerConfig:
     depth_codec: str = "h264"
     max_message_size: int = DEFAULT_MAX_MESSAGE_SIZE
     max_sessions: int = 8               # sessions past their Hello
+    admit_wait_s: float = 5.0           # a Hello at a full server waits this long for a slot
     max_pending: int = 64               # connections yet to send a Hello; beyond, the oldest is dropped
     hello_timeout_s: float = 10.0       # from connecting to a whole Hello
     idle_timeout_s: float = 15.0        # real clock: longest wait for the client's next pose or clock
@@ -85,6 +86,8 @@ class ServerConfig:
             raise ConfigError("max sessions must be at least 1")
         if self.max_pending < 1:
             raise ConfigError("max pending connections must be at least 1")
+        if not (0 <= self.admit_wait_s <= 3600):
+            raise ConfigError(f"admission wait must be in 0..3600 s, got {self.admit_wait_s}")
         for value, what in ((self.hello_timeout_s, "hello timeout"), (self.idle_timeout_s, "idle timeout"),
                             (self.idle_timeout_virtual_s, "virtual-clock idle timeout"),
                             (self.max_clock_lead_s, "clock lead")):

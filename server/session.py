@@ -116,7 +116,7 @@ class Session:
         try:
             hello = await self._receive_hello()
             self.server.check_scene(hello.scene)   # a Hello the server cannot serve takes no slot
-            self.server.admit(self)
+            await self.server.admit(self)
             await self._set_up(hello)
             if hello.clock == "virtual":
                 await self._run_virtual()

@@ -120,7 +120,7 @@ async def test_a_client_that_reads_nothing_loses_its_slot():
 async def test_idle_connections_before_hello_take_no_slot():
     """Defect 10: 12 connections that never say Hello; a client connecting after them is served at
     once, and the oldest idle ones beyond max_pending are dropped with an Error saying why."""
-    srv, host, port, task = await _serving(max_sessions=1, max_pending=4, hello_timeout_s=30.0)
+    srv, host, port, task = await _serving(max_sessions=1, max_pending=4, hello_timeout_s=30.0, admit_wait_s=0.3)
     idle = []
     try:
         for _ in range(12):
@@ -132,7 +132,8 @@ async def test_idle_connections_before_hello_take_no_slot():
         dropped = await _messages_until_closed(idle[0][0], timeout=5.0)
         assert dropped[0].code == PeerTimeout.code and "the oldest, is dropped" in dropped[0].text
         # The slot counts from the Hello: a second Hello finds the server full.
-        with pytest.raises(RemoteError, match="server full: 1 sessions already") as err:
+        with pytest.raises(RemoteError, match=r"server full: 1 sessions already \(waited 0.3 s for one to end\)") \
+                as err:
             await _welcomed(host, port, timeout=10.0)
         assert err.value.code == ConfigError.code
         # A Hello the server cannot serve is told so, full or not: it never takes a slot.
@@ -142,6 +143,34 @@ async def test_idle_connections_before_hello_take_no_slot():
     finally:
         for _, writer in idle:
             writer.close()
+        await _stop(srv, task)
+
+
+async def test_a_hello_at_a_full_server_waits_for_a_slot_first_come_first_served():
+    """A client reconnecting the moment its previous session ends (before the server has noticed)
+    is not told "server full": Hellos wait up to admit_wait_s for a slot, in arrival order."""
+    srv, host, port, task = await _serving(max_sessions=1, admit_wait_s=10.0)
+    try:
+        first = await _welcomed(host, port)
+        order = []
+
+        async def queued(name):
+            c = await _welcomed(host, port, timeout=20.0)
+            order.append(name)
+            return c
+        second = asyncio.create_task(queued("second"))
+        await asyncio.sleep(0.3)
+        third = asyncio.create_task(queued("third"))
+        await asyncio.sleep(0.3)
+        assert list(srv._slot_waiters) and len(srv._slot_waiters) == 2 and not second.done()
+        await first.close()
+        c2 = await asyncio.wait_for(second, 10)
+        assert order == ["second"] and not third.done()
+        await c2.close()
+        c3 = await asyncio.wait_for(third, 10)
+        assert order == ["second", "third"] and not srv._slot_waiters
+        await c3.close()
+    finally:
         await _stop(srv, task)
 
 
