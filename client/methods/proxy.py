@@ -20,7 +20,7 @@ fallback (alpha 0).
 
 Moving objects. The proxy of a moving object is drawn where it is at the display time, as
 ``motion`` (client/object_motion.py) extrapolates it from the transforms the frames carried
-(``velocity`` by default), and looked up in the views where the frame's own transforms put it
+(second order by default), and looked up in the views where the frame's own transforms put it
 when they were rendered.
 
 Shading is deferred: the proxy passes store, per pixel, which view and where to sample; one

@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from pibr.client.object_motion import (ObjectPlacer, PoseHistory, damped_horizon, extrapolate, rotation_exp,
+from pibr.client.object_motion import (ACCEL_LIMIT, ObjectPlacer, PoseHistory, damped_horizon, extrapolate, rotation_exp,
                                        rotation_log)
 from pibr.protocol.errors import ConfigError
 from pibr.protocol.object_poses import ObjectPoses
@@ -62,14 +62,25 @@ def test_constant_velocity_and_spin_are_extrapolated_exactly():
     np.testing.assert_allclose(accel, motion(4.5 * DT), atol=1e-12)
 
 
-def test_second_order_follows_a_constant_acceleration():
+def test_second_order_follows_a_constant_acceleration_within_its_limit():
+    """A steady acceleration is followed exactly while its correction stays within ACCEL_LIMIT of
+    the first order's displacement; from rest (all acceleration) it is limited to that."""
     def motion(t):
-        return _rigid(position=(0.5 * 3.0 * t * t, 0, 0))
+        return _rigid(position=(4.0 * t + 1.5 * t * t, 0, 0))
 
     track = _track(motion, [0.0, DT, 2 * DT])
     t = 2 * DT + 0.25
     assert extrapolate(track, t, "accel", HORIZON)[0, 3] == pytest.approx(motion(t)[0, 3], abs=1e-12)
-    assert extrapolate(track, t, "velocity", HORIZON)[0, 3] < motion(t)[0, 3] - 0.05
+    assert extrapolate(track, t, "velocity", HORIZON)[0, 3] < motion(t)[0, 3] - 0.1
+
+    def from_rest(t):
+        return _rigid(position=(10.0 * t * t, 0, 0))
+
+    track = _track(from_rest, [0.0, DT, 2 * DT])
+    x_new, first = from_rest(2 * DT)[0, 3], extrapolate(track, t, "velocity", HORIZON)[0, 3]
+    got = extrapolate(track, t, "accel", HORIZON)[0, 3]
+    assert got == pytest.approx(x_new + (1.0 + ACCEL_LIMIT) * (first - x_new))   # limited
+    assert first < got < from_rest(t)[0, 3]
 
 
 def test_a_reversal_between_frames_overshoots_by_at_most_the_capped_horizon():
@@ -96,10 +107,17 @@ def test_a_stop_between_frames_and_a_start():
     assert over == pytest.approx(1.0 + 2.0 * 0.25)                               # still moving, bounded
     still = extrapolate(_track(travel.matrix, [1.4, 1.5, 1.6]), 1.8, "velocity", HORIZON)[0, 3]
     assert still == pytest.approx(1.0, abs=1e-12) == travel.matrix(1.8)[0, 3]
+    # the second order sees a huge deceleration there; limited, it does not throw the cart back
+    for t in (1.7, 1.8, 2.0, 5.0):
+        assert extrapolate(_track(travel.matrix, [1.4, 1.5, 1.6]), t, "accel", HORIZON)[0, 3] == \
+            pytest.approx(1.0, abs=1e-12)
     # starting at t = 2.5: frames at 2.4 and 2.5 are at rest, then it tracks from two moving frames on
     assert extrapolate(_track(travel.matrix, [2.4, 2.5]), 2.7, "velocity", HORIZON)[0, 3] == pytest.approx(1.0)
     np.testing.assert_allclose(extrapolate(_track(travel.matrix, [2.6, 2.7]), 2.9, "velocity", HORIZON),
                                travel.matrix(2.9), atol=1e-12)
+    # right after the start the second order overshoots, by at most ACCEL_LIMIT of the way
+    x = extrapolate(_track(travel.matrix, [2.4, 2.5, 2.6]), 2.8, "accel", HORIZON)[0, 3]
+    assert travel.matrix(2.8)[0, 3] > x >= 0.8 - (1.0 + ACCEL_LIMIT) * 2.0 * 0.2 - 1e-12
 
 
 @pytest.mark.parametrize("turn", [0.9 * math.pi, 0.99 * math.pi, math.pi - 1e-7])
