@@ -67,7 +67,11 @@ class FloorPass:
 
 
 class Simulation:
-    """Server and client pipelines of one session in one process, on one GL context."""
+    """Server and client pipelines of one session in one process, on one GL context.
+
+    Frames carry what the server's do, the moving objects' transforms included; ``poses`` is
+    the client's history of them (every server frame's, shown or not), handed to the methods
+    with ``oracle_pose`` (the scene's animation, for proxy's ``motion="oracle"``)."""
 
     def __init__(self, scene, view_size=(1024, 1024), out_size=(960, 540), fov_deg=90.0, fps=10.0,
                  bitrate_kbps=16000.0, extra_view="auto", proxies=None, ctx=None, depth_codec="h264",
