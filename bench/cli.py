@@ -152,6 +152,10 @@ def register(sub) -> None:
     d.add_argument("--method", type=parse_methods, default=("none", "rotation", "proxy"),
                    help="methods to compare, comma-separated (default none,rotation,proxy)")
     d.add_argument("--depth-codec", choices=("h264", "edge"), default="h264", help="depth transport")
+    from pibr.client.object_motion import CLIENT_MOTION_MODES
+
+    d.add_argument("--motion", choices=CLIENT_MOTION_MODES, default=None,
+                   help="proxy: how moving objects are placed at the display time (see 'pibr client --help')")
     d.add_argument("--clock", choices=("virtual", "real"), default="virtual")
     d.add_argument("--flip-every", type=_non_negative_int, default=4, help="FLIP on every Nth frame, 0: never (default 4)")
     d.set_defaults(func=cmd_demo)
@@ -485,7 +489,8 @@ def cmd_demo(args) -> int:
     metrics = run_demo(out_dir=args.out, scene=with_up(args.scene, args.up), trace=args.trace, start_s=args.start,
                        duration_s=args.duration, rate_hz=args.rate, size=args.size, latency_ms=args.latency_ms,
                        methods=args.method, clock=args.clock, flip_every=args.flip_every, anchor=args.anchor,
-                       server_args=("--depth-codec", args.depth_codec))
+                       server_args=("--depth-codec", args.depth_codec),
+                       client_args=("--motion", args.motion) if args.motion else ())
     print_report(metrics, args.out)
     return 0
 

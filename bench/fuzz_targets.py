@@ -389,18 +389,16 @@ class ProxyTarget(Target):
         from pibr.scenes.description import box_mesh
         from pibr.scenes.lod import simplify_encaging
         from pibr.scenes.registry import load_scene
-        from pibr.scenes.scene import Animation
 
         objects = []
         for obj in load_scene("sphere").objects:
             lod = simplify_encaging(obj.mesh, resolution=12)
-            objects.append(ProxyObject(obj.name, obj.transform, obj.animation, obj.mesh.bounds().astype("f8"),
+            objects.append(ProxyObject(obj.name, obj.transform, obj.is_dynamic, obj.mesh.bounds().astype("f8"),
                                        (obj.mesh.vertices, obj.mesh.faces), (lod.proxy.vertices, lod.proxy.faces)))
         box = box_mesh((0.4, 0.4, 0.4))
-        spin = Animation("spin", (0.0, 1.0, 0.0), 0.8, (1.0, 0.5, 0.0))
         transform = np.eye(4)
         transform[:3, 3] = (1.0, 0.5, 0.0)
-        objects.append(ProxyObject("box", transform, spin, box.bounds().astype("f8"), (box.vertices, box.faces),
+        objects.append(ProxyObject("box", transform, True, box.bounds().astype("f8"), (box.vertices, box.faces),
                                    (box.vertices, box.faces)))
         small = encode_bundle(objects[1:])
         raw = encode_bundle(objects)
@@ -435,13 +433,13 @@ class ProxyTarget(Target):
         elif kind != "raw":
             data = decompress_bundle(data, *self.announced[kind])
         for obj in decode_bundle(data):
-            for t in (0.0, 1.5):
-                if not np.all(np.isfinite(obj.world_matrix(t))):
-                    raise AssertionError(f"decoded object {obj.name!r} has a non-finite world matrix at t={t}")
+            if not (np.all(np.isfinite(obj.transform)) and isinstance(obj.moving, bool)):
+                raise AssertionError(f"decoded object {obj.name!r} has a non-finite transform or a moving flag "
+                                     f"{obj.moving!r}")
 
 
 def _bundle_fields(raw: bytes) -> tuple:
-    """Object count; per object the name length, transform, motion flag and values, bounds, and
+    """Object count; per object the name length, transform, moving flag, bounds, and
     both meshes' vertex and face counts, a vertex and a face index (protocol/proxy.py layout)."""
     fields, pos = [(4, 4, "u")], 8
     for _ in range(struct.unpack_from("<I", raw, 4)[0]):
@@ -450,8 +448,8 @@ def _bundle_fields(raw: bytes) -> tuple:
         pos += 2 + n
         fields += [(pos + 8 * k, 8, "f") for k in range(16)] + [(pos + 128, 1, "u")]
         pos += 129
-        fields += [(pos + 8 * k, 8, "f") for k in range(11 + 6)]
-        pos += 88 + 48
+        fields += [(pos + 8 * k, 8, "f") for k in range(6)]
+        pos += 48
         for _mesh in range(2):
             nv, nf = struct.unpack_from("<II", raw, pos)
             fields += [(pos, 4, "u"), (pos + 4, 4, "u"), (pos + 8, 8, "u"), (pos + 8 + 12 * nv, 4, "u")]

@@ -14,6 +14,7 @@ ms, triangles drawn and DSSIM for several LoD targets and forced levels.
 from __future__ import annotations
 
 import dataclasses
+import math
 import sys
 import time
 
@@ -66,7 +67,11 @@ class FloorPass:
 
 
 class Simulation:
-    """Server and client pipelines of one session in one process, on one GL context."""
+    """Server and client pipelines of one session in one process, on one GL context.
+
+    Frames carry what the server's do, the moving objects' transforms included; ``poses`` is
+    the client's history of them (every server frame's, shown or not), handed to the methods
+    with ``oracle_pose`` (the scene's animation, for proxy's ``motion="oracle"``)."""
 
     def __init__(self, scene, view_size=(1024, 1024), out_size=(960, 540), fov_deg=90.0, fps=10.0,
                  bitrate_kbps=16000.0, extra_view="auto", proxies=None, ctx=None, depth_codec="h264",
@@ -113,6 +118,15 @@ class Simulation:
         self._oracle = None    # (encoder, decoder, textures) of the zero-latency stream
         self.bytes = []        # H.264 bytes per frame
         self.depth_bytes = []  # edge-codec bytes per frame
+        # Moving objects' transforms as a client receives them: from every server frame, including
+        # those the display's stride never shows (a client receives them all).
+        self.poses = None
+        if scene.is_dynamic:
+            from pibr.client.object_motion import PoseHistory
+
+            rest = [o.transform for o in scene.objects]
+            bounds = [o.mesh.bounds().astype(np.float64) for o in scene.objects]
+            self.poses = PoseHistory(np.stack(rest), np.stack(bounds))
 
     def frame_at(self, t_render: float, pose):
         """Make (and decode, upload) the server frame rendered at ``t_render`` from ``pose``."""
@@ -129,6 +143,9 @@ class Simulation:
             depth = self.depth_encoder.encode(p)
             self.depth_bytes.append(sum(len(d) for _, d in depth))
             payloads += depth
+        if p.object_poses is not None:
+            payloads.append((PayloadKind.OBJECT_POSES, p.object_poses))
+            self._receive_poses(t_render, p.object_poses)
         us = int(round(t_render * 1e6))
         frame = Frame(len(self.bytes) - 1, us, us, 0, us, p.primary_pose, p.extra_pose, self.scene.near,
                       self.scene.far, payloads=tuple(payloads), keyframe=key)
@@ -136,6 +153,27 @@ class Simulation:
         self.textures.upload(self.decoder.decode(data), frame.frame_id, distances)
         self._last_render = (cache_key, frame)
         return frame
+
+    def _receive_poses(self, t_render: float, payload: bytes) -> None:
+        """Feed the pose history with the frames of the server's ticks up to ``t_render``: those the
+        display skipped (from the scene, as the server makes them) and this one (its payload)."""
+        from pibr.client.object_motion import HISTORY
+        from pibr.protocol.object_poses import decode_object_poses
+        from pibr.server.object_poses import object_poses_at
+
+        interval = 1.0 / self.fps
+        newest = self.poses.newest_time
+        if newest is None or newest >= t_render:   # a new timeline: the frames before it, as a pre-roll
+            newest = t_render - HISTORY * interval
+        k0 = int(math.floor(newest / interval + 1e-6)) + 1
+        for k in range(k0, int(round(t_render / interval))):
+            self.poses.add(k * interval, object_poses_at(self.scene, k * interval))
+        self.poses.add(t_render, decode_object_poses(payload, len(self.scene.objects)))
+
+    def oracle_pose(self, index: int, t: float) -> np.ndarray:
+        """The scene's animation: object ``index``'s (4, 4) motion at scene time ``t`` (the
+        ``oracle`` extrapolation; a benchmark's knowledge, never a client's)."""
+        return self.scene.objects[index].animation.matrix(t)
 
     def with_quadtree(self, frame, threshold: float):
         """``frame`` with the views' quadtrees at ``threshold`` attached, as a server sends them to a
@@ -176,6 +214,7 @@ class Simulation:
 
         if name == "floor":
             return FloorPass(self.ctx, self.output, self.session)
+        options = {"poses": self.poses, "oracle_pose": self.oracle_pose, **options}
         return make_method(name, self.ctx, self.output, self.session, proxies=self.proxies, **options)
 
     def display(self, method, pose, frame, scene_t, textures=None):

@@ -80,6 +80,16 @@ def default_variants(methods=None) -> list[Variant]:
     return [v for v in table if v.method in wanted]
 
 
+def motion_variants(variants, scene) -> list[Variant]:
+    """In a scene that moves, ``proxy`` (which places moving objects' proxies) also with the
+    bounds of placing them (client/object_motion.py): ``static`` (where the newest frame saw
+    them) and ``oracle`` (the scene's animation, a benchmark's knowledge); the default proxy
+    variant uses the client's default extrapolation between them."""
+    if not scene.is_dynamic or not any(v.method == "proxy" and not v.options for v in variants):
+        return []
+    return [Variant(f"proxy, {mode} motion", "proxy", {"motion": mode}) for mode in ("static", "oracle")]
+
+
 def _metrics_job(gt, rgb, ppd, with_flip):
     return frame_metrics(gt, rgb, ppd, with_flip)
 
@@ -149,6 +159,7 @@ def measure_scene(scene, variants, windows, latency_ms=128.0, rate_hz=30.0, stri
     """Quality and speed of every variant on one scene; see the module docstring."""
     from .ibr_bench import Simulation, load_proxies
 
+    variants = [*variants, *motion_variants(variants, scene)]
     with_proxies = any(v.method == "proxy" for v in variants)
     proxies, bundle = load_proxies(scene, progress=False) if with_proxies else (None, None)
     latency = LatencyModel(rate_hz=rate_hz, up_ms=latency_ms / 2, down_ms=latency_ms / 2)

@@ -199,6 +199,8 @@ class Client:
         self.proxies = None
         self.proxy_stats: dict = {}
         self._depth_decoder = None
+        #: moving objects' transforms from every frame received (scenes that move)
+        self.poses = None
         #: server time = client time + this (0 on the virtual clock, estimated on the real one)
         self._server_offset_us = 0
         #: real clock: client time 0 (tick 0) in microseconds after the receiver started; arrivals
@@ -231,7 +233,7 @@ class Client:
         out = OutputConfig(self.cfg.width, self.cfg.height, self.cfg.fov_deg, self.cfg.rate_hz)
         textures = FrameTextures(ctx, self.session)
         options = {"tau": self.cfg.tau, "lod_target_px": self.cfg.lod_pixels, "lod_level": self.cfg.lod_level,
-                   **self.cfg.options}
+                   "poses": self.poses, **self.cfg.options}
         methods = [make_method(name, ctx, out, self.session, proxies=self.proxies, **options)
                    for name in self.cfg.methods]
         target = OutputTarget(ctx, self.cfg.width, self.cfg.height)
@@ -294,6 +296,8 @@ class Client:
                 from .depth_stream import EdgeDepthDecoder
 
                 self._depth_decoder = EdgeDepthDecoder(self.session)
+            if self.session.motion:
+                self.poses = self._pose_history()
             self.gl = await loop.run_in_executor(None, GLThread, "pibr-client-gl")
             await self.gl.run(self._gl_setup)
             if cfg.record:
@@ -358,6 +362,28 @@ class Client:
                  len(self.proxies), len(data) / 1e6, assembler.count, self.proxy_stats["transfer_ms"],
                  self.proxy_stats["decode_ms"])
 
+    def _pose_history(self):
+        """Where the frames' object transforms are kept (the proxies' rest transforms and boxes
+        give each object the point whose path is extrapolated)."""
+        from .object_motion import PoseHistory
+
+        if not self.proxies:
+            return PoseHistory()
+        return PoseHistory(np.stack([o.transform for o in self.proxies]), np.stack([o.bounds for o in self.proxies]))
+
+    def _object_poses(self, frame: Frame):
+        """The frame's moving-object transforms (None when it carries none), checked against the session."""
+        from pibr.protocol.errors import MalformedMessage
+        from pibr.protocol.object_poses import decode_object_poses
+
+        payload = frame.payload(PayloadKind.OBJECT_POSES)
+        if payload is None:
+            return None
+        if not self.session.motion:
+            raise MalformedMessage(f"frame {frame.frame_id} carries object poses, but the session has no moving objects")
+        count = len(self.proxies) if self.proxies else self.session.object_count
+        return decode_object_poses(payload, count)
+
     async def _decode(self, frames: list) -> None:
         """Decode ``frames`` [(Frame, arrival us)], oldest first, and make the last the newest.
 
@@ -368,6 +394,7 @@ class Client:
         for frame, _ in frames:
             if frame.payload(PayloadKind.H264_ATLAS) is None:
                 raise UnexpectedMessage(f"frame {frame.frame_id} carries no H.264 atlas")
+        poses = [(frame, self._object_poses(frame)) for frame, _ in frames]
         loop = asyncio.get_running_loop()
 
         def decode():  # every frame, in order: both decoders keep state from the previous frame
@@ -379,6 +406,10 @@ class Client:
             return image, depth
 
         image, distances = await loop.run_in_executor(self._decode_pool, decode)
+        if self.poses is not None:   # every frame's transforms: the history sees each frame's time
+            for frame, p in poses:
+                if p is not None:
+                    self.poses.add(frame.scene_t_us / 1e6, p)
         frame, arrival_us = frames[-1]
         self._newest = _Decoded(frame, arrival_us, image, distances)
         self.frames_received += len(frames)

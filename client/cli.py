@@ -144,6 +144,12 @@ def add_method_knobs(parser) -> None:
                            help="gridwarp: no depth-aware hole filling")
     group.add_argument("--no-extra-view", dest="knob_extra_view", action="store_const", const=False, default=None,
                        help="proxy: ignore the transmitted extra view")
+    from .object_motion import CLIENT_MOTION_MODES
+
+    group.add_argument("--motion", dest="knob_motion", choices=CLIENT_MOTION_MODES, default=None,
+                       help=f"proxy: where moving objects are placed at the display time, from the transforms the "
+                            f"frames carried: static (where the newest frame saw them), velocity (constant linear "
+                            f"and angular velocity), accel (second order); default {defaults.get('motion')}")
     group.add_argument("--no-carve", dest="knob_carve", action="store_const", const=False, default=None,
                        help="proxy: test only the nearest proxy fragment of each pixel (one cheaper pass; proxy "
                             "surfaces no view confirms then hide what lies behind them)")

@@ -72,11 +72,14 @@ class LodSelector:
             return False
         return True
 
-    def select(self, pose: Pose, t: float, near: float = 0.0) -> list[Selection]:
+    def select(self, pose: Pose, near: float = 0.0, placed: dict | None = None) -> list[Selection]:
+        """What to draw at ``pose``; ``placed`` maps an object index to its (4, 4) object-to-world
+        transform where it is not at rest (moving objects), the others use their rest transform."""
         view = pose.view_matrix()
+        placed = placed or {}
         out = []
         for i, o in enumerate(self.objects):
-            world = self._corners[i] @ o.world_matrix(t).T
+            world = self._corners[i] @ placed.get(i, o.transform).T
             cam = world @ view.T
             if self.cull and not self._visible(cam[:, :3], near):
                 continue

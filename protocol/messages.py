@@ -258,8 +258,10 @@ class PayloadKind:
     EDGE_DEPTH_EXTRA = 3  # edge-codec depth of the extra view
     EDGE_MOTION = 4       # edge-codec motion of moving objects (primary view)
     QUADTREE = 5          # depth quadtrees of every view (protocol/quadtree.py), when the Hello asked
-    ALL = (H264_ATLAS, EDGE_DEPTH, EDGE_DEPTH_EXTRA, EDGE_MOTION, QUADTREE)
-    NAMES = {1: "h264-atlas", 2: "edge-depth", 3: "edge-depth-extra", 4: "edge-motion", 5: "quadtree"}
+    OBJECT_POSES = 6      # moving objects' transforms at the frame's scene time (protocol/object_poses.py)
+    ALL = (H264_ATLAS, EDGE_DEPTH, EDGE_DEPTH_EXTRA, EDGE_MOTION, QUADTREE, OBJECT_POSES)
+    NAMES = {1: "h264-atlas", 2: "edge-depth", 3: "edge-depth-extra", 4: "edge-motion", 5: "quadtree",
+             6: "object-poses"}
 
 
 _FRAME_HEAD = struct.Struct("<IqqIqI7d7ddd4fB")

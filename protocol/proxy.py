@@ -1,6 +1,6 @@
 """The proxy bundle: every object's levels of detail, sent once before the first frame.
 
-Per object: a name, its rest transform, its motion (if it moves), its bounding box, and two
+Per object: a name, its rest transform, whether it moves, its bounding box, and two
 meshes — the original and the simplified *encaging* proxy (the third level, the box, is
 the bounding box). Positions only: the client rasterises proxies for depth and
 back-projection; colour comes from the transmitted views.
@@ -8,15 +8,19 @@ back-projection; colour comes from the transmitted views.
 Layout (little-endian), then zstd-compressed and cut into ``ProxyChunk`` messages, all
 ``chunk_bytes`` long but the last (see :class:`BundleInfo`, what the ``Welcome`` announces)::
 
-    b"PXB1" u32 object_count
+    b"PXB2" u32 object_count
     per object:
         u16 name_len, name (UTF-8)
-        16 f64 transform (row-major), u8 has_motion, 11 f64 motion (see motion.RigidMotion)
+        16 f64 transform (row-major), u8 moving (0 or 1)
         6 f64 bounds (min xyz, max xyz; object space)
         2 x mesh: u32 vertex_count, u32 face_count, f32 vertices (n, 3), u32 faces (m, 3)
 
 Every count is checked against limits and the bytes left before anything is allocated;
 decompression never produces more than the announced uncompressed size.
+
+A moving object's animation does not travel: the client learns where it is from the
+transforms every ``Frame`` carries (protocol/object_poses.py), as a real engine's client
+would, never where it will be. Format 2 (``PXB2``) dropped format 1's motion model.
 """
 from __future__ import annotations
 
@@ -26,9 +30,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from .errors import MalformedMessage
-from .motion import RigidMotion
 
-MAGIC = b"PXB1"
+MAGIC = b"PXB2"
 MAX_OBJECTS = 100_000
 MAX_VERTICES = 20_000_000
 MAX_BUNDLE_BYTES = 1 << 30
@@ -45,17 +48,17 @@ LEVELS = ("original", "proxy", "box")
 
 @dataclass
 class ProxyObject:
-    """One object's levels of detail. vertices (n, 3) float32, faces (m, 3) uint32 per mesh."""
+    """One object's levels of detail. vertices (n, 3) float32, faces (m, 3) uint32 per mesh.
+
+    transform : (4, 4) object-to-world at rest; a ``moving`` object's frames say where it is.
+    """
 
     name: str
     transform: np.ndarray
-    motion: RigidMotion | None
+    moving: bool
     bounds: np.ndarray
     original: tuple
     proxy: tuple
-
-    def world_matrix(self, t: float) -> np.ndarray:
-        return self.transform if self.motion is None else self.motion.matrix(t) @ self.transform
 
     def box_mesh(self) -> tuple:
         """The bounding box as (8, 3) vertices and (12, 3) outward-wound faces."""
@@ -85,8 +88,7 @@ def encode_bundle(objects: list[ProxyObject]) -> bytes:
         name = o.name.encode("utf-8")[:65535]
         parts.append(struct.pack("<H", len(name)) + name)
         parts.append(np.asarray(o.transform, "<f8").reshape(16).tobytes())
-        motion = o.motion.to_array() if o.motion is not None else np.zeros(11)
-        parts.append(struct.pack("<B", o.motion is not None) + np.asarray(motion, "<f8").tobytes())
+        parts.append(struct.pack("<B", bool(o.moving)))
         parts.append(np.asarray(o.bounds, "<f8").reshape(6).tobytes())
         _pack_mesh(parts, *o.original)
         _pack_mesh(parts, *o.proxy)
@@ -136,20 +138,15 @@ def decode_bundle(data: bytes) -> list[ProxyObject]:
         except UnicodeDecodeError:
             raise MalformedMessage(f"proxy bundle: object {i} name is not UTF-8") from None
         transform = np.frombuffer(r.take(128, f"object {i} transform"), "<f8").reshape(4, 4).copy()
-        (has_motion,) = r.unpack("<B", f"object {i} motion flag")
-        motion_values = np.frombuffer(r.take(88, f"object {i} motion"), "<f8")
+        (moving,) = r.unpack("<B", f"object {i} moving flag")
+        if moving > 1:
+            raise MalformedMessage(f"proxy bundle: object {i} moving flag is {moving}, not 0 or 1")
         bounds = np.frombuffer(r.take(48, f"object {i} bounds"), "<f8").reshape(2, 3).copy()
         if not (np.all(np.isfinite(transform)) and np.all(np.isfinite(bounds))):
             raise MalformedMessage(f"proxy bundle: object {i} has a non-finite transform or bounds")
-        motion = None
-        if has_motion:
-            try:
-                motion = RigidMotion.from_array(motion_values)
-            except ValueError as exc:
-                raise MalformedMessage(f"proxy bundle: object {i} motion: {exc}") from None
         original = _read_mesh(r, f"object {i} original mesh")
         proxy = _read_mesh(r, f"object {i} proxy mesh")
-        objects.append(ProxyObject(name, transform, motion, bounds, original, proxy))
+        objects.append(ProxyObject(name, transform, bool(moving), bounds, original, proxy))
     if r.pos != len(data):
         raise MalformedMessage(f"proxy bundle: {len(data) - r.pos} trailing bytes")
     return objects

@@ -29,6 +29,8 @@ DEPTH_CODECS = ("h264", "edge")
 #: Clip spheres a session may announce, metres (scene descriptions obey the same ranges).
 NEAR_RANGE = (1e-9, 1e12)
 FAR_RANGE = (1e-9, 1e15)
+#: Most objects a scene may have (as the proxy bundle's limit).
+MAX_SCENE_OBJECTS = 100_000
 
 
 def _num(o, key, lo, hi, kind=float, path="Welcome.config"):
@@ -77,7 +79,9 @@ class SessionConfig:
     video_bitrate_kbps, keyint : H.264 settings
     depth_codec      : "h264" (8-bit disparity in the atlas) or "edge" (edge codec payloads)
     depth_bits, depth_min_code : quantization of the depth transport
-    motion           : the frame carries motion of moving objects
+    motion           : the scene has moving objects: every frame carries their transforms
+                       (``PayloadKind.OBJECT_POSES``) and, with the edge codec, their motion flow
+                       (``EDGE_MOTION``); False: frames carry no motion of any kind
     proxies          : the proxy bundle's announcement (proxy.BundleInfo as JSON) or None when none are sent
     """
 
@@ -111,6 +115,15 @@ class SessionConfig:
         return float(self.scene["far"])
 
     @property
+    def object_count(self) -> int:
+        """How many objects the scene has (the range of object indices in frames' object poses)."""
+        n = self.scene.get("objects", 0)
+        if isinstance(n, bool) or not isinstance(n, int) or not 0 <= n <= MAX_SCENE_OBJECTS:
+            raise MalformedMessage(f"Welcome.config.scene: field 'objects' must be a whole number in "
+                                   f"[0, {MAX_SCENE_OBJECTS}], got {n!r:.40}")
+        return n
+
+    @property
     def viewer_origin(self) -> Pose:
         return Pose.from_array(self.scene["viewer_origin"])
 
@@ -142,6 +155,8 @@ class SessionConfig:
         far = _num(scene, "far", *FAR_RANGE, path=p + ".scene")
         if not near < far:
             raise MalformedMessage(f"{p}.scene: need near < far, got {near} and {far}")
+        if "objects" in scene:
+            _num(scene, "objects", 0, MAX_SCENE_OBJECTS, int, path=p + ".scene")
         vo = scene.get("viewer_origin")
         try:
             Pose.from_array(vo)

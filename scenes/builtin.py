@@ -1,4 +1,5 @@
-"""Built-in scenes, made procedurally (no downloaded assets): ``room`` (default), ``sphere``, ``empty``.
+"""Built-in scenes, made procedurally (no downloaded assets): ``room`` (default), ``sphere``,
+``courtyard``, ``dynamic`` (things in motion), ``empty``.
 
 ``room`` is the showcase and the stress test for image-based rendering: a 10 m x 10 m x
 3.2 m gallery around a central exhibit, with occluders at several depths, thin structures
@@ -763,6 +764,90 @@ def build_courtyard() -> Scene:
     )
 
 
+#: The ``dynamic`` scene's hall: (2, 3) interior min and max corners (3 m high, the focus point
+#: near its middle).
+DYNAMIC_BOUNDS = np.array([[-4.0, 0.0, -4.5], [4.6, 3.0, 4.1]])
+
+
+def build_dynamic() -> Scene:
+    """A small hall where things move in every way extrapolation finds hard, around the point
+    the recorded people walk around (the room's focus point):
+
+    * ``spinner``: a three-armed, textured turnstile spinning steadily (2 rad/s) on a pedestal
+      at the focus point;
+    * ``pendulum``: swings 0.45 rad either way (period 2.7 s), reversing twice a period;
+    * ``cart``: starts and stops: travels 4.4 m along the north wall at 1.8 m/s, rests 1.2 s,
+      travels back (the ``travel`` animation);
+    * ``ball``: flies fast (4.8 m/s) on a 3 m circle round the focus point at 2.3 m, entering
+      and leaving any view;
+    * ``slider``: glides along the east wall behind a pillar, hidden part of each period.
+
+    Static context: a parquet floor, plaster and brick walls, a ceiling, two pillars, the
+    pedestal and the cart's rail. Small (a few thousand triangles) so it renders quickly."""
+    b = _SceneBuilder()
+    (x0, _, z0), (x1, h, z1) = DYNAMIC_BOUNDS
+    cx, cz, t = (x0 + x1) / 2, (z0 + z1) / 2, _WALL
+    b.add("floor", prim.grid_plane(x1 - x0, z1 - z0, cell_size=0.5, uv_scale=_PARQUET_M),
+          b.material("parquet", (0.88, 0.84, 0.8), "parquet"), prim.translation(cx, 0, cz))
+    b.add("ceiling", prim.grid_plane(x1 - x0, z1 - z0, cell_size=1.0, uv_scale=_PLASTER_M),
+          b.material("ceiling_paint", (0.95, 0.95, 0.93), "plaster"),
+          prim.compose(prim.translation(cx, h, cz), prim.rotation((1, 0, 0), math.pi)))
+    plaster = b.material("wall_paint", (0.93, 0.9, 0.84), "plaster")
+    b.add("walls", prim.merge([prim.box_between((x0 - t, 0, z0 - t), (x1 + t, h, z0), _PLASTER_M, 1.0),
+                               prim.box_between((x0 - t, 0, z1), (x1 + t, h, z1 + t), _PLASTER_M, 1.0),
+                               prim.box_between((x1, 0, z0), (x1 + t, h, z1), _PLASTER_M, 1.0)]), plaster)
+    b.add("wall_west_brick", prim.box_between((x0 - t, 0, z0), (x0, h, z1), _BRICK_M, 1.0),
+          b.material("brick", texture="brick"))
+    pillar = b.material("pillar_paint", (0.88, 0.86, 0.82), "plaster")
+    for name, (x, z) in (("pillar_east", (3.5, -2.2)), ("pillar_south_west", (-2.4, 2.8))):
+        b.add(name, prim.cylinder(0.25, h, 32, caps=False, uv_scale=_PLASTER_M, height_segments=6), pillar,
+              prim.translation(x, 0, z))
+    fx, _, fz = FOCUS_POINT
+    b.add("pedestal", prim.box((0.4, 1.0, 0.4), (0, 0.5, 0), 0.8, 0.2),
+          b.material("pedestal_marble", (0.95, 0.95, 0.95), "marble"), prim.translation(fx, 0, fz))
+    # Moving things.
+    arm = prim.box((0.36, 0.1, 0.06), (0.18, 0.0, 0.0), 0.5)
+    spinner = prim.merge([prim.cylinder(0.05, 0.3, 24, uv_scale=0.5),
+                          *((arm, prim.compose(prim.translation(0, 0.15, 0), prim.rotation((0, 1, 0), a)))
+                            for a in (0.0, 2 * math.pi / 3, 4 * math.pi / 3))])
+    b.add("spinner", spinner, b.material("spinner_pattern", texture="test_pattern"), prim.translation(fx, 1.0, fz),
+          Animation("spin", axis=(0, 1, 0), speed=2.0, pivot=(fx, 1.0, fz)))
+    px, pz, length, bob_r = -2.9, -2.2, 1.6, 0.14
+    pendulum = prim.merge([
+        prim.colored(prim.cylinder(0.008, length, 8, caps=False), _rgba((0.2, 0.2, 0.2))),
+        (prim.colored(prim.sphere(bob_r, 24, 12), _rgba((0.85, 0.6, 0.2))), prim.translation(0, -bob_r, 0))])
+    b.add("pendulum", pendulum, b.material("pendulum_brass"), prim.translation(px, h - length, pz),
+          Animation("swing", axis=(0, 0, 1), speed=math.sqrt(9.81 / (length + bob_r)), amplitude=0.45,
+                    pivot=(px, h, pz)))
+    rail_z = -3.6
+    b.add("rail", prim.box_between((-2.6, 0.0, rail_z - 0.25), (2.6, 0.02, rail_z + 0.25), 0.5),
+          b.material("rail_steel", (0.3, 0.3, 0.32)))
+    b.add("cart", prim.box((0.5, 0.35, 0.4), (0, 0.195, 0), 0.5), b.material("cart_wood", texture="wood"),
+          prim.translation(-2.2, 0.0, rail_z),
+          Animation("travel", axis=(1, 0, 0), speed=1.8, amplitude=4.4, rest=1.2))
+    b.add("ball", prim.sphere(0.15, 24, 12), b.material("ball_pattern", texture="test_pattern"),
+          prim.translation(fx, 2.3, fz), Animation("orbit", axis=(0, 1, 0), speed=1.6, radius=3.0))
+    b.add("slider", prim.box((0.3, 0.6, 0.5), (0, 0.3, 0), 0.5), b.material("slider_paint", (0.2, 0.45, 0.8)),
+          prim.translation(4.2, 0.8, -2.4), Animation("slide", axis=(0, 0, 1), speed=0.9, amplitude=1.4))
+    return Scene(
+        name="dynamic",
+        objects=b.objects,
+        lights=[Light("ambient", color=(0.92, 0.95, 1.0), intensity=0.35),
+                Light("directional", color=(1.0, 0.94, 0.84), intensity=0.8, direction=(0.35, -0.75, -0.55)),
+                Light("point", color=(1.0, 0.85, 0.65), intensity=0.4, position=(0.3, 2.6, -0.2), range=7.0)],
+        description=BUILTIN_SCENES["dynamic"][0],
+        viewer_origin=VIEWER_ORIGIN,
+        near=0.1,
+        far=100.0,
+        sky_color=(0.62, 0.76, 0.92),
+        extra_view=True,
+        # The room's offset: the paper's 1.8 m up would put the extra camera above this ceiling.
+        extra_view_offset=dual_view_offset(*ROOM_EXTRA_OFFSET),
+        view_region=VIEW_REGION.copy(),
+        source="builtin",
+    )
+
+
 #: name -> (one-line description, builder). ``room`` is the default scene.
 BUILTIN_SCENES: dict[str, tuple[str, Callable[[], Scene]]] = {
     "room": ("Exhibition room around a torus-knot sculpture: pillars, plinths, bookshelves, a railing, "
@@ -773,5 +858,8 @@ BUILTIN_SCENES: dict[str, tuple[str, Callable[[], Scene]]] = {
     "courtyard": ("A large open-air courtyard under open sky: colonnades 20 m out, a fountain, a statue, "
                   "planters, lamp posts and obelisks against the sky (dual views where sky is behind near things)",
                   build_courtyard),
+    "dynamic": ("A small hall where things move: a spinning turnstile, a pendulum, a cart that starts and "
+                "stops, a fast ball circling the viewer, a slider passing behind a pillar (extrapolation tests)",
+                build_dynamic),
     "empty": ("No objects: sky only (edge-case tests)", build_empty),
 }

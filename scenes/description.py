@@ -69,14 +69,15 @@ A complete example (``courtyard.toml``)::
     radius = 0.3
     position = [2, 1, 0]
     color = [0.9, 0.2, 0.1]            # RGB or RGBA in [0, 1]; multiplies an asset's own colours
-    [objects.animation]                # as pibr.scenes.scene.Animation
-    kind = "orbit"                     # spin | orbit | swing | slide
+    [objects.animation]                # as pibr.scenes.animation.Animation
+    kind = "orbit"                     # spin | orbit | swing | slide | travel
     axis = [0, 1, 0]
     radius = 1.5                       # orbit radius, metres (position is the circle's centre)
-    speed = 0.5                        # rad/s
+    speed = 0.5                        # rad/s (travel: m/s)
     # pivot = [0, 1, 0]                # spin/swing pivot; default: the object's position
-    # amplitude = 0.3                  # swing (rad) or slide (m)
-    # phase = 0.0
+    # amplitude = 0.3                  # swing (rad), slide or travel (m)
+    # phase = 0.0                      # rad (travel: seconds into its cycle)
+    # rest = 1.0                       # travel: seconds at rest at each end before it starts again
 
 The same structure works as JSON (``{"name": ..., "objects": [{...}, ...]}``).
 
@@ -142,7 +143,7 @@ _LIGHT_KEYS = {
     "directional": ("kind", "color", "intensity", "direction"),
     "point": ("kind", "color", "intensity", "position", "range"),
 }
-_ANIMATION_KEYS = ("kind", "axis", "speed", "pivot", "radius", "amplitude", "phase")
+_ANIMATION_KEYS = ("kind", "axis", "speed", "pivot", "radius", "amplitude", "phase", "rest")
 
 
 def is_description_path(path) -> bool:
@@ -537,7 +538,7 @@ class _Builder:
         for k in ("axis", "pivot"):
             if k in t:
                 kw[k] = self.vector(t[k], f"{key}.{k}", 3)
-        for k in ("speed", "radius", "amplitude", "phase"):
+        for k in ("speed", "radius", "amplitude", "phase", "rest"):
             if k in t:
                 kw[k] = self.number(t[k], f"{key}.{k}")
         if "pivot" not in kw:

@@ -12,8 +12,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from pibr.protocol.errors import SceneError
-from pibr.protocol.motion import RigidMotion
 from pibr.protocol.pose import Pose
+
+from .animation import Animation
 
 
 @dataclass
@@ -127,16 +128,6 @@ class Material:
                     t = np.clip(t * 255.0 + 0.5, 0, 255)
                 t = t.astype(np.uint8)
             self.texture = np.ascontiguousarray(t[:, :, :3])
-
-
-class Animation(RigidMotion):
-    """A scene object's motion (see :class:`pibr.protocol.motion.RigidMotion`); bad values raise SceneError."""
-
-    def __post_init__(self):
-        try:
-            super().__post_init__()
-        except ValueError as exc:
-            raise SceneError(str(exc)) from None
 
 
 @dataclass

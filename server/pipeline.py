@@ -16,6 +16,7 @@ from pibr.protocol.atlas import AtlasLayout
 from pibr.protocol.depth import DepthQuantizer
 from pibr.protocol.pose import Pose
 
+from .object_poses import object_poses_payload
 from .packer import AtlasPacker
 from .renderer import PEEL_TOLERANCE, RenderTarget, Renderer, edge_angle_for_width
 
@@ -35,6 +36,7 @@ class ProducerSpec:
     mark_peeled: bool = True      # ... marking peeled pixels apart from sky (protocol/depth.py)
     peel_tolerance: float = PEEL_TOLERANCE
     motion_dt: float | None = None  # render the primary's object motion over this many seconds
+    object_poses: bool = False     # hand the moving objects' transforms (the scene moves)
     low_colour: int = 0            # hand a colour image downsampled by this factor (0: none)
     #: rasterise the smaller extra view with edges as much longer as keeps their bend in pixels
     #: (renderer.edge_angle_for_width): fewer triangles for the same accuracy in its own pixels
@@ -56,6 +58,7 @@ class ProducedFrame:
     motion: np.ndarray | None = None       # (h, w, 2) pixels of moving objects, primary view
     moving: np.ndarray | None = None       # (h, w) bool: pixels of moving objects
     low_colour: np.ndarray | None = None   # (h / k, w / k, 3) uint8 primary colour
+    object_poses: bytes | None = None      # the OBJECT_POSES payload at scene_t (moving objects)
 
 
 class FrameProducer:
@@ -103,8 +106,9 @@ class FrameProducer:
             k = self.spec.low_colour
             low = self.primary.read_color()[k // 2::k, k // 2::k].copy()
         t3 = time.perf_counter()
+        poses = object_poses_payload(self.renderer.scene, t) if self.spec.object_poses else None
         return ProducedFrame(yuv, pose, extra_pose, t, (t1 - t0) * 1e3, (t3 - t2) * 1e3, (t2 - t1) * 1e3, distances,
-                             motion, moving, low)
+                             motion, moving, low, poses)
 
     def release(self) -> None:
         self.primary.release()

@@ -48,7 +48,7 @@ def build_bundle(scene, settings: ProxySettings = ProxySettings(), progress: boo
     for obj in scene.objects:
         lod = lods[obj.name]
         m = obj.mesh
-        objects.append(ProxyObject(obj.name, obj.transform, obj.animation, m.bounds().astype("f8"),
+        objects.append(ProxyObject(obj.name, obj.transform, obj.is_dynamic, m.bounds().astype("f8"),
                                    (m.vertices, m.faces), (lod.proxy.vertices, lod.proxy.faces)))
         tris["original"] += m.triangle_count
         tris["proxy"] += lod.proxy.triangle_count

@@ -766,11 +766,14 @@ class Renderer:
         self._resample_vao.render(ctx.TRIANGLE_STRIP)
         ctx.enable(ctx.DEPTH_TEST)
 
-    def render_perspective(self, target: RenderTarget, pose: Pose, t: float, fov_x_deg: float) -> None:
-        """Perspective view (ground truth) at ``pose`` and scene time ``t``, horizontal FOV ``fov_x_deg``."""
+    def render_perspective(self, target: RenderTarget, pose: Pose, t: float, fov_x_deg: float,
+                           mark_moving: bool = False) -> None:
+        """Perspective view (ground truth) at ``pose`` and scene time ``t``, horizontal FOV ``fov_x_deg``.
+        ``mark_moving`` (a target with motion): flag the pixels of moving objects (read_motion()[1])."""
         self._begin(target)
         proj = perspective_matrix(fov_x_deg, target.width / target.height, self.scene.near, self.scene.far)
-        self._draw("perspective", pose.view_matrix(), pose.p, t, {"u_projection": proj.T})
+        self._draw("perspective", pose.view_matrix(), pose.p, t, {"u_projection": proj.T},
+                   motion_dt=1.0 if mark_moving else None)
 
     def release(self) -> None:
         for g in self.objects:

@@ -223,6 +223,8 @@ class Session:
         if self.depth_encoder is not None:
             payloads += await self.server.encode(self.id, self.depth_encoder.encode, produced)
         payloads += [(PayloadKind.QUADTREE, q) for q in quadtree]
+        if produced.object_poses is not None:
+            payloads.append((PayloadKind.OBJECT_POSES, produced.object_poses))
         encode_ms = (time.perf_counter() - t0) * 1e3   # H.264 and, with the edge codec, depth (and quadtrees)
         frame = Frame(frame_id=self.frames_sent, render_t_us=t_us, pose_t_us=pose_msg.t_us, pose_seq=pose_msg.seq,
                       scene_t_us=t_us, primary_pose=produced.primary_pose, extra_pose=produced.extra_pose,

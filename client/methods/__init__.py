@@ -38,7 +38,8 @@ def quadtree_threshold(names, options: dict) -> float:
 
 
 def method_options(name: str) -> tuple[str, ...]:
-    """The knobs (keyword arguments) method ``name`` takes."""
+    """The keyword arguments method ``name`` takes: its knobs, and for ``proxy`` the session's
+    pose history (``poses``) and a benchmark's ``oracle_pose``."""
     params = inspect.signature(METHODS[name].__init__).parameters
     return tuple(p for p in params if p not in ("self", "ctx", "output", "config", "proxies"))
 

@@ -18,6 +18,11 @@ Where the primary view shows sky the fragment is dropped so the sky behind shows
 proxy fragment reached take the primary view along their ray: the sky, or a rotation-only
 fallback (alpha 0).
 
+Moving objects. The proxy of a moving object is drawn where it is at the display time, as
+``motion`` (client/object_motion.py) extrapolates it from the transforms the frames carried
+(second order by default), and looked up in the views where the frame's own transforms put it
+when they were rendered.
+
 Shading is deferred: the proxy passes store, per pixel, which view and where to sample; one
 full-screen pass then fetches each pixel's colour once, from that view only (or the
 background where no proxy was drawn). Nothing writes gl_FragDepth (on a software rasteriser
@@ -36,10 +41,13 @@ from __future__ import annotations
 
 import numpy as np
 
+from pibr.protocol.messages import PayloadKind
+from pibr.protocol.object_poses import decode_object_poses
 from pibr.protocol.pose import Pose
 
 from ..frame_textures import bind_frame_uniforms, frame_glsl, has_extra_depth, rect_uniform
 from ..lod_select import DEFAULT_TARGET_PX, LodSelector
+from ..object_motion import DEFAULT_HORIZON_FRAMES, DEFAULT_MOTION, ObjectPlacer, PoseHistory
 from .base import FULLSCREEN_VS, Method, fullscreen_quad, output_tan_half
 from .view_warp import mat4_bytes, output_projection
 
@@ -285,14 +293,20 @@ def _front_to_back(sel) -> tuple:
 
 class ProxyIBR(Method):
     """Proxy IBR; ``carve`` (default) tests every proxy fragment and lets the nearest accepted one
-    win, ``carve=False`` tests only the nearest (one cheaper pass, see _NEAREST_VS)."""
+    win, ``carve=False`` tests only the nearest (one cheaper pass, see _NEAREST_VS).
+
+    ``motion``: how moving objects are placed at the display time (object_motion.MOTION_MODES);
+    ``poses``: the session's :class:`PoseHistory`, filled with every frame received (without
+    one the method keeps its own from the frames it is given); ``oracle_pose(index, t)``: the
+    scene's animation, for ``motion="oracle"`` in benchmarks only."""
 
     name = "proxy"
     needs_proxies = True
 
     def __init__(self, ctx, output, config, proxies=None, tau: float = DEFAULT_TAU,
                  lod_target_px: float = DEFAULT_TARGET_PX, lod_level: str | None = None, extra_view: bool = True,
-                 carve: bool = True):
+                 carve: bool = True, motion: str = DEFAULT_MOTION, poses: PoseHistory | None = None,
+                 oracle_pose=None, horizon_frames: float = DEFAULT_HORIZON_FRAMES):
         super().__init__(ctx, output, config)
         if not proxies:
             from pibr.protocol.errors import ConfigError
@@ -301,6 +315,13 @@ class ProxyIBR(Method):
         self.tau = tau
         self.carve = bool(carve)
         self.objects = proxies
+        self.moving = [i for i, o in enumerate(proxies) if o.moving]
+        self._own_history = poses is None
+        if poses is None:
+            poses = PoseHistory(np.stack([o.transform for o in proxies]), np.stack([o.bounds for o in proxies]))
+        self.motion = motion
+        self.placer = ObjectPlacer(poses, motion, config.frame_interval_us / 1e6, horizon_frames, oracle_pose)
+        self._seen = (None, {})   # (frame key, index -> motion) of the newest frame's own transforms
         self.selector = LodSelector(proxies, output, lod_target_px, force_level=lod_level)
         glsl = {"frame": frame_glsl(config), "background": _BACKGROUND_GLSL}
         if self.carve:
@@ -400,23 +421,39 @@ class ProxyIBR(Method):
         to_p = frame.primary_pose.view_matrix()
         to_e = frame.extra_pose.view_matrix() if frame.extra_pose is not None else to_p
         vp = self.projection @ view
-        frame_t = frame.scene_t_us / 1e6
+        seen_motion = self._frame_motions(frame)
+        now = {i: m @ self.objects[i].transform for i, m in self.placer.motions(self.moving, scene_t).items()}
         draws, tris = [], 0
-        for sel in sorted(self.selector.select(out_pose, scene_t, self.near), key=_front_to_back):
+        for sel in sorted(self.selector.select(out_pose, self.near, now), key=_front_to_back):
             levels = self.vaos[sel.index]
             level = sel.level if sel.level in levels else next(iter(levels), None)
             if level is None:
                 continue
             obj = self.objects[sel.index]
-            model = obj.world_matrix(scene_t)
+            model = now.get(sel.index, obj.transform)
             # A moving object is drawn where it is now, but looked up where the views saw it.
-            seen = obj.world_matrix(frame_t) if obj.motion is not None else model
+            seen = seen_motion[sel.index] @ obj.transform if sel.index in seen_motion else model
             vao, n = levels[level]
             draws.append((vao, mat4_bytes(vp @ model), mat4_bytes(to_p @ seen), mat4_bytes(to_e @ seen),
                           mat4_bytes(seen)))
             tris += n
         self.last_primitives = tris
         return draws
+
+    def _frame_motions(self, frame) -> dict:
+        """index -> (4, 4) motion of the moving objects at ``frame``'s scene time, from its own
+        OBJECT_POSES payload (parsed once per frame; also fed to a history of our own)."""
+        payload = frame.payload(PayloadKind.OBJECT_POSES)
+        key = (frame.frame_id, frame.scene_t_us, None if payload is None else len(payload))
+        if self._seen[0] != key:
+            motions = {}
+            if payload is not None:
+                poses = decode_object_poses(payload, len(self.objects))
+                motions = dict(zip(poses.indices.tolist(), poses.matrices()))
+                if self._own_history:
+                    self.placer.history.add(frame.scene_t_us / 1e6, poses)
+            self._seen = (key, motions)
+        return self._seen[1]
 
     def release(self) -> None:
         for levels in self.vaos:

@@ -63,6 +63,17 @@ def test_unknown_methods_are_named():
     assert {v.method for v in default_variants(["proxy"])} == {"proxy"}
 
 
+def test_motion_variants_only_where_things_move():
+    from pibr.bench.pareto import motion_variants
+    from pibr.scenes.registry import load_scene
+
+    everything = default_variants()
+    assert motion_variants(everything, load_scene("sphere")) == []
+    assert [v.options for v in motion_variants(everything, load_scene("dynamic"))] == [{"motion": "static"},
+                                                                                         {"motion": "oracle"}]
+    assert motion_variants(default_variants(["none"]), load_scene("dynamic")) == []
+
+
 @pytest.mark.gl
 def test_tiny_pareto_run(tmp_path):
     r = run_pareto_bench(scenes=("room",), methods=("none", "rotation", "coarse-meshwarp", "proxy"),
@@ -76,7 +87,9 @@ def test_tiny_pareto_run(tmp_path):
     v = room["variants"]
     assert set(v) == {"none", "rotation", "coarse-meshwarp s=2", "coarse-meshwarp s=4", "coarse-meshwarp s=8",
                       "coarse-meshwarp s=16", "proxy", "proxy lod 2px", "proxy lod 16px", "proxy tau 0.05",
-                      "proxy tau 0.2", "proxy, no extra view", "proxy, no carving", ORACLE}
+                      "proxy tau 0.2", "proxy, no extra view", "proxy, no carving", "proxy, static motion",
+                      "proxy, oracle motion", ORACLE}
+    assert v["proxy, oracle motion"]["options"] == {"motion": "oracle"}
     assert all(x["quality"]["frames"] == 3 and x["quality"]["flip_frames"] == 2 for x in v.values())
     # One geometric definition: methods drawing from the same views share it; the extra view
     # only ever removes holes.

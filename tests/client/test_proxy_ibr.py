@@ -127,7 +127,7 @@ def _quad(centre, right, up, half: float) -> ProxyObject:
     v = np.array([c - half * r - half * u, c + half * r - half * u, c + half * r + half * u, c - half * r + half * u],
                  np.float32)
     f = np.array([[0, 1, 2], [0, 2, 3], [0, 2, 1], [0, 3, 2]], np.uint32)
-    return ProxyObject("crafted", np.eye(4), None, np.stack([v.min(0), v.max(0)]), (v, f), (v, f))
+    return ProxyObject("crafted", np.eye(4), False, np.stack([v.min(0), v.max(0)]), (v, f), (v, f))
 
 
 def _render_with(sim, extra_objects, display, rendered):

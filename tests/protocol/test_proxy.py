@@ -5,18 +5,17 @@ from hypothesis import strategies as st
 
 from pibr.protocol.errors import MalformedMessage
 from pibr.protocol.messages import ProxyChunk
-from pibr.protocol.motion import RigidMotion
-from pibr.protocol.proxy import (MAX_CHUNKS, MIN_CHUNK_BYTES, BundleAssembler, BundleInfo, ProxyObject,
+from pibr.protocol.proxy import (MAGIC, MAX_CHUNKS, MIN_CHUNK_BYTES, BundleAssembler, BundleInfo, ProxyObject,
                                  compress_bundle, decode_bundle, decompress_bundle, encode_bundle, split_chunks)
 
 
 def _objects():
     v = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], np.float32)
     f = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]], np.uint32)
-    still = ProxyObject("tetra", np.eye(4), None, np.array([[0, 0, 0], [1, 1, 1.0]]), (v, f), (v, f))
+    still = ProxyObject("tetra", np.eye(4), False, np.array([[0, 0, 0], [1, 1, 1.0]]), (v, f), (v, f))
     t = np.eye(4)
     t[:3, 3] = [1, 2, 3]
-    moving = ProxyObject("fan", t, RigidMotion("spin", (0, 1, 0), 2.0, (1, 2, 3)),
+    moving = ProxyObject("fan", t, True,
                          np.array([[-1, -1, -1], [1, 1, 1.0]]), (v * 2, f), (np.zeros((0, 3), np.float32),
                                                                            np.zeros((0, 3), np.uint32)))
     return [still, moving]
@@ -31,9 +30,7 @@ def test_round_trip():
         np.testing.assert_array_equal(a.transform, b.transform)
         np.testing.assert_array_equal(a.original[0], b.original[0])
         np.testing.assert_array_equal(a.proxy[1], b.proxy[1])
-        if a.motion is not None:
-            np.testing.assert_allclose(a.world_matrix(0.7), b.world_matrix(0.7))
-    assert back[0].motion is None
+    assert [o.moving for o in back] == [False, True]
     v, f = back[1].level("box")
     assert v.shape == (8, 3) and f.shape == (12, 3)
 
@@ -42,9 +39,10 @@ def test_golden_bytes_are_stable():
     import hashlib
 
     raw = encode_bundle(_objects())
-    # Pinned: a change here changes the wire format both ends must agree on.
-    assert len(raw) == 870
-    assert hashlib.sha256(raw).hexdigest() == "ee1a1f38a52fc74cece0c7d6bb5e5317ea0405fb9b6024085abae454ee0d686c"
+    # Pinned: a change here changes the wire format both ends must agree on (format 2, issue 14:
+    # the per-object motion model became a moving flag).
+    assert len(raw) == 694
+    assert hashlib.sha256(raw).hexdigest() == "8c9d28d63ecab4f9dfedf3d6318ca0add7c95b27bc7a13ca24226e495df6cd93"
     assert encode_bundle(decode_bundle(raw)) == raw
 
 
@@ -65,7 +63,7 @@ def test_bad_indices_counts_and_trailing_bytes():
         decode_bundle(bytes(bad))
     v = np.zeros((3, 3), np.float32)
     f = np.array([[0, 1, 7]], np.uint32)
-    o = ProxyObject("x", np.eye(4), None, np.zeros((2, 3)), (v, f), (v, f))
+    o = ProxyObject("x", np.eye(4), False, np.zeros((2, 3)), (v, f), (v, f))
     with pytest.raises(MalformedMessage, match="face index 7"):
         decode_bundle(encode_bundle([o]))
 
@@ -126,8 +124,8 @@ def test_gigabyte_bomb_is_refused_from_its_header():
 
 @pytest.mark.parametrize("prefix, match", [
     (b"", "bad magic"),                                     # zeros: wrong from the first bytes
-    (b"PXB1" + (5).to_bytes(4, "little"), "holds 5 objects, the Welcome announced 2"),
-    (b"PXB1" + (2).to_bytes(4, "little"), "more than the 2097152 bytes"),   # a valid start, then too much
+    (MAGIC + (5).to_bytes(4, "little"), "holds 5 objects, the Welcome announced 2"),
+    (MAGIC + (2).to_bytes(4, "little"), "more than the 2097152 bytes"),   # a valid start, then too much
 ])
 def test_bombs_without_a_declared_size_stop_at_the_announced_size(prefix, match):
     bomb = _zeros_frame(prefix, 256 << 20, content_size=False)
@@ -137,7 +135,7 @@ def test_bombs_without_a_declared_size_stop_at_the_announced_size(prefix, match)
 
 
 def test_a_window_larger_than_the_announced_bundle_is_refused():
-    bomb = _zeros_frame(b"PXB1", 16 << 20, content_size=False, window_log=23)
+    bomb = _zeros_frame(MAGIC, 16 << 20, content_size=False, window_log=23)
     with pytest.raises(MalformedMessage, match="8388608-byte window, more than the 2097152 bytes"):
         decompress_bundle(bomb, 2 << 20)
 
@@ -221,11 +219,17 @@ def test_welcome_config_validates_the_proxy_announcement():
         SessionConfig.from_json(cfg)
 
 
-def test_motion_round_trip_and_validation():
-    m = RigidMotion("swing", (0, 0, 2), 1.5, (1, 2, 3), 0.0, 0.4, 0.1)
-    m2 = RigidMotion.from_array(m.to_array())
-    np.testing.assert_allclose(m.matrix(1.3), m2.matrix(1.3))
-    with pytest.raises(ValueError):
-        RigidMotion.from_array(np.r_[9, np.zeros(10)])
-    with pytest.raises(ValueError):
-        RigidMotion("spin", (0, 0, 0))
+def test_the_bundle_carries_no_motion_model():
+    """Format 2: per object only a moving flag; a flag other than 0 or 1 is refused, and the old
+    format (with its motion model) is refused by its magic."""
+    raw = encode_bundle(_objects())
+    assert raw[:4] == b"PXB2"
+    with pytest.raises(MalformedMessage, match="bad magic"):
+        decode_bundle(b"PXB1" + raw[4:])
+    flag_at = 4 + 4 + 2 + len("tetra") + 128
+    assert raw[flag_at] == 0
+    bad = bytearray(raw)
+    bad[flag_at] = 2
+    with pytest.raises(MalformedMessage, match="object 0 moving flag is 2"):
+        decode_bundle(bytes(bad))
+    assert not any(hasattr(o, "motion") or hasattr(o, "world_matrix") for o in decode_bundle(raw))

@@ -393,3 +393,38 @@ def test_courtyard_is_mostly_sky_with_geometry_all_round():
             assert 0.2 < sky.mean() < 0.6, (yaw, sky.mean())     # sky above colonnades on every side
     finally:
         probe.close()
+
+
+# ----------------------------------------------------------------------------- the dynamic scene
+
+def test_dynamic_scene_moves_in_every_way_and_stays_small(scenes):
+    from pibr.scenes.builtin import DYNAMIC_BOUNDS
+
+    scene = scenes["dynamic"]
+    kinds = {o.name: o.animation.kind for o in scene.objects if o.is_dynamic}
+    assert kinds == {"spinner": "spin", "pendulum": "swing", "cart": "travel", "ball": "orbit", "slider": "slide"}
+    assert scene.triangle_count < 10_000 and scene.extra_view
+    objects = {o.name: o for o in scene.objects}
+    ts = np.linspace(0.0, 12.0, 961)
+    centre = lambda name, t: objects[name].world_bounds(t).mean(0)
+    for name in kinds:   # inside the hall at every time, and out of the walkers' way but for the spinner
+        lo = np.min([objects[name].world_bounds(t)[0] for t in ts], 0)
+        hi = np.max([objects[name].world_bounds(t)[1] for t in ts], 0)
+        assert np.all(lo >= DYNAMIC_BOUNDS[0] - 1e-9) and np.all(hi <= DYNAMIC_BOUNDS[1] + 0.1), name
+        if name != "spinner":
+            overlap = np.minimum(hi, WALKING_REGION[1]) - np.maximum(lo, WALKING_REGION[0])
+            assert np.any(overlap <= 0), name
+    speed = lambda name: np.linalg.norm(np.diff([centre(name, t) for t in ts], axis=0), axis=1) / (ts[1] - ts[0])
+    assert speed("ball").min() > 4.0                                  # fast, all the time
+    cart = speed("cart")
+    assert cart.max() == pytest.approx(1.8, rel=1e-6) and np.mean(cart < 1e-9) > 0.3   # starts and stops
+    swing = [objects["pendulum"].animation.matrix(t)[0, 1] for t in ts]
+    assert np.sum(np.diff(np.sign(np.diff(swing))) != 0) >= 8        # reverses, again and again
+    # the slider passes behind the east pillar, seen from the focus point, for part of each period
+    pillar = objects["pillar_east"].transform[[0, 2], 3]
+    hidden = []
+    for t in ts:
+        a, b = np.array(FOCUS_POINT)[[0, 2]], centre("slider", t)[[0, 2]]
+        s = np.clip(np.dot(pillar - a, b - a) / np.dot(b - a, b - a), 0, 1)
+        hidden.append(np.linalg.norm(a + s * (b - a) - pillar) < 0.25)
+    assert 0.1 < np.mean(hidden) < 0.6

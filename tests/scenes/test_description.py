@@ -181,6 +181,15 @@ def test_animation_object_with_asset_parts_moves_together(assets):
     np.testing.assert_allclose(shift, [[1, 0, 0], [1, 0, 0]], atol=1e-9)
 
 
+def test_travel_animation_starts_and_stops(assets):
+    """The starts-and-stops kind from a description: rest, travel at constant speed, rest, back."""
+    scene = build_scene({"objects": [{"builtin": "box", "position": [1, 0, 0], "animation": {
+        "kind": "travel", "axis": [0, 0, 2], "speed": 2.0, "amplitude": 3.0, "rest": 0.5}}]}, assets / "inline.toml")
+    (obj,) = scene.objects
+    z = [obj.world_matrix(t)[2, 3] for t in (0.0, 0.5, 1.0, 2.0, 2.5, 3.0, 4.0, 4.5)]
+    np.testing.assert_allclose(z, [0.0, 0.0, 1.0, 3.0, 3.0, 2.0, 0.0, 0.0], atol=1e-12)
+
+
 INVALID = [
     ('objcts = []', "objcts: unknown key; allowed here: name, description"),
     ('near = 1.0\nfar = 0.5', "far: must be greater than near (1.0), got 0.5"),
@@ -218,6 +227,10 @@ INVALID = [
     ('[[objects]]\nbuiltin = "box"\n[objects.animation]\nkind = "spin"\naxis = [0, 0, 0]',
      "objects[0].animation: animation axis must be a non-zero 3-vector"),
     ('[[objects]]\nbuiltin = "box"\n[objects.animation]\nspeed = 1', "objects[0].animation.kind: required"),
+    ('[[objects]]\nbuiltin = "box"\n[objects.animation]\nkind = "travel"\nspeed = 1',
+     "objects[0].animation: a travel animation needs a positive speed (m/s) and amplitude (m)"),
+    ('[[objects]]\nbuiltin = "box"\n[objects.animation]\nkind = "travel"\namplitude = 1\nrest = -1',
+     "objects[0].animation: animation rest must be >= 0 seconds, got -1.0"),
     ('objects = 3', "objects: expected a list of tables, got 3"),
     ('name = "x"\nname2 = ', "invalid TOML"),
 ]

@@ -1,0 +1,89 @@
+"""Moving objects on the wire: every frame of a scene that moves carries its objects' transforms
+(with either depth codec, with or without proxies); a static scene's frames carry no motion of
+any kind, and the session says so."""
+import asyncio
+
+import numpy as np
+import pytest
+
+from pibr.client.connection import ClientConnection
+from pibr.client.depth_stream import EdgeDepthDecoder
+from pibr.protocol.messages import Hello, OutputConfig, PayloadKind, ProxyChunk
+from pibr.protocol.object_poses import decode_object_poses
+from pibr.protocol.proxy import BundleAssembler, decode_bundle, decompress_bundle
+from pibr.scenes.registry import load_scene
+from pibr.server.app import Server
+from pibr.server.config import ServerConfig
+
+from ..loopback import exchange_virtual
+
+pytestmark = pytest.mark.gl
+
+MOTION_KINDS = (PayloadKind.OBJECT_POSES, PayloadKind.EDGE_MOTION)
+
+
+@pytest.fixture
+async def server():
+    srv = Server(ServerConfig(port=0, scene="sphere", view_size=(128, 128), fps=10.0, server_delay_ms=20.0,
+                              bitrate_kbps=2000))
+    host, port = await srv.start()
+    task = asyncio.create_task(srv.serve_forever())
+    yield host, port
+    task.cancel()
+    await asyncio.gather(task, return_exceptions=True)
+    await srv.close()
+
+
+async def _session(host, port, scene: str, depth_codec: str, want_proxies: bool = False, ticks: int = 8):
+    """-> (SessionConfig, proxies or None, [Frame])."""
+    c = await ClientConnection.open(host, port)
+    cfg = await c.handshake(Hello(client="test", scene=scene, output=OutputConfig(160, 96, 90.0, 30.0),
+                                  want_proxies=want_proxies, depth_codec=depth_codec))
+    proxies = None
+    if want_proxies:
+        assembler = BundleAssembler()
+        while not assembler.complete:
+            env = await c.recv(timeout=300)
+            assert isinstance(env.message, ProxyChunk)
+            assembler.add(env.message)
+        proxies = decode_bundle(decompress_bundle(assembler.data()))
+    interval = 33_333
+    frames = await exchange_virtual(c, cfg.viewer_origin, [k * interval for k in range(ticks)], interval)
+    await c.close()
+    return cfg, proxies, [f for _, f in frames]
+
+
+@pytest.mark.parametrize("depth_codec, want_proxies", [("h264", False), ("edge", False), ("h264", True)])
+async def test_a_moving_scene_sends_its_objects_transforms_in_every_frame(server, depth_codec, want_proxies):
+    scene = load_scene("dynamic")
+    moving = [i for i, o in enumerate(scene.objects) if o.is_dynamic]
+    cfg, proxies, frames = await _session(*server, "dynamic", depth_codec, want_proxies)
+    assert cfg.motion is True and cfg.object_count == len(scene.objects)
+    assert len(frames) >= 2
+    if proxies is not None:
+        assert [i for i, o in enumerate(proxies) if o.moving] == moving
+    for f in frames:
+        poses = decode_object_poses(f.payload(PayloadKind.OBJECT_POSES), cfg.object_count)
+        assert poses.indices.tolist() == moving
+        t = f.scene_t_us / 1e6
+        truth = np.stack([scene.objects[i].animation.matrix(t) for i in moving])
+        np.testing.assert_allclose(poses.matrices(), truth, atol=2e-6)   # float32 on the wire
+        assert len(f.payload(PayloadKind.OBJECT_POSES)) == 4 + 32 * len(moving)
+    assert frames[0].scene_t_us != frames[-1].scene_t_us
+
+
+@pytest.mark.parametrize("depth_codec", ["h264", "edge"])
+async def test_a_static_scene_sends_no_motion_of_any_kind(server, depth_codec):
+    cfg, _, frames = await _session(*server, "sphere", depth_codec)
+    assert cfg.motion is False and cfg.to_json()["motion"] is False
+    assert frames
+    for f in frames:
+        assert not [k for k, _ in f.payloads if k in MOTION_KINDS], f.payloads
+    if depth_codec == "edge":   # and the edge codec's depth carries no motion flow either
+        decoder = EdgeDepthDecoder(cfg)
+        try:
+            for f in frames:
+                decoder.decode(f)
+                assert decoder.motion is None
+        finally:
+            decoder.close()
