@@ -10,7 +10,7 @@ from pibr.client.connection import ClientConnection
 from pibr.client.depth_stream import EdgeDepthDecoder
 from pibr.protocol.messages import Hello, OutputConfig, PayloadKind, ProxyChunk
 from pibr.protocol.object_poses import decode_object_poses
-from pibr.protocol.proxy import BundleAssembler, decode_bundle, decompress_bundle
+from pibr.protocol.proxy import BundleAssembler, BundleInfo, decode_bundle, decompress_bundle
 from pibr.scenes.registry import load_scene
 from pibr.server.app import Server
 from pibr.server.config import ServerConfig
@@ -41,12 +41,13 @@ async def _session(host, port, scene: str, depth_codec: str, want_proxies: bool 
                                   want_proxies=want_proxies, depth_codec=depth_codec))
     proxies = None
     if want_proxies:
-        assembler = BundleAssembler()
+        info = BundleInfo.from_json(cfg.proxies)
+        assembler = BundleAssembler(info)
         while not assembler.complete:
             env = await c.recv(timeout=300)
             assert isinstance(env.message, ProxyChunk)
             assembler.add(env.message)
-        proxies = decode_bundle(decompress_bundle(assembler.data()))
+        proxies = decode_bundle(decompress_bundle(assembler.data(), info.raw_bytes, info.objects))
     interval = 33_333
     frames = await exchange_virtual(c, cfg.viewer_origin, [k * interval for k in range(ticks)], interval)
     await c.close()
