@@ -6,6 +6,7 @@ import asyncio
 import sys
 
 from pibr.protocol.address import parse_host_port
+from pibr.protocol.motion_flow import DEFAULT_FLOW_CODER, FLOW_CODERS
 
 from .config import DEFAULT_PORT
 
@@ -80,6 +81,10 @@ def register(sub) -> None:
     p.add_argument("--edge-perceptual", action="store_true",
                    help="edge codec: weight edges by their visibility in the colour (contrast transducer)")
     p.add_argument("--edge-no-temporal", action="store_true", help="edge codec: no temporal context")
+    p.add_argument("--flow-coder", choices=FLOW_CODERS, default=DEFAULT_FLOW_CODER,
+                   help="motion flow of scenes that move: the moving mask and 8x8 block means (blocks), or "
+                        "Pajak et al.'s edge samples diffused on the client (edges) ('pibr bench dynamic' "
+                        f"measures both; default {DEFAULT_FLOW_CODER})")
     p.add_argument("--max-sessions", type=int, default=8)
     p.add_argument("--max-in-flight", type=int, default=3, metavar="N",
                    help="real clock: render a new frame only while fewer than N sent frames wait to be decoded "
@@ -112,7 +117,7 @@ def cmd_serve(args) -> int:
                           preset=args.preset, projection=args.projection, max_edge_deg=args.max_edge_deg,
                           server_delay_ms=args.server_delay_ms,
                           depth_codec=args.depth_codec, max_sessions=args.max_sessions,
-                          max_in_flight=args.max_in_flight,
+                          max_in_flight=args.max_in_flight, flow_coder=args.flow_coder,
                           edge=EdgeSettings(kbps=args.edge_kbps, temporal=not args.edge_no_temporal,
                                             perceptual=args.edge_perceptual))
     try:
