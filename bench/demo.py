@@ -34,7 +34,7 @@ def check_inputs(scene: str, trace: str, start_s: float, duration_s: float) -> N
 def run_demo(out_dir: str = "out", scene: str = "room", trace: str = "pred6dof-1", start_s: float = 30.0,
              duration_s: float = 6.0, rate_hz: float = 30.0, size=(960, 540), latency_ms: float = 128.0,
              methods=DEFAULT_METHODS, clock: str = "virtual", flip_every: int = 4, server_args=(),
-             progress: bool = True, anchor: str = "start") -> dict:
+             progress: bool = True, anchor: str = "start", motion: str | None = None) -> dict:
     from tqdm import tqdm
 
     check_inputs(scene, trace, start_s, duration_s)
@@ -58,7 +58,7 @@ def run_demo(out_dir: str = "out", scene: str = "room", trace: str = "pred6dof-1
             client_args=["--trace", trace, "--start", str(start_s), "--duration", str(duration_s),
                          "--rate", str(rate_hz), "--size", f"{size[0]}x{size[1]}", "--clock", clock,
                          "--anchor", anchor,
-                         "--method", ",".join(methods)],
+                         "--method", ",".join(methods), *(["--motion", motion] if motion else [])],
             on_progress=on_progress)
     finally:
         bar.close()

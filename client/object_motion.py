@@ -12,7 +12,9 @@ Pajak et al. 2011's temporal upsampling done on object transforms instead of pix
   frame interval; a faster spin is seen turning backwards (it aliases, as any sampling does);
 * ``accel``: second order, velocity and acceleration from the last three transforms;
 * ``oracle``: the scene's own animation, which only the benchmarks have (they pass a callable;
-  the client process never has one).
+  the client process never has one);
+* ``flow``: not per object but per pixel: the moving pixels of the newest frame warped along
+  their decoded motion flow (client/flow_warp.py); no proxy needed.
 
 The horizon is bounded: the extrapolation runs at full speed for ``horizon_frames`` frame
 intervals past the newest transform (3: a frame is normally shown 1.5 to 2.5 intervals after
@@ -32,9 +34,9 @@ import numpy as np
 from pibr.protocol.object_poses import ObjectPoses
 from pibr.protocol.pose import quat_from_matrix, quat_to_matrix
 
-MOTION_MODES = ("static", "velocity", "accel", "oracle")
+MOTION_MODES = ("static", "velocity", "accel", "oracle", "flow")
 #: What a client process can run: ``oracle`` needs the scene's animation (benchmarks only).
-CLIENT_MOTION_MODES = ("static", "velocity", "accel")
+CLIENT_MOTION_MODES = ("static", "velocity", "accel", "flow")
 DEFAULT_MOTION = "velocity"
 #: Frame intervals past the newest transform extrapolated at full speed; then damped.
 DEFAULT_HORIZON_FRAMES = 3.0

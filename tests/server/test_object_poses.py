@@ -112,3 +112,10 @@ async def test_a_moving_scene_sends_its_motion_flow_with_either_depth_codec(serv
                 assert depth.motion is None
         finally:
             depth.close()
+
+
+def test_the_flow_coder_is_checked():
+    from pibr.protocol.errors import ConfigError
+
+    with pytest.raises(ConfigError, match="flow coder must be one of blocks, edges, got 'dct'"):
+        ServerConfig(flow_coder="dct")
