@@ -307,7 +307,7 @@ def register(sub) -> None:
                                    "both flow coders. Writes dynamic.json and dynamic.png.")
     dy.add_argument("--scene", type=_names, default=("dynamic", "room"), help="scenes that move (default dynamic,room)")
     dy.add_argument("--windows", type=_windows, default=None,
-                    help="head-trace windows (default: pred6dof-2@50+3,synth-turns@5+3, parts of the evaluation "
+                    help="head-trace windows (default: pred6dof-2@50+2,synth-turns@5+2, parts of the evaluation "
                          "windows where the dynamic scene's objects are in view; " + _WINDOWS_HELP + ")")
     dy.add_argument("--latency-ms", type=_floats, default=(64.0, 128.0, 256.0), metavar="MS,...",
                     help="round trips (default 64,128,256)")
@@ -315,6 +315,8 @@ def register(sub) -> None:
                     help="round trip of the reversal and stop probes (default 128)")
     dy.add_argument("--rate", type=_positive, default=30.0, help="display rate Hz (default 30)")
     dy.add_argument("--stride", type=_positive_int, default=3, help="score every Nth displayed tick (default 3)")
+    dy.add_argument("--event-stride", type=_positive_int, default=2,
+                    help="score every Nth tick around the reversals and stops (default 2)")
     dy.add_argument("--view-size", type=_size, default=(512, 512), metavar="WxH",
                     help="server view size (default 512x512: a few minutes on 2 cores; the server's is 1024x1024)")
     dy.add_argument("--size", type=_size, default=(480, 270), metavar="WxH", help="output size (default 480x270)")
@@ -462,7 +464,7 @@ def cmd_bench_dynamic(args) -> int:
     r = run_dynamic_bench(scenes=args.scene, windows=args.windows or DEFAULT_WINDOWS, latencies=args.latency_ms,
                           rate_hz=args.rate, stride=args.stride, view_size=args.view_size, out_size=args.size,
                           depth_codec=args.depth_codec, flow_coder=args.flow_coder,
-                          event_latency_ms=args.event_latency_ms, out_dir=args.out)
+                          event_latency_ms=args.event_latency_ms, event_stride=args.event_stride, out_dir=args.out)
     print_dynamic_tables(r)
     print(f"written: {args.out}/dynamic.json, {args.out}/dynamic.png")
     return 0

@@ -53,7 +53,7 @@ VARIANTS = {
 DEFAULT_SCENES = ("dynamic", "room")
 DEFAULT_LATENCIES = (64.0, 128.0, 256.0)
 #: Parts of evaluation windows where the dynamic scene's moving objects are in view.
-DEFAULT_WINDOWS = (Window("pred6dof-2", 50.0, 3.0), Window("synth-turns", 5.0, 3.0))
+DEFAULT_WINDOWS = (Window("pred6dof-2", 50.0, 2.0), Window("synth-turns", 5.0, 2.0))
 #: Seconds shown before and after an event.
 EVENT_BEFORE, EVENT_AFTER = 0.5, 1.0
 
@@ -292,7 +292,7 @@ def sample_count(scene, windows, latencies, rate_hz, stride, event_stride=1) -> 
 
 def run_dynamic_bench(scenes=DEFAULT_SCENES, windows=DEFAULT_WINDOWS, latencies=DEFAULT_LATENCIES, rate_hz=30.0,
                       stride=3, view_size=(512, 512), out_size=(480, 270), depth_codec="h264", flow_coder=None,
-                      event_latency_ms=128.0, event_stride=1, out_dir="out/bench", progress=True) -> dict:
+                      event_latency_ms=128.0, event_stride=2, out_dir="out/bench", progress=True) -> dict:
     """See the module docstring; writes ``dynamic.json`` and ``dynamic.png`` into ``out_dir``."""
     from pibr.protocol.motion_flow import DEFAULT_FLOW_CODER
     from pibr.scenes.registry import load_scene
@@ -319,6 +319,7 @@ def run_dynamic_bench(scenes=DEFAULT_SCENES, windows=DEFAULT_WINDOWS, latencies=
         if bar is not None:
             bar.close()
     result = {"latencies_ms": list(latencies), "rate_hz": rate_hz, "server_fps": 10.0, "stride": stride,
+              "event_stride": event_stride,
               "view_size": list(view_size), "output": list(out_size), "depth_codec": depth_codec,
               "flow_coder": flow_coder or DEFAULT_FLOW_CODER,
               "windows": windows_json(windows, "reporting"),

@@ -177,14 +177,18 @@ def plot_pareto(result: dict, path: str) -> None:
 
 def plot_dynamic(result: dict, path: str) -> None:
     """``pibr bench dynamic``: per event (a reversal, a stop) the DSSIM of the object's pixels over
-    time for every method; per scene the DSSIM of moving pixels against latency."""
+    time for every ``proxy`` variant (at a fixed head pose ``rotation`` shows what ``static`` does);
+    per scene the DSSIM of moving pixels against latency for every variant."""
     plt = _pyplot()
     events = [(scene, e) for scene, s in result["scenes"].items() for e in s["events"]]
     scenes = list(result["scenes"])
     cols = max(len(events), len(scenes), 1)
     fig, axes = plt.subplots(2, cols, figsize=(4.8 * cols, 7.5), squeeze=False)
     for ax, (scene, e) in zip(axes[0], events):
+        kinds = next(iter(result["scenes"][scene]["latency"].values()), {}).get("methods", {})
         for label, m in e["methods"].items():
+            if kinds.get(label, {}).get("method", "proxy") != "proxy":
+                continue
             ax.plot(e["times"], m["dssim_object"], label=label, lw=1.2, ls="--" if label == "oracle" else "-")
         ax.axvline(0.0, color="k", lw=0.8, ls=":")
         ax.set_title(f"{scene}: {e['object']} {e['kind']} at {e['t']:.2f} s ({e['latency_ms']:g} ms)", fontsize=9)
@@ -207,6 +211,7 @@ def plot_dynamic(result: dict, path: str) -> None:
     for ax in axes[1][len(scenes):]:
         ax.axis("off")
     axes[0][0].legend(fontsize=7)
+    axes[1][0].legend(fontsize=7)
     fig.tight_layout()
     fig.savefig(path, dpi=100)
     plt.close(fig)

@@ -233,12 +233,12 @@ class FlowFrame:
         self.y, self.u, self.v = y, u, v
         self.distance = np.asarray(distance, np.float32)
         flow = np.asarray(flow, np.float32)
-        moving = np.asarray(moving, bool) & np.all(np.isfinite(flow), axis=-1)
+        # a moving pixel whose flow is 0 (an object at rest, or its axis) stays put, and uncovers nothing
+        moving = np.asarray(moving, bool) & np.all(np.isfinite(flow), axis=-1) & np.any(flow != 0, axis=-1)
         ys, xs = np.nonzero(moving)
         self.count = len(ys)
         self._last: Extrapolated | None = None
-        if not self.count or not np.any(flow[ys, xs] != 0):
-            self.count = 0
+        if not self.count:
             return
         self._src = (xs.astype(np.float64), ys.astype(np.float64), flow[ys, xs, 0].astype(np.float64),
                      flow[ys, xs, 1].astype(np.float64))

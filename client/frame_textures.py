@@ -9,6 +9,11 @@ and converted to RGB in the shader. Depth comes from the transport the session u
 Shaders call ``primary_distance(uv)`` / ``extra_distance(uv)`` (radial distance, 0 = sky or
 nothing known) and ``atlas_rgb(rect, uv)``, whichever the transport; :func:`frame_glsl`
 writes the matching implementation.
+
+A frame uploaded with a :class:`~pibr.client.flow_warp.FlowFrame` can show its primary view
+extrapolated along its motion flow to a display time: ``use(flow_time)`` writes the rectangle
+that changes (colour and depth, either transport), ``use()`` puts the decoded frame back. The
+CPU copies (:meth:`FrameTextures.view_distances`) stay the frame as decoded.
 """
 from __future__ import annotations
 

@@ -88,6 +88,16 @@ def _crop(ext, mask):
 def test_zero_flow_or_no_time_changes_nothing():
     f, _ = _frame(flow_value=(0.0, 0.0))
     assert not f.moves and f.extrapolate(2.0) is None
+    # an object at rest beside one that moves: its pixels and its surroundings stay as decoded
+    y, u, v, dist = _frame()[1]
+    moving = np.zeros((H, W), bool)
+    moving[BOX] = True
+    moving[40:50, 60:70] = True
+    flow = np.zeros((H, W, 2), np.float32)
+    flow[BOX] = (3.0, 1.0)
+    ext = FlowFrame(y, u, v, dist, flow, moving, 1.0, 0.1).extrapolate(2.0)
+    x0, y0, w, h = ext.rect
+    assert y0 + h <= 38      # the resting object is outside what changed
     g, _ = _frame()
     assert g.moves
     assert g.extrapolate(0.0) is None and g.extrapolate(g.steps(1.0)) is None and g.steps(0.5) == 0.0
@@ -154,10 +164,10 @@ def test_a_stretching_object_has_no_cracks():
     dist[moving] = 2.0
     flow = np.zeros((H, W, 2), np.float32)
     xs = np.indices((H, W))[1]
-    flow[..., 0] = np.where(moving, 0.5 * (xs - 10), 0.0)   # one step: pixel k goes to 1.5 k
+    flow[..., 0] = np.where(moving, 0.5 * (xs - 9), 0.0)    # one step: pixel 9 + k goes to 9 + 1.5 k
     f = FlowFrame(y, u, u, dist, flow, moving, 1.0, 0.1)
     out = _full(f.extrapolate(1.0), (y, u, u, dist))[0]
-    assert np.all(out[20:30, 10:24] == 200)
+    assert np.all(out[20:30, 11:25] == 200)
 
 
 def test_bad_shapes_are_refused():
