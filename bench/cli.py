@@ -133,6 +133,8 @@ def _names(text: str) -> tuple:
 
 
 def register(sub) -> None:
+    from pibr.client.object_motion import CLIENT_MOTION_MODES
+
     d = sub.add_parser("demo", help="run server, relay and client on loopback and score the result",
                        description="Start a server, a 128 ms relay and a client as separate processes, replay a "
                                    "real head trace, then compare the methods against ground truth.")
@@ -158,6 +160,9 @@ def register(sub) -> None:
                    help="proxy: how moving objects are placed at the display time (see 'pibr client --help')")
     d.add_argument("--clock", choices=("virtual", "real"), default="virtual")
     d.add_argument("--flip-every", type=_non_negative_int, default=4, help="FLIP on every Nth frame, 0: never (default 4)")
+    d.add_argument("--motion", choices=CLIENT_MOTION_MODES, default=None,
+                   help="how the client brings moving objects to the display time (see 'pibr client --help'; "
+                        "try --scene dynamic --motion flow)")
     d.set_defaults(func=cmd_demo)
 
     e = sub.add_parser("evaluate", help="score a client recording against ground truth",
@@ -295,6 +300,35 @@ def register(sub) -> None:
     pa.add_argument("--depth-codec", choices=("h264", "edge"), default="h264")
     pa.add_argument("--out", default="out/bench")
     pa.set_defaults(func=cmd_bench_pareto)
+
+    dy = bs.add_parser("dynamic", help="moving objects at the display time: static, velocity, accel, flow and the "
+                                       "oracle per latency; both flow coders",
+                       description="Every way the client brings moving objects to the display time (proxy with "
+                                   "--motion static, velocity, accel, flow, oracle; rotation with and without flow), "
+                                   "at several round trips, on scenes that move: DSSIM and PSNR over the frame and "
+                                   "over the moving objects' pixels, client ms, motion bits per frame; the error "
+                                   "over time around a reversal and a stop; the motion flow's bits and error with "
+                                   "both flow coders. Writes dynamic.json and dynamic.png.")
+    dy.add_argument("--scene", type=_names, default=("dynamic", "room"), help="scenes that move (default dynamic,room)")
+    dy.add_argument("--windows", type=_windows, default=None,
+                    help="head-trace windows (default: pred6dof-2@50+2,synth-turns@5+2, parts of the evaluation "
+                         "windows where the dynamic scene's objects are in view; " + _WINDOWS_HELP + ")")
+    dy.add_argument("--latency-ms", type=_floats, default=(64.0, 128.0, 256.0), metavar="MS,...",
+                    help="round trips (default 64,128,256)")
+    dy.add_argument("--event-latency-ms", type=_positive, default=128.0,
+                    help="round trip of the reversal and stop probes (default 128)")
+    dy.add_argument("--rate", type=_positive, default=30.0, help="display rate Hz (default 30)")
+    dy.add_argument("--stride", type=_positive_int, default=3, help="score every Nth displayed tick (default 3)")
+    dy.add_argument("--event-stride", type=_positive_int, default=2,
+                    help="score every Nth tick around the reversals and stops (default 2)")
+    dy.add_argument("--view-size", type=_size, default=(512, 512), metavar="WxH",
+                    help="server view size (default 512x512: a few minutes on 2 cores; the server's is 1024x1024)")
+    dy.add_argument("--size", type=_size, default=(480, 270), metavar="WxH", help="output size (default 480x270)")
+    dy.add_argument("--depth-codec", choices=("h264", "edge"), default="h264")
+    dy.add_argument("--flow-coder", choices=("blocks", "edges"), default=None,
+                    help="the motion flow the flow methods receive (default: the server's); both are measured")
+    dy.add_argument("--out", default="out/bench")
+    dy.set_defaults(func=cmd_bench_dynamic)
 
     sp = bs.add_parser("split", help="a one-mesh level, whole against cut into pieces: LoD, client ms, DSSIM",
                        description="Generates a one-mesh atrium (167k triangles) and serves it whole and cut into "
@@ -457,6 +491,18 @@ def cmd_bench_fuzz(args) -> int:
     print_fuzz_table(r)
     print(f"written: {args.out}/fuzz.json")
     return 0 if r["ok"] else 1
+
+
+def cmd_bench_dynamic(args) -> int:
+    from .dynamic_bench import DEFAULT_WINDOWS, print_dynamic_tables, run_dynamic_bench
+
+    r = run_dynamic_bench(scenes=args.scene, windows=args.windows or DEFAULT_WINDOWS, latencies=args.latency_ms,
+                          rate_hz=args.rate, stride=args.stride, view_size=args.view_size, out_size=args.size,
+                          depth_codec=args.depth_codec, flow_coder=args.flow_coder,
+                          event_latency_ms=args.event_latency_ms, event_stride=args.event_stride, out_dir=args.out)
+    print_dynamic_tables(r)
+    print(f"written: {args.out}/dynamic.json, {args.out}/dynamic.png")
+    return 0
 
 
 def cmd_bench_split(args) -> int:

@@ -75,7 +75,12 @@ class Simulation:
 
     def __init__(self, scene, view_size=(1024, 1024), out_size=(960, 540), fov_deg=90.0, fps=10.0,
                  bitrate_kbps=16000.0, extra_view="auto", proxies=None, ctx=None, depth_codec="h264",
-                 edge_kbps=0.0, keep_distances=False, peel_marker=True):
+                 edge_kbps=0.0, keep_distances=False, peel_marker=True, flow_coder=None, flow_frames=False,
+                 moving_truth=False):
+        """flow_coder: the server's MOTION_FLOW coder (default its default); flow_frames: decode each
+        frame's motion flow and hand the textures a FlowFrame, for methods with ``motion="flow"``;
+        moving_truth: the ground truth also says which moving object each pixel shows
+        (:meth:`ground_truth_moving`)."""
         from pibr.client.frame_textures import FrameTextures
         from pibr.client.output_target import OutputTarget
         from pibr.client.video import H264Decoder
@@ -90,7 +95,9 @@ class Simulation:
         self.ctx = ctx or create_context()
         self.scene, self.fps = scene, fps
         cfg = ServerConfig(view_size=tuple(view_size), extra_view=extra_view, fps=fps, bitrate_kbps=bitrate_kbps,
-                           depth_codec=depth_codec, edge=EdgeSettings(kbps=edge_kbps), peel_marker=peel_marker)
+                           depth_codec=depth_codec, edge=EdgeSettings(kbps=edge_kbps), peel_marker=peel_marker,
+                           **({} if flow_coder is None else {"flow_coder": flow_coder}))
+        self.flow_coder = cfg.flow_coder
         info = {"objects": len(proxies)} if proxies else None
         self.session, spec = plan_session(cfg, scene, Hello(want_proxies=bool(proxies)), info)
         if keep_distances:   # the views' true distances, for geometric holes
@@ -110,7 +117,7 @@ class Simulation:
         self.textures = FrameTextures(self.ctx, self.session)
         self.output = OutputConfig(out_size[0], out_size[1], fov_deg, 60.0)
         self.target = OutputTarget(self.ctx, *out_size)
-        self.gt = RenderTarget(self.ctx, *out_size)
+        self.gt = RenderTarget(self.ctx, *out_size, motion=moving_truth)
         self.proxies = proxies
         self._last_render = None
         self.distances = {}    # the newest frame's true distance maps (keep_distances)
@@ -118,6 +125,17 @@ class Simulation:
         self._oracle = None    # (encoder, decoder, textures) of the zero-latency stream
         self.bytes = []        # H.264 bytes per frame
         self.depth_bytes = []  # edge-codec bytes per frame
+        self.pose_bytes = []   # OBJECT_POSES bytes per frame (scenes that move)
+        self.flow_bytes = []   # MOTION_FLOW bytes per frame (scenes that move)
+        self.flow = None       # the newest frame's decoded (flow (h, w, 2), moving (h, w)), with flow_frames
+        self.true_flow = None  # ... and the renderer's own (flow, moving) before coding
+        self.motion_decoder = None
+        self.flow_decode_ms = []    # per frame with flow_frames: MOTION_FLOW decode (and diffusion)
+        self.flow_prepare_ms = []   # ... and the FlowFrame's background fill
+        if flow_frames and scene.is_dynamic:
+            from pibr.client.motion_flow import MotionFlowDecoder
+
+            self.motion_decoder = MotionFlowDecoder(*view_size)
         # Moving objects' transforms as a client receives them: from every server frame, including
         # those the display's stride never shows (a client receives them all).
         self.poses = None
@@ -145,12 +163,31 @@ class Simulation:
             payloads += depth
         if p.object_poses is not None:
             payloads.append((PayloadKind.OBJECT_POSES, p.object_poses))
+            self.pose_bytes.append(len(p.object_poses))
             self._receive_poses(t_render, p.object_poses)
+        if p.motion is not None:
+            from pibr.server.motion_flow import motion_flow_payload
+
+            flow_payload = motion_flow_payload(p, self.flow_coder)
+            payloads.append((PayloadKind.MOTION_FLOW, flow_payload))
+            self.flow_bytes.append(len(flow_payload))
+            self.true_flow = (p.motion, p.moving)
         us = int(round(t_render * 1e6))
         frame = Frame(len(self.bytes) - 1, us, us, 0, us, p.primary_pose, p.extra_pose, self.scene.near,
                       self.scene.far, payloads=tuple(payloads), keyframe=key)
         distances = self.depth_decoder.decode(frame) if self.depth_decoder is not None else None
-        self.textures.upload(self.decoder.decode(data), frame.frame_id, distances)
+        image = self.decoder.decode(data)
+        flow_frame = None
+        if self.motion_decoder is not None:
+            from pibr.client.frame_textures import primary_flow_frame
+
+            t0 = time.perf_counter()
+            self.flow = self.motion_decoder.decode(frame.payload(PayloadKind.MOTION_FLOW))
+            t1 = time.perf_counter()
+            flow_frame = primary_flow_frame(self.session, image, distances, *self.flow, t_render)
+            self.flow_decode_ms.append((t1 - t0) * 1e3)
+            self.flow_prepare_ms.append((time.perf_counter() - t1) * 1e3)
+        self.textures.upload(image, frame.frame_id, distances, flow_frame)
         self._last_render = (cache_key, frame)
         return frame
 
@@ -233,6 +270,13 @@ class Simulation:
     def ground_truth(self, pose, t):
         self.renderer.render_perspective(self.gt, pose, t, self.output.fov_deg)
         return self.gt.read_color().copy()
+
+    def ground_truth_moving(self) -> np.ndarray:
+        """(h, w) int32 scene index of the moving object each pixel of the last ground truth shows,
+        -1 elsewhere (a Simulation made with moving_truth=True)."""
+        if self.gt.motion is None:
+            raise ValueError("make the Simulation with moving_truth=True")
+        return self.gt.read_moving_index()
 
     def ground_truth_distance(self) -> np.ndarray:
         """(h, w) float32 radial distance of the last ground truth rendered (0 = sky)."""

@@ -82,3 +82,26 @@ def nearly_uniform(image: np.ndarray, fraction: float = 0.95, tolerance: int = 2
     mode = np.median(flat[:: max(1, len(flat) // 4096)], axis=0)
     same = np.all(np.abs(flat - mode) <= tolerance, axis=1)
     return bool(same.mean() > fraction)
+
+
+#: Pixels of a mask needed for :func:`masked_metrics` to score them.
+MIN_PIXELS = 30
+
+
+def masked_metrics(gt: np.ndarray, rgb: np.ndarray, masks: dict) -> dict:
+    """Whole-frame PSNR / DSSIM of (H, W, 3) uint8 images and, per mask (H, W) bool, the PSNR and
+    DSSIM of its pixels (the SSIM map averaged there); NaN where a mask has fewer than MIN_PIXELS."""
+    from skimage.metrics import structural_similarity
+
+    _check_pair(gt, rgb)
+    mean, smap = structural_similarity(gt, rgb, channel_axis=2, data_range=255, full=True)
+    out = {"psnr": psnr(gt, rgb), "dssim": dssim(float(mean))}
+    err = (gt.astype(np.float64) - rgb.astype(np.float64)) ** 2
+    for name, mask in masks.items():
+        if mask.sum() < MIN_PIXELS:
+            out[f"psnr_{name}"] = out[f"dssim_{name}"] = float("nan")
+            continue
+        mse = float(err[mask].mean())
+        out[f"psnr_{name}"] = PSNR_CAP if mse <= 0 else min(PSNR_CAP, 10 * math.log10(255.0 ** 2 / mse))
+        out[f"dssim_{name}"] = dssim(float(smap[mask].mean()))
+    return out

@@ -68,10 +68,9 @@ def measure_motion(scene, windows, modes=MODES, latency_ms: float = 128.0, rate_
                                       latency)[::stride]
             for t_disp, display, t_render, rendered in samples:
                 frame = sim.frame_at(t_render, rendered)
-                sim.renderer.render_perspective(truth, display, frame.scene_t_us / 1e6, sim.output.fov_deg,
-                                                mark_moving=True)
+                sim.renderer.render_perspective(truth, display, frame.scene_t_us / 1e6, sim.output.fov_deg)
                 stale = truth.read_motion()[1].copy()
-                sim.renderer.render_perspective(truth, display, t_disp, sim.output.fov_deg, mark_moving=True)
+                sim.renderer.render_perspective(truth, display, t_disp, sim.output.fov_deg)
                 gt = truth.read_color().copy()
                 mask = truth.read_motion()[1] | stale
                 for mode, m in methods.items():

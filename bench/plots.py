@@ -173,3 +173,45 @@ def plot_pareto(result: dict, path: str) -> None:
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
+
+
+def plot_dynamic(result: dict, path: str) -> None:
+    """``pibr bench dynamic``: per event (a reversal, a stop) the DSSIM of the object's pixels over
+    time for every ``proxy`` variant (at a fixed head pose ``rotation`` shows what ``static`` does);
+    per scene the DSSIM of moving pixels against latency for every variant."""
+    plt = _pyplot()
+    events = [(scene, e) for scene, s in result["scenes"].items() for e in s["events"]]
+    scenes = list(result["scenes"])
+    cols = max(len(events), len(scenes), 1)
+    fig, axes = plt.subplots(2, cols, figsize=(4.8 * cols, 7.5), squeeze=False)
+    for ax, (scene, e) in zip(axes[0], events):
+        kinds = next(iter(result["scenes"][scene]["latency"].values()), {}).get("methods", {})
+        for label, m in e["methods"].items():
+            if kinds.get(label, {}).get("method", "proxy") != "proxy":
+                continue
+            ax.plot(e["times"], m["dssim_object"], label=label, lw=1.2, ls="--" if label == "oracle" else "-")
+        ax.axvline(0.0, color="k", lw=0.8, ls=":")
+        ax.set_title(f"{scene}: {e['object']} {e['kind']} at {e['t']:.2f} s ({e['latency_ms']:g} ms)", fontsize=9)
+        ax.set_xlabel("display time - event time, s")
+        ax.set_ylabel("DSSIM of the object's pixels")
+        ax.grid(alpha=0.3)
+    for ax in axes[0][len(events):]:
+        ax.axis("off")
+    for ax, scene in zip(axes[1], scenes):
+        lat = result["scenes"][scene]["latency"]
+        xs = [float(k) for k in lat]
+        labels = list(next(iter(lat.values()))["methods"]) if lat else []
+        for label in labels:
+            ax.plot(xs, [lat[k]["methods"][label]["dssim_moving"] for k in lat], marker="o", label=label, lw=1.2,
+                    ls="--" if label == "oracle" else "-")
+        ax.set_title(f"{scene}: moving objects' pixels", fontsize=9)
+        ax.set_xlabel("round trip ms")
+        ax.set_ylabel("DSSIM (lower is better)")
+        ax.grid(alpha=0.3)
+    for ax in axes[1][len(scenes):]:
+        ax.axis("off")
+    axes[0][0].legend(fontsize=7)
+    axes[1][0].legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)

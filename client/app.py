@@ -145,6 +145,7 @@ class _Decoded:
     arrival_us: int
     image: object
     distances: dict | None = None   # edge codec: view -> dense distance (h, w) float32
+    flow: object = None             # the primary view's FlowFrame (client/flow_warp.py), when a method uses flow
 
 
 @dataclass
@@ -199,6 +200,7 @@ class Client:
         self.proxies = None
         self.proxy_stats: dict = {}
         self._depth_decoder = None
+        self._motion_decoder = None     # the frames' MOTION_FLOW (scenes that move)
         #: moving objects' transforms from every frame received (scenes that move)
         self.poses = None
         #: server time = client time + this (0 on the virtual clock, estimated on the real one)
@@ -245,7 +247,7 @@ class Client:
         """Upload the newest frame if new, render every method; -> [(rgb, hole fraction, ms)]."""
         textures, methods, target = self._gl_state
         if decoded is not None and textures.frame_id != decoded.frame.frame_id:
-            textures.upload(decoded.image, decoded.frame.frame_id, decoded.distances)
+            textures.upload(decoded.image, decoded.frame.frame_id, decoded.distances, decoded.flow)
         out = []
         for m in methods:
             target.begin()
@@ -298,6 +300,10 @@ class Client:
                 self._depth_decoder = EdgeDepthDecoder(self.session)
             if self.session.motion:
                 self.poses = self._pose_history()
+                if cfg.options.get("motion") == "flow":
+                    from .motion_flow import MotionFlowDecoder
+
+                    self._motion_decoder = MotionFlowDecoder(self.session.primary.width, self.session.primary.height)
             self.gl = await loop.run_in_executor(None, GLThread, "pibr-client-gl")
             await self.gl.run(self._gl_setup)
             if cfg.record:
@@ -403,17 +409,33 @@ class Client:
                 image = self._decoder.decode(frame.payload(PayloadKind.H264_ATLAS), convert=newest)
                 depth = (self._depth_decoder.decode(frame, reconstruct=newest)
                          if self._depth_decoder is not None else None)
-            return image, depth
+            # the flow (its decoder keeps no state) only for the frame that will be shown
+            return image, depth, self._flow_frame(frames[-1][0], image, depth)
 
-        image, distances = await loop.run_in_executor(self._decode_pool, decode)
+        image, distances, flow = await loop.run_in_executor(self._decode_pool, decode)
         if self.poses is not None:   # every frame's transforms: the history sees each frame's time
             for frame, p in poses:
                 if p is not None:
                     self.poses.add(frame.scene_t_us / 1e6, p)
         frame, arrival_us = frames[-1]
-        self._newest = _Decoded(frame, arrival_us, image, distances)
+        self._newest = _Decoded(frame, arrival_us, image, distances, flow)
         self.frames_received += len(frames)
         self._arrivals_us.extend(arrival for _, arrival in frames)
+
+    def _flow_frame(self, frame: Frame, image, distances):
+        """The frame's primary view ready for ``flow`` extrapolation (decode pool), or None when no
+        method uses flow or the frame carries no motion flow."""
+        if self._motion_decoder is None:
+            return None
+        from pibr.protocol.errors import MalformedMessage
+
+        from .frame_textures import primary_flow_frame
+
+        payload = frame.payload(PayloadKind.MOTION_FLOW)
+        if payload is None:
+            raise MalformedMessage(f"frame {frame.frame_id} of a moving scene carries no motion flow")
+        flow, moving = self._motion_decoder.decode(payload)
+        return primary_flow_frame(self.session, image, distances, flow, moving, frame.scene_t_us / 1e6)
 
     async def _display(self, tick: int, t_us: int, pose: Pose) -> None:
         """Render all methods for the tick and record them. Recorded times are in client time;

@@ -147,9 +147,12 @@ def add_method_knobs(parser) -> None:
     from .object_motion import CLIENT_MOTION_MODES
 
     group.add_argument("--motion", dest="knob_motion", choices=CLIENT_MOTION_MODES, default=None,
-                       help=f"proxy: where moving objects are placed at the display time, from the transforms the "
+                       help=f"how moving objects are brought to the display time. proxy, from the transforms the "
                             f"frames carried: static (where the newest frame saw them), velocity (constant linear "
-                            f"and angular velocity), accel (second order); default {defaults.get('motion')}")
+                            f"and angular velocity), accel (second order), default velocity; flow, for proxy and "
+                            f"every method that re-projects the primary view (none, rotation, homography, splat, "
+                            f"meshwarp, coarse-meshwarp): the moving pixels warped along the frames' motion flow "
+                            f"(Pajak et al.), default static")
     group.add_argument("--no-carve", dest="knob_carve", action="store_const", const=False, default=None,
                        help="proxy: test only the nearest proxy fragment of each pixel (one cheaper pass; proxy "
                             "surfaces no view confirms then hide what lies behind them)")

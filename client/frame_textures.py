@@ -9,6 +9,11 @@ and converted to RGB in the shader. Depth comes from the transport the session u
 Shaders call ``primary_distance(uv)`` / ``extra_distance(uv)`` (radial distance, 0 = sky or
 nothing known) and ``atlas_rgb(rect, uv)``, whichever the transport; :func:`frame_glsl`
 writes the matching implementation.
+
+A frame uploaded with a :class:`~pibr.client.flow_warp.FlowFrame` can show its primary view
+extrapolated along its motion flow to a display time: ``use(flow_time)`` writes the rectangle
+that changes (colour and depth, either transport), ``use()`` puts the decoded frame back. The
+CPU copies (:meth:`FrameTextures.view_distances`) stay the frame as decoded.
 """
 from __future__ import annotations
 
@@ -114,6 +119,41 @@ def has_extra_depth(config: SessionConfig) -> bool:
     return config.extra is not None and (config.depth_codec == "edge" or config.atlas.rect("extra.depth") is not None)
 
 
+def transport_quantizer(config: SessionConfig):
+    """The depth transport's :class:`~pibr.protocol.depth.DepthQuantizer`."""
+    from pibr.protocol.depth import DepthQuantizer
+
+    return DepthQuantizer(config.near, config.far, config.depth_bits, config.depth_min_code)
+
+
+def primary_flow_frame(config: SessionConfig, image: YUVImage, distances: dict | None, flow, moving,
+                       scene_t: float, horizon_frames: float | None = None):
+    """A :class:`~pibr.client.flow_warp.FlowFrame` of a decoded frame's primary view, for
+    :meth:`FrameTextures.upload` (CPU only: make it where the frame is decoded). flow (h, w, 2)
+    and moving (h, w) from the frame's MOTION_FLOW; distances: the edge codec's, else the
+    atlas's 8-bit disparity is read."""
+    from .flow_warp import DEFAULT_HORIZON_FRAMES, FlowFrame
+
+    x, y, w, h = config.atlas.rect("primary.color")
+    if distances and "primary" in distances:
+        distance = distances["primary"]
+    else:
+        dx, dy, dw, dh = config.atlas.rect("primary.depth")
+        distance = transport_quantizer(config).dequantize(image.y[dy:dy + dh, dx:dx + dw])
+    # the transport's error forgiven in depth tests, in disparity (1 / m)
+    slack = DEPTH_SLACK_CODES[config.depth_codec] / (config.near * ((1 << config.depth_bits) - 1 - config.depth_min_code))
+    return FlowFrame(image.y[y:y + h, x:x + w], image.u[y // 2:(y + h) // 2, x // 2:(x + w) // 2],
+                     image.v[y // 2:(y + h) // 2, x // 2:(x + w) // 2], distance, flow, moving, scene_t,
+                     config.frame_interval_us / 1e6, DEFAULT_HORIZON_FRAMES if horizon_frames is None else horizon_frames,
+                     slack)
+
+
+def _inside(inner, outer) -> bool:
+    """Whether rectangle ``inner`` (x, y, w, h) lies within ``outer``."""
+    return (outer[0] <= inner[0] and outer[1] <= inner[1] and inner[0] + inner[2] <= outer[0] + outer[2]
+            and inner[1] + inner[3] <= outer[1] + outer[3])
+
+
 class FrameTextures:
     """The newest frame's textures; :meth:`upload` replaces their contents. GL thread only."""
 
@@ -137,11 +177,14 @@ class FrameTextures:
                 self.distances[name] = t
         self.frame_id = None
         self.config = config
+        self.flow = None
+        self.extrapolated = None
         self._image: YUVImage | None = None
         self._cpu_distances: dict = {}
 
-    def upload(self, image: YUVImage, frame_id: int, distances: dict | None = None) -> None:
-        """image: the atlas planes; distances: view name -> (h, w) float32 (edge codec)."""
+    def upload(self, image: YUVImage, frame_id: int, distances: dict | None = None, flow=None) -> None:
+        """image: the atlas planes; distances: view name -> (h, w) float32 (edge codec); flow: the
+        frame's :class:`~pibr.client.flow_warp.FlowFrame` (see :meth:`use`), or None."""
         self._image = image
         self._cpu_distances = dict(distances or {})
         self.y.write(np.ascontiguousarray(image.y), alignment=1)
@@ -150,6 +193,8 @@ class FrameTextures:
         for name, d in (distances or {}).items():
             self.distances[name].write(np.ascontiguousarray(d, np.float32).tobytes())
         self.frame_id = frame_id
+        self.flow = flow
+        self.extrapolated = None   # what of the primary view the textures hold extrapolated (see use())
 
     def view_distances(self, name: str) -> np.ndarray | None:
         """The newest frame's radial distance of view ``name`` ("primary" or "extra") on the CPU,
@@ -162,16 +207,61 @@ class FrameTextures:
         rect = self.config.atlas.rect(f"{name}.depth")
         if self.config.depth_codec != "h264" or rect is None or self._image is None:
             return None
-        from pibr.protocol.depth import DepthQuantizer
-
         x, y, w, h = rect
-        quantizer = DepthQuantizer(self.config.near, self.config.far, self.config.depth_bits,
-                                   self.config.depth_min_code)
-        d = quantizer.dequantize(self._image.y[y:y + h, x:x + w]).astype(np.float32)
+        d = transport_quantizer(self.config).dequantize(self._image.y[y:y + h, x:x + w]).astype(np.float32)
         self._cpu_distances[name] = d
         return d
 
-    def use(self) -> None:
+    def show_at(self, flow_time: float | None) -> None:
+        """Make the primary view's textures show the frame extrapolated along its motion flow to
+        scene time ``flow_time`` (client/flow_warp.py), or as decoded (None, or no flow). Only the
+        rectangle extrapolation changes is written; :meth:`use` calls this."""
+        ext = None
+        if flow_time is not None and self.flow is not None:
+            ext = self.flow.extrapolate(self.flow.steps(flow_time))
+        old = self.extrapolated
+        if ext is old:
+            return
+        if old is not None and not (ext is not None and _inside(old.rect, ext.rect)):
+            self._write_primary(old.rect)
+        if ext is not None:
+            self._write_primary(ext.rect, ext)
+        self.extrapolated = ext
+
+    def _write_primary(self, rect, ext=None) -> None:
+        """Write ``rect`` (x, y, w, h) of the primary view: from ``ext`` (Extrapolated over exactly
+        that rectangle) or from the frame as decoded."""
+        x0, y0, w, h = rect
+        cx, cy = self.config.atlas.rect("primary.color")[:2]
+        img = self._image
+        if ext is None:
+            planes = (img.y[cy + y0:cy + y0 + h, cx + x0:cx + x0 + w],
+                      img.u[(cy + y0) // 2:(cy + y0 + h) // 2, (cx + x0) // 2:(cx + x0 + w) // 2],
+                      img.v[(cy + y0) // 2:(cy + y0 + h) // 2, (cx + x0) // 2:(cx + x0 + w) // 2])
+        else:
+            planes = (ext.y, ext.u, ext.v)
+        self.y.write(np.ascontiguousarray(planes[0]), viewport=(cx + x0, cy + y0, w, h), alignment=1)
+        for tex, plane in ((self.u, planes[1]), (self.v, planes[2])):
+            tex.write(np.ascontiguousarray(plane), viewport=((cx + x0) // 2, (cy + y0) // 2, w // 2, h // 2),
+                      alignment=1)
+        if "primary" in self.distances:
+            d = self._cpu_distances["primary"][y0:y0 + h, x0:x0 + w] if ext is None else ext.distance
+            self.distances["primary"].write(np.ascontiguousarray(d, np.float32).tobytes(), viewport=(x0, y0, w, h))
+            return
+        depth = self.config.atlas.rect("primary.depth")
+        if depth is None:
+            return
+        dx, dy = depth[:2]
+        codes = img.y[dy + y0:dy + y0 + h, dx + x0:dx + x0 + w]
+        if ext is not None:
+            codes = codes.copy()
+            codes[ext.changed] = transport_quantizer(self.config).quantize(ext.distance[ext.changed])
+        self.y.write(np.ascontiguousarray(codes), viewport=(dx + x0, dy + y0, w, h), alignment=1)
+
+    def use(self, flow_time: float | None = None) -> None:
+        """Bind the frame's textures; ``flow_time``: see :meth:`show_at` (None: the frame as decoded)."""
+        if self._image is not None:
+            self.show_at(flow_time)
         self.y.use(UNIT_Y)
         self.u.use(UNIT_U)
         self.v.use(UNIT_V)

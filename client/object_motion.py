@@ -14,7 +14,9 @@ Pajak et al. 2011's temporal upsampling done on object transforms instead of pix
   transforms, the acceleration's correction limited to the first order's own displacement
   (ACCEL_LIMIT), so a start or stop between frames cannot throw an object about;
 * ``oracle``: the scene's own animation, which only the benchmarks have (they pass a callable;
-  the client process never has one).
+  the client process never has one);
+* ``flow``: not per object but per pixel: the moving pixels of the newest frame warped along
+  their decoded motion flow (client/flow_warp.py); no proxy needed.
 
 Measured (``python -m pibr.bench.motion_eval``, 128 ms, DSSIM over the moving objects' pixels,
 see bench/motion_eval.py): in ``dynamic`` over the seven evaluation windows static 0.326,
@@ -42,9 +44,9 @@ import numpy as np
 from pibr.protocol.object_poses import ObjectPoses
 from pibr.protocol.pose import quat_from_matrix, quat_to_matrix
 
-MOTION_MODES = ("static", "velocity", "accel", "oracle")
+MOTION_MODES = ("static", "velocity", "accel", "oracle", "flow")
 #: What a client process can run: ``oracle`` needs the scene's animation (benchmarks only).
-CLIENT_MOTION_MODES = ("static", "velocity", "accel")
+CLIENT_MOTION_MODES = ("static", "velocity", "accel", "flow")
 DEFAULT_MOTION = "accel"
 #: Frame intervals past the newest transform extrapolated at full speed; then damped.
 DEFAULT_HORIZON_FRAMES = 3.0

@@ -256,12 +256,13 @@ class PayloadKind:
     H264_ATLAS = 1        # one H.264 access unit of the colour (+ 8-bit disparity) atlas
     EDGE_DEPTH = 2        # edge-codec depth of the primary view
     EDGE_DEPTH_EXTRA = 3  # edge-codec depth of the extra view
-    EDGE_MOTION = 4       # edge-codec motion of moving objects (primary view)
+    EDGE_MOTION = 4       # reserved: never sent (motion flow travels as MOTION_FLOW, with either depth codec)
     QUADTREE = 5          # depth quadtrees of every view (protocol/quadtree.py), when the Hello asked
     OBJECT_POSES = 6      # moving objects' transforms at the frame's scene time (protocol/object_poses.py)
-    ALL = (H264_ATLAS, EDGE_DEPTH, EDGE_DEPTH_EXTRA, EDGE_MOTION, QUADTREE, OBJECT_POSES)
+    MOTION_FLOW = 7       # motion flow of moving objects in the primary view (protocol/motion_flow.py)
+    ALL = (H264_ATLAS, EDGE_DEPTH, EDGE_DEPTH_EXTRA, EDGE_MOTION, QUADTREE, OBJECT_POSES, MOTION_FLOW)
     NAMES = {1: "h264-atlas", 2: "edge-depth", 3: "edge-depth-extra", 4: "edge-motion", 5: "quadtree",
-             6: "object-poses"}
+             6: "object-poses", 7: "motion-flow"}
 
 
 _FRAME_HEAD = struct.Struct("<IqqIqI7d7ddd4fB")

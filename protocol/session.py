@@ -80,8 +80,8 @@ class SessionConfig:
     depth_codec      : "h264" (8-bit disparity in the atlas) or "edge" (edge codec payloads)
     depth_bits, depth_min_code : quantization of the depth transport
     motion           : the scene has moving objects: every frame carries their transforms
-                       (``PayloadKind.OBJECT_POSES``) and, with the edge codec, their motion flow
-                       (``EDGE_MOTION``); False: frames carry no motion of any kind
+                       (``PayloadKind.OBJECT_POSES``) and their motion flow in the primary view
+                       (``MOTION_FLOW``, either depth codec); False: frames carry no motion of any kind
     proxies          : the proxy bundle's announcement (proxy.BundleInfo as JSON) or None when none are sent
     """
 

@@ -6,6 +6,7 @@ import asyncio
 import sys
 
 from pibr.protocol.address import parse_host_port
+from pibr.protocol.motion_flow import DEFAULT_FLOW_CODER, FLOW_CODERS
 
 from .config import DEFAULT_PORT
 from .relay import DEFAULT_BUFFER_BYTES, DEFAULT_MAX_CONNECTIONS
@@ -114,6 +115,10 @@ def register(sub) -> None:
     p.add_argument("--edge-perceptual", action="store_true",
                    help="edge codec: weight edges by their visibility in the colour (contrast transducer)")
     p.add_argument("--edge-no-temporal", action="store_true", help="edge codec: no temporal context")
+    p.add_argument("--flow-coder", choices=FLOW_CODERS, default=DEFAULT_FLOW_CODER,
+                   help="motion flow of scenes that move: the moving mask and 8x8 block means (blocks), or "
+                        "Pajak et al.'s edge samples diffused on the client (edges) ('pibr bench dynamic' "
+                        f"measures both; default {DEFAULT_FLOW_CODER})")
     p.add_argument("--max-sessions", type=int, default=8,
                    help="sessions served at once, counted from a valid Hello (default 8)")
     p.add_argument("--admit-wait-s", type=float, default=5.0, metavar="S",
@@ -183,7 +188,7 @@ def cmd_serve(args) -> int:
                           hello_timeout_s=args.hello_timeout_s,
                           idle_timeout_s=args.idle_timeout_s, idle_timeout_virtual_s=args.idle_timeout_virtual_s,
                           max_clock_lead_s=args.max_clock_lead_s,
-                          max_in_flight=args.max_in_flight,
+                          max_in_flight=args.max_in_flight, flow_coder=args.flow_coder,
                           edge=EdgeSettings(kbps=args.edge_kbps, temporal=not args.edge_no_temporal,
                                             perceptual=args.edge_perceptual),
                           token=_token(args), tls_cert=args.tls_cert, tls_key=args.tls_key)

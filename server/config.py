@@ -7,6 +7,7 @@ from pibr.protocol.access import check_listen_access
 from pibr.protocol.atlas import check_view_size
 from pibr.protocol.errors import ConfigError
 from pibr.protocol.framing import DEFAULT_MAX_MESSAGE_SIZE
+from pibr.protocol.motion_flow import DEFAULT_FLOW_CODER, FLOW_CODERS
 from pibr.protocol.pose import dual_view_offset
 
 from .depth_stream import EdgeSettings
@@ -57,6 +58,7 @@ class ServerConfig:
     tls_key: str | None = None          # PEM key, unencrypted
     proxy_settings: ProxySettings = field(default_factory=ProxySettings)
     edge: EdgeSettings = field(default_factory=EdgeSettings)
+    flow_coder: str = DEFAULT_FLOW_CODER    # MOTION_FLOW of scenes that move (protocol/motion_flow.py)
 
     def __post_init__(self):
         if not (0 < self.port < 65536) and self.port != 0:
@@ -82,6 +84,8 @@ class ServerConfig:
             raise ConfigError(f"server delay must be in 0..10000 ms, got {self.server_delay_ms}")
         if self.depth_codec not in ("h264", "edge"):
             raise ConfigError(f"depth codec must be h264 or edge, got {self.depth_codec!r}")
+        if self.flow_coder not in FLOW_CODERS:
+            raise ConfigError(f"flow coder must be one of {', '.join(FLOW_CODERS)}, got {self.flow_coder!r}")
         if self.max_sessions < 1:
             raise ConfigError("max sessions must be at least 1")
         if self.max_pending < 1:

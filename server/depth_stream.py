@@ -73,8 +73,7 @@ class EdgeSettings:
 
 
 class EdgeDepthEncoder:
-    """A session's depth encoding: the primary view's stream (with motion when the scene moves)
-    and the extra view's. ``encode(produced)`` gives the Frame's payloads."""
+    """A session's depth encoding: the primary view's stream and the extra view's. ``encode(produced)`` gives the Frame's payloads."""
 
     def __init__(self, session, fps: float, settings: EdgeSettings = EdgeSettings()):
         q = edge_quantizer(session.near, session.far, session.depth_bits)
@@ -94,9 +93,8 @@ class EdgeDepthEncoder:
         payloads = []
         poses = {"primary": produced.primary_pose, "extra": produced.extra_pose}
         for name, (stream, kind) in self.streams.items():
-            primary = name == "primary"
-            data, stats = stream.encode(produced.distances[name], poses[name], produced.motion if primary else None,
-                                        produced.moving if primary else None, produced.low_colour)
+            # the motion flow travels as its own payload (MOTION_FLOW), with either depth codec
+            data, stats = stream.encode(produced.distances[name], poses[name], colour=produced.low_colour)
             payloads.append((kind, data))
             self.last_stats[name] = stats
         return payloads

@@ -104,8 +104,9 @@ in vec2 v_uv;
 in vec4 v_color;
 layout(location = 0) out vec4 f_color;
 layout(location = 1) out float f_dist;
-layout(location = 2) out vec4 f_motion;   // (dx, dy) pixels, moving flag; only wide views keep it
+layout(location = 2) out vec4 f_motion;   // (dx, dy) pixels, moving flag, object index
 uniform bool u_moving;
+uniform float u_object_index;             // the object's index in the scene (moving objects' pixels)
 uniform vec2 u_half_px;                   // pixels per unit of t' (wide views)
 %(shading)s
 %(projection)s
@@ -152,7 +153,8 @@ void main() {
     // seen from the current camera. Rows grow downwards, t'_y upwards.
     f_motion = vec4(0.0);
     if (u_moving)
-        f_motion = vec4((wa_project(v_cam).xy - wa_project(v_prev_cam).xy) * vec2(1.0, -1.0) * u_half_px, 1.0, 0.0);
+        f_motion = vec4((wa_project(v_cam).xy - wa_project(v_prev_cam).xy) * vec2(1.0, -1.0) * u_half_px, 1.0,
+                        u_object_index);
 }
 """
 
@@ -437,6 +439,7 @@ class _GPUObject:
     obj: object
     original: _GPUMesh
     texture: object | None
+    index: int = 0     # in the scene's object list
     #: pre-tessellated copies: edge angle (degrees) -> [(band distance m, mesh)], bands ascending
     tessellations: dict = field(default_factory=dict)
 
@@ -483,6 +486,12 @@ class RenderTarget:
         data = self.fbo.read(components=4, attachment=2, dtype="f2", alignment=1)
         m = np.frombuffer(data, np.float16).reshape(self.height, self.width, 4).astype(np.float32)
         return np.ascontiguousarray(m[:, :, :2]), m[:, :, 2] > 0.5
+
+    def read_moving_index(self) -> np.ndarray:
+        """(height, width) int32: the scene index of the moving object each pixel shows, -1 elsewhere."""
+        data = self.fbo.read(components=4, attachment=2, dtype="f2", alignment=1)
+        m = np.frombuffer(data, np.float16).reshape(self.height, self.width, 4).astype(np.float32)
+        return np.where(m[:, :, 2] > 0.5, np.rint(m[:, :, 3]), -1).astype(np.int32)
 
     def release(self) -> None:
         for r in (self.fbo, self.color, self.distance, self.depth, self.motion):
@@ -549,7 +558,7 @@ class Renderer:
         self._mip_nearest = ctx.sampler(filter=(ctx.LINEAR_MIPMAP_NEAREST, ctx.LINEAR))
         self.objects: list[_GPUObject] = []
         self.tessellated_triangles = 0
-        for obj in scene.objects:
+        for index, obj in enumerate(scene.objects):
             if obj.mesh.triangle_count == 0:
                 continue
             original = _GPUMesh(ctx, obj.mesh, {k: self.programs[k] for k in ("perspective", "tess", "tess_peel",
@@ -561,7 +570,7 @@ class Renderer:
                 tex.build_mipmaps()
                 tex.filter = (ctx.LINEAR_MIPMAP_LINEAR, ctx.LINEAR)
                 # No anisotropic filtering: on llvmpipe it costs more than the rest of the pass.
-            self.objects.append(_GPUObject(obj, original, tex))
+            self.objects.append(_GPUObject(obj, original, tex, index))
         self.wide = wide
         if wide:  # pre-tessellated copies for the vertex-projection path
             self.tessellated_triangles = self.prepare_edge_angle(max_edge_angle_deg)
@@ -659,6 +668,8 @@ class Renderer:
                 prog["u_has_texture"].value = g.texture is not None
             if "u_moving" in members:
                 prog["u_moving"].value = moving
+            if moving and "u_object_index" in members:
+                prog["u_object_index"].value = float(g.index)
             if prog_name.startswith("vertex"):
                 self._render_mesh(self._tessellated(g, edge_deg, eye, t), prog_name, self.ctx.TRIANGLES, mv, cull)
             elif prog_name.startswith("tess"):
@@ -766,14 +777,13 @@ class Renderer:
         self._resample_vao.render(ctx.TRIANGLE_STRIP)
         ctx.enable(ctx.DEPTH_TEST)
 
-    def render_perspective(self, target: RenderTarget, pose: Pose, t: float, fov_x_deg: float,
-                           mark_moving: bool = False) -> None:
+    def render_perspective(self, target: RenderTarget, pose: Pose, t: float, fov_x_deg: float) -> None:
         """Perspective view (ground truth) at ``pose`` and scene time ``t``, horizontal FOV ``fov_x_deg``.
-        ``mark_moving`` (a target with motion): flag the pixels of moving objects (read_motion()[1])."""
+        A target with motion also gets which moving object each pixel shows (RenderTarget.read_moving_index)."""
         self._begin(target)
         proj = perspective_matrix(fov_x_deg, target.width / target.height, self.scene.near, self.scene.far)
         self._draw("perspective", pose.view_matrix(), pose.p, t, {"u_projection": proj.T},
-                   motion_dt=1.0 if mark_moving else None)
+                   motion_dt=0.0 if target.motion is not None else None)
 
     def release(self) -> None:
         for g in self.objects:

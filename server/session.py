@@ -27,6 +27,7 @@ from pibr.protocol.errors import (AccessDenied, ConfigError, PeerTimeout, Protoc
 from pibr.protocol.messages import (FRAMES_DECODED, PROTOCOL_VERSION, Bye, Clock, Error, Frame, Hello, PayloadKind,
                                     PoseMsg, Stats, Welcome)
 
+from .motion_flow import motion_flow_payload
 from .quadtree import quadtree_payload
 
 log = logging.getLogger(__name__)
@@ -225,6 +226,9 @@ class Session:
         payloads += [(PayloadKind.QUADTREE, q) for q in quadtree]
         if produced.object_poses is not None:
             payloads.append((PayloadKind.OBJECT_POSES, produced.object_poses))
+        if produced.motion is not None:   # a scene that moves: its flow, whatever the depth codec
+            payloads.append((PayloadKind.MOTION_FLOW, await loop.run_in_executor(
+                self.server.encode_pool, motion_flow_payload, produced, self.server.config.flow_coder)))
         encode_ms = (time.perf_counter() - t0) * 1e3   # H.264 and, with the edge codec, depth (and quadtrees)
         frame = Frame(frame_id=self.frames_sent, render_t_us=t_us, pose_t_us=pose_msg.t_us, pose_seq=pose_msg.seq,
                       scene_t_us=t_us, primary_pose=produced.primary_pose, extra_pose=produced.extra_pose,

@@ -34,9 +34,8 @@ def plan_session(cfg: ServerConfig, scene, hello: Hello, proxies: dict | None = 
     layout = build_layout((pw, ph), extra_size, depth_in_atlas=not edge)
     quantizer = edge_quantizer(scene.near, scene.far) if edge else h264_quantizer(scene.near, scene.far)
     # A scene with nothing moving sends no motion at all. One that moves sends its objects'
-    # transforms with every frame, and with the edge codec their motion flow too.
+    # transforms and their motion flow with every frame, whatever the depth codec.
     motion = scene.is_dynamic
-    flow = edge and motion
     options = {"projection": cfg.projection}
     if use_extra:   # whether the extra view's sky (distance 0) is sky, not also peeled pixels
         options["peel_marker"] = bool(cfg.peel_marker)
@@ -51,7 +50,7 @@ def plan_session(cfg: ServerConfig, scene, hello: Hello, proxies: dict | None = 
         depth_codec=depth_codec, depth_bits=quantizer.bits, depth_min_code=quantizer.min_code,
         motion=motion, proxies=proxies, options=options)
     spec = ProducerSpec((pw, ph), layout, None if edge else quantizer, cfg.projection, extra_size, offset,
-                        keep_distance=edge or quadtree, motion_dt=1.0 / cfg.fps if flow else None,
+                        keep_distance=edge or quadtree, motion_dt=1.0 / cfg.fps if motion else None,
                         object_poses=motion,
                         low_colour=8 if edge and cfg.edge.perceptual else 0, mark_peeled=bool(cfg.peel_marker))
     return config, spec

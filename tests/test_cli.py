@@ -171,6 +171,21 @@ def test_bad_method_knobs_are_named(capsys, argv, message):
     assert message in capsys.readouterr().err
 
 
+def test_the_motion_knobs_parse():
+    from pibr.client.cli import method_knobs
+
+    args = build_parser().parse_args(["client", "--method", "rotation,proxy", "--motion", "flow"])
+    assert method_knobs(args) == {"motion": "flow"}
+    assert build_parser().parse_args(["serve", "--flow-coder", "edges"]).flow_coder == "edges"
+    assert build_parser().parse_args(["serve"]).flow_coder == "blocks"
+    assert build_parser().parse_args(["demo", "--scene", "dynamic", "--motion", "flow"]).motion == "flow"
+    d = build_parser().parse_args(["bench", "dynamic", "--latency-ms", "64,256", "--scene", "dynamic"])
+    assert d.latency_ms == (64.0, 256.0) and d.scene == ("dynamic",) and d.view_size == (512, 512)
+    for argv in (["client", "--motion", "oracle"], ["serve", "--flow-coder", "dct"]):
+        with pytest.raises(SystemExit):
+            build_parser().parse_args(argv)
+
+
 def test_bench_ibr_shows_its_defaults_and_takes_its_variants(capsys):
     with pytest.raises(SystemExit):
         build_parser().parse_args(["bench", "ibr", "--help"])

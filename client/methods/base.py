@@ -39,9 +39,30 @@ class Method:
     uses_extra_view = False
     #: Points, triangles or quads drawn in the last render (0 for full-screen passes).
     last_primitives = 0
+    #: How moving objects are brought to the display time (the ``motion`` knob): ``flow`` warps
+    #: the primary view's moving pixels along their motion flow (client/flow_warp.py) for every
+    #: method that re-projects the primary view; the per-object modes need proxies.
+    motion = "static"
 
     def __init__(self, ctx, output: OutputConfig, config: SessionConfig):
         self.ctx, self.output, self.config = ctx, output, config
+
+    def set_motion(self, motion: str) -> None:
+        """Take the ``motion`` knob: ``flow``, or a per-object mode (static, velocity, accel,
+        oracle), which a method without proxies has no objects for: it shows them where the
+        frame does."""
+        from pibr.protocol.errors import ConfigError
+
+        from ..object_motion import MOTION_MODES
+
+        if motion not in MOTION_MODES:
+            raise ConfigError(f"unknown motion extrapolation {motion!r}; choose from {', '.join(MOTION_MODES)}")
+        self.motion = motion
+
+    def flow_time(self, scene_t: float) -> float | None:
+        """The time to extrapolate the primary view to (``textures.use(...)``): ``scene_t`` under
+        ``flow``, else None (the frame as decoded)."""
+        return scene_t if self.motion == "flow" else None
 
     def render(self, out_pose: Pose, frame, textures, scene_t: float = 0.0) -> None:
         """Draw the view at ``out_pose`` from ``frame`` (protocol Frame) whose atlas is in ``textures``;

@@ -4,6 +4,7 @@
 pose. ``rotation`` turns them to the current orientation first (asynchronous timewarp):
 head rotation since the render is corrected, translation is ignored. Neither needs depth.
 Output rays that leave the primary view's front hemisphere have no source (alpha 0).
+With ``motion="flow"`` both show the primary view extrapolated along its motion flow.
 """
 from __future__ import annotations
 
@@ -36,8 +37,9 @@ class DirectionWarp(Method):
     follow_rotation = True
     fragment_shader = _FS
 
-    def __init__(self, ctx, output, config):
+    def __init__(self, ctx, output, config, motion: str = "static"):
         super().__init__(ctx, output, config)
+        self.set_motion(motion)
         self.prog = ctx.program(vertex_shader=FULLSCREEN_VS,
                                 fragment_shader=self.fragment_shader % {"frame": frame_glsl(config)})
         bind_frame_uniforms(self.prog, config)
@@ -51,7 +53,7 @@ class DirectionWarp(Method):
         view_rotation = out_pose.rotation() if self.follow_rotation else src.rotation()
         out_to_src = src.rotation().T @ view_rotation
         self.prog["u_out_to_src"].write(out_to_src.T.astype("f4").tobytes())
-        textures.use()
+        textures.use(self.flow_time(scene_t))
         self.ctx.disable(self.ctx.DEPTH_TEST)
         self.vao.render(self.ctx.TRIANGLE_STRIP)
 

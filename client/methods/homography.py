@@ -48,10 +48,10 @@ class HomographyWarp(DirectionWarp):
     name = "homography"
     fragment_shader = _FS
 
-    def __init__(self, ctx, output, config, plane_distance: float = DEFAULT_PLANE_DISTANCE):
+    def __init__(self, ctx, output, config, plane_distance: float = DEFAULT_PLANE_DISTANCE, motion: str = "static"):
         if not (math.isfinite(plane_distance) and plane_distance > 0):
             raise ConfigError(f"homography plane distance must be a positive number of metres, got {plane_distance}")
-        super().__init__(ctx, output, config)
+        super().__init__(ctx, output, config, motion)
         self.plane_distance = float(plane_distance)
         self.prog["u_plane"].value = self.plane_distance
 
@@ -60,6 +60,6 @@ class HomographyWarp(DirectionWarp):
         r_src = src.rotation()
         self.prog["u_out_to_src"].write((r_src.T @ out_pose.rotation()).T.astype("f4").tobytes())
         self.prog["u_eye"].value = tuple(float(x) for x in r_src.T @ (out_pose.p - src.p))
-        textures.use()
+        textures.use(self.flow_time(scene_t))
         self.ctx.disable(self.ctx.DEPTH_TEST)
         self.vao.render(self.ctx.TRIANGLE_STRIP)

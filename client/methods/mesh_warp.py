@@ -163,8 +163,9 @@ class _GridWarp(Method):
     split: float | None = None
     primary_only = False
 
-    def __init__(self, ctx, output, config):
+    def __init__(self, ctx, output, config, motion: str = "static"):
         super().__init__(ctx, output, config)
+        self.set_motion(motion)
         self.program = MeshWarpProgram(ctx, config, self.split, grid=True)
         self.views = source_views(config, primary_only=self.primary_only)
         self.uses_extra_view = len(self.views) > 1
@@ -180,7 +181,7 @@ class _GridWarp(Method):
 
     def render(self, out_pose: Pose, frame, textures, scene_t: float = 0.0) -> None:
         ctx, prog = self.ctx, self.program.prog
-        textures.use()
+        textures.use(self.flow_time(scene_t))
         ctx.enable(ctx.DEPTH_TEST)
         n = 0
         for view, (vao, _, grid_width, quads) in zip(self.views, self.grids):
@@ -204,9 +205,9 @@ class MeshWarp(_GridWarp):
 
     name = "meshwarp"
 
-    def __init__(self, ctx, output, config, split: float = DEFAULT_SPLIT):
+    def __init__(self, ctx, output, config, split: float = DEFAULT_SPLIT, motion: str = "static"):
         self.split = check_split(split)
-        super().__init__(ctx, output, config)
+        super().__init__(ctx, output, config, motion)
 
 
 class CoarseMeshWarp(_GridWarp):
@@ -215,8 +216,8 @@ class CoarseMeshWarp(_GridWarp):
     name = "coarse-meshwarp"
     primary_only = True
 
-    def __init__(self, ctx, output, config, step: int = 4):
+    def __init__(self, ctx, output, config, step: int = 4, motion: str = "static"):
         if not (isinstance(step, int) and 1 <= step <= 4096):
             raise ConfigError(f"coarse mesh warp step must be a whole number of pixels in 1..4096, got {step!r}")
         self.step = step
-        super().__init__(ctx, output, config)
+        super().__init__(ctx, output, config, motion)

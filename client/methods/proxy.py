@@ -20,8 +20,14 @@ fallback (alpha 0).
 
 Moving objects. The proxy of a moving object is drawn where it is at the display time, as
 ``motion`` (client/object_motion.py) extrapolates it from the transforms the frames carried
-(second order by default), and looked up in the views where the frame's own transforms put it
-when they were rendered.
+(second order, ``accel``, by default), and looked up in the views where the frame's own transforms put it
+when they were rendered. With ``motion="flow"`` (Pajak et al.'s way, per pixel) the moving
+objects' proxies are not drawn: the primary view is extrapolated along its motion flow to the
+display time (client/flow_warp.py; the static proxies see the background it made up where the
+objects were), and every pixel a moving pixel landed on is drawn as a point at its distance,
+accepted from the primary view like a confirmed proxy fragment, so the depth test sorts it
+among the static proxies. A frame whose view shows nothing moving places the moving objects'
+proxies as ``static`` does.
 
 Shading is deferred: the proxy passes store, per pixel, which view and where to sample; one
 full-screen pass then fetches each pixel's colour once, from that view only (or the
@@ -285,6 +291,57 @@ void main() {
 """
 
 
+# motion="flow": the pixels the extrapolated primary view's moving pixels landed on, as points at
+# their distance (accepted from the primary view, in the front half of the depth range). Each
+# fragment of a point looks up the primary view where its own output ray meets the sphere of the
+# point's distance about the primary camera, so a point magnified on screen is resampled, not a
+# flat square, and a fragment past the object's outline finds what the view shows there.
+_POINTS_VS = """
+#version 410
+%(frame)s
+uniform mat4 u_primary_to_clip;   // primary camera space -> output clip space
+uniform vec2 u_view_size;
+uniform float u_depth_half;
+in vec2 in_px;                     // the primary view's pixel
+in float in_distance;
+flat out float v_d;
+void main() {
+    v_d = in_distance;
+    vec3 p = wa_unproject(wa_from_uv((in_px + 0.5) / u_view_size)) * in_distance;
+    gl_Position = u_primary_to_clip * vec4(p, 1.0);
+    gl_Position.y = -gl_Position.y;   // top-row-first images
+    float z = gl_Position.z, w = gl_Position.w;
+    gl_ClipDistance[0] = w - z;
+    gl_Position.z = 0.5 * (z + u_depth_half * w);
+}
+"""
+
+_POINTS_FS = """
+#version 410
+%(frame)s
+flat in float v_d;
+out vec4 f_out;
+uniform bool u_position;          // carve=False: the records are world positions
+uniform mat3 u_out_to_primary;    // output camera rotation -> primary camera space
+uniform vec3 u_eye;               // output camera position in primary camera space
+uniform mat4 u_primary_to_world;
+uniform vec2 u_tan_half;
+uniform vec2 u_out_size;
+void main() {
+    vec2 ndc = vec2(2.0 * gl_FragCoord.x / u_out_size.x - 1.0, 1.0 - 2.0 * gl_FragCoord.y / u_out_size.y);
+    vec3 r = u_out_to_primary * normalize(vec3(ndc * u_tan_half, -1.0));
+    float b = dot(u_eye, r), c = dot(u_eye, u_eye) - v_d * v_d;
+    float disc = b * b - c;
+    if (disc < 0.0) discard;
+    float t = c < 0.0 ? -b + sqrt(disc) : -b - sqrt(disc);   // the eye inside the sphere, or the near hit
+    vec3 p = u_eye + t * r;
+    if (t <= 0.0 || p.z > 0.0) discard;
+    vec2 uv = wa_uv(wa_project(p).xy);
+    f_out = u_position ? vec4((u_primary_to_world * vec4(p, 1.0)).xyz, 1.0) : vec4(uv.x, uv.y + 2.0, 0.0, 0.0);
+}
+"""
+
+
 def _front_to_back(sel) -> tuple:
     """Sort key: nearest object first, and those whose box holds the camera (the walls of the room
     it stands in, usually behind everything else) last."""
@@ -316,11 +373,15 @@ class ProxyIBR(Method):
         self.carve = bool(carve)
         self.objects = proxies
         self.moving = [i for i, o in enumerate(proxies) if o.moving]
+        self._moving_set = set(self.moving)
+        self.last_points = 0
         self._own_history = poses is None
         if poses is None:
             poses = PoseHistory(np.stack([o.transform for o in proxies]), np.stack([o.bounds for o in proxies]))
-        self.motion = motion
-        self.placer = ObjectPlacer(poses, motion, config.frame_interval_us / 1e6, horizon_frames, oracle_pose)
+        self.set_motion(motion)
+        # flow: a frame without motion to extrapolate shows the moving objects where it saw them
+        self.placer = ObjectPlacer(poses, "static" if motion == "flow" else motion, config.frame_interval_us / 1e6,
+                                   horizon_frames, oracle_pose)
         self._seen = (None, {})   # (frame key, index -> motion) of the newest frame's own transforms
         self.selector = LodSelector(proxies, output, lod_target_px, force_level=lod_level)
         glsl = {"frame": frame_glsl(config), "background": _BACKGROUND_GLSL}
@@ -355,6 +416,20 @@ class ProxyIBR(Method):
                                              and config.depth_min_code >= 2)
         test["u_tau"].value = float(tau)
         self.resolve_vbo, self.resolve_vao = fullscreen_quad(ctx, self.resolve)
+        self.points = self.points_vbo = self.points_vao = None
+        if self.motion == "flow":
+            self.points = ctx.program(vertex_shader=_POINTS_VS % glsl, fragment_shader=_POINTS_FS % glsl)
+            bind_frame_uniforms(self.points, config)
+            self.points["u_view_size"].value = (float(config.primary.width), float(config.primary.height))
+            self.points["u_position"].value = not self.carve
+            self.points["u_tan_half"].value = output_tan_half(output)
+            self.points["u_out_size"].value = (float(output.width), float(output.height))
+            self.points_vbo = ctx.buffer(reserve=12 * 1024, dynamic=True)
+            self.points_vao = ctx.vertex_array(self.points, [(self.points_vbo, "2f 1f", "in_px", "in_distance")])
+            # source pixels per output pixel at the centres of both: a point covers its pixel's footprint
+            src_px_per_rad = config.primary.width / np.pi
+            out_px_per_rad = output.width / (2.0 * output_tan_half(output)[0])
+            self.point_size = float(np.ceil(1.5 * out_px_per_rad / src_px_per_rad))
         self.near, self.far = config.near, config.far
         self.projection = output_projection(output, self.near, self.far)
         self._buffers = []
@@ -377,8 +452,9 @@ class ProxyIBR(Method):
     def render(self, out_pose: Pose, frame, textures, scene_t: float = 0.0) -> None:
         ctx = self.ctx
         output_fbo = ctx.fbo
-        textures.use()
-        draws = self._draws(out_pose, frame, scene_t)
+        textures.use(self.flow_time(scene_t))
+        moved = textures.extrapolated if self.motion == "flow" else None
+        draws = self._draws(out_pose, frame, scene_t, skip_moving=moved is not None)
         self.refs_fbo.use()
         ctx.enable(ctx.DEPTH_TEST)
         if self.carve:
@@ -386,6 +462,8 @@ class ProxyIBR(Method):
             # where to fetch its colour.
             self.refs_fbo.clear(*_NO_PROXY, 0.0, 0.0, depth=1.0)
             ctx.enable_direct(_GL_CLIP_DISTANCE0)
+            if moved is not None:
+                self._draw_points(moved, out_pose, frame)
             for depth_half in (-1.0, 1.0):   # accepted fragments, then the rest behind them
                 self.prog["u_fallback"].value = depth_half > 0
                 self.prog["u_depth_half"].value = depth_half
@@ -397,6 +475,10 @@ class ProxyIBR(Method):
             ctx.disable_direct(_GL_CLIP_DISTANCE0)
         else:
             self.refs_fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)   # w = 0: no proxy here
+            if moved is not None:
+                ctx.enable_direct(_GL_CLIP_DISTANCE0)
+                self._draw_points(moved, out_pose, frame)
+                ctx.disable_direct(_GL_CLIP_DISTANCE0)
             for vao, mvp, _, _, seen in draws:
                 self.prog["u_mvp"].write(mvp)
                 self.prog["u_seen"].write(seen)
@@ -413,10 +495,35 @@ class ProxyIBR(Method):
             self.resolve["u_out_to_extra"].write(rot.T.astype("f4").tobytes())
         self.resolve_vao.render(ctx.TRIANGLE_STRIP)
 
-    def _draws(self, out_pose: Pose, frame, scene_t: float) -> list:
+    def _draw_points(self, moved, out_pose: Pose, frame) -> None:
+        """The extrapolated view's moving pixels (flow_warp.Extrapolated) as points, accepted."""
+        n = len(moved.moved)
+        self.last_points = n
+        if n == 0:
+            return
+        data = np.empty((n, 3), np.float32)
+        data[:, :2] = moved.moved
+        data[:, 2] = moved.moved_distance
+        if self.points_vbo.size < data.nbytes:
+            self.points_vbo.orphan(data.nbytes)
+        self.points_vbo.write(data.tobytes())
+        src = frame.primary_pose
+        to_clip = self.projection @ out_pose.view_matrix() @ src.matrix()
+        self.points["u_primary_to_clip"].write(mat4_bytes(to_clip))
+        r_src = src.rotation()
+        self.points["u_out_to_primary"].write((r_src.T @ out_pose.rotation()).T.astype("f4").tobytes())
+        self.points["u_eye"].value = tuple(float(x) for x in r_src.T @ (out_pose.p - src.p))
+        if "u_primary_to_world" in self.points:
+            self.points["u_primary_to_world"].write(mat4_bytes(src.matrix()))
+        self.points["u_depth_half"].value = -1.0
+        self.ctx.point_size = self.point_size
+        self.points_vao.render(self.ctx.POINTS, vertices=n)
+
+    def _draws(self, out_pose: Pose, frame, scene_t: float, skip_moving: bool = False) -> list:
         """[(vao, mvp, to_primary, to_extra, seen)] of the objects to draw, nearest first (so the
         depth test rejects most hidden fragments before they are shaded); matrices as uniform
-        bytes (seen: object -> world where the views saw it)."""
+        bytes (seen: object -> world where the views saw it). ``skip_moving``: leave the moving
+        objects out (``flow`` draws their pixels instead)."""
         view = out_pose.view_matrix()
         to_p = frame.primary_pose.view_matrix()
         to_e = frame.extra_pose.view_matrix() if frame.extra_pose is not None else to_p
@@ -425,6 +532,8 @@ class ProxyIBR(Method):
         now = {i: m @ self.objects[i].transform for i, m in self.placer.motions(self.moving, scene_t).items()}
         draws, tris = [], 0
         for sel in sorted(self.selector.select(out_pose, self.near, now), key=_front_to_back):
+            if skip_moving and sel.index in self._moving_set:
+                continue
             levels = self.vaos[sel.index]
             level = sel.level if sel.level in levels else next(iter(levels), None)
             if level is None:
@@ -462,5 +571,6 @@ class ProxyIBR(Method):
         for b in self._buffers:
             b.release()
         for r in (self.prog, self.resolve_vao, self.resolve_vbo, self.resolve,
-                  self.refs_fbo, self.refs, self.refs_depth):
-            r.release()
+                  self.refs_fbo, self.refs, self.refs_depth, self.points_vao, self.points_vbo, self.points):
+            if r is not None:
+                r.release()

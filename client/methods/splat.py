@@ -32,8 +32,9 @@ void main() {
 class PointSplat(Method):
     name = "splat"
 
-    def __init__(self, ctx, output, config, point_size: float = DEFAULT_POINT_SIZE):
+    def __init__(self, ctx, output, config, point_size: float = DEFAULT_POINT_SIZE, motion: str = "static"):
         super().__init__(ctx, output, config)
+        self.set_motion(motion)
         if not (0.5 <= point_size <= 64):
             from pibr.protocol.errors import ConfigError
 
@@ -51,7 +52,7 @@ class PointSplat(Method):
 
     def render(self, out_pose: Pose, frame, textures, scene_t: float = 0.0) -> None:
         ctx = self.ctx
-        textures.use()
+        textures.use(self.flow_time(scene_t))
         ctx.enable(ctx.DEPTH_TEST)
         ctx.point_size = self.point_size
         n = 0

@@ -9,7 +9,8 @@ already coded samples on the same surface, optionally quantized), and one *regul
 Modules: :mod:`.arith` (context-adaptive binary arithmetic coder, pure Python and numba),
 :mod:`.bitstream` (frame format and its limits), :mod:`.edges` (edge image: four interleaved
 passes or raster, temporal context), :mod:`.values` (edge values), :mod:`.regular` (regular
-samples), :mod:`.motion` (motion of moving objects), :mod:`.codec` (the API).
+samples), :mod:`.motion` (motion of moving objects: mask and block means), :mod:`.flow` (motion as
+edge samples, Pajak et al.'s way; both coders serve ``protocol/motion_flow.py``), :mod:`.codec` (the API).
 
 Both ends must run the same version of this package: the bitstream is pinned by golden
 payloads in ``tests/protocol/golden/edge_*.bin``. The numba kernels are cached on disk

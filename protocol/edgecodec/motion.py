@@ -43,7 +43,10 @@ MAX_CODE = int(np.ceil(255 * np.sqrt(MAX_MOTION)))
 
 
 def quantize_motion(v, scale: float) -> np.ndarray:
-    """Motion components (any shape, pixels) -> int32 codes sign(v) * round(scale * sqrt(|v|))."""
+    """Motion components (any shape, pixels) -> int32 codes sign(v) * round(scale * sqrt(|v|)).
+
+    Dequantized, a component with |v| <= MAX_MOTION comes back within sqrt(|v|) / scale +
+    1 / (4 scale^2) pixels (half a step in sqrt(|v|)); a larger one is clamped to +-MAX_MOTION."""
     v = np.clip(np.nan_to_num(np.asarray(v, dtype=np.float64)), -MAX_MOTION, MAX_MOTION)
     return (np.sign(v) * np.floor(scale * np.sqrt(np.abs(v)) + 0.5)).astype(np.int32)
 

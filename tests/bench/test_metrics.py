@@ -3,7 +3,8 @@ import math
 import numpy as np
 import pytest
 
-from pibr.bench.metrics import PSNR_CAP, dssim, error_image, flip, frame_metrics, pixels_per_degree, psnr, ssim
+from pibr.bench.metrics import (PSNR_CAP, dssim, error_image, flip, frame_metrics, masked_metrics, pixels_per_degree,
+                                psnr, ssim)
 from pibr.protocol.errors import ConfigError
 
 
@@ -62,3 +63,16 @@ def test_summary_warns_of_frames_that_say_little():
     assert "warning" not in quiet
     loud = summary_table({"methods": {"none": row}, "nearly_uniform_frames": 28})
     assert "warning: 28 of 30 ground-truth frames are nearly one colour" in loud
+
+
+def test_masked_metrics():
+    rng = np.random.default_rng(0)
+    a = rng.integers(0, 255, (40, 60, 3), dtype=np.uint8)
+    b = a.copy()
+    mask = np.zeros((40, 60), bool)
+    mask[10:30, 20:40] = True
+    b[mask] = 255 - b[mask]
+    m = masked_metrics(a, b, {"object": mask, "rest": ~mask, "tiny": np.eye(40, 60, dtype=bool)[:, :60] & mask})
+    assert m["psnr_rest"] == 100.0 and m["dssim_rest"] < m["dssim_object"]
+    assert m["psnr_object"] < m["psnr"] < 100.0
+    assert math.isnan(m["psnr_tiny"]) and math.isnan(m["dssim_tiny"])   # fewer than MIN_PIXELS

@@ -35,9 +35,9 @@ async def dynamic_server():
     await srv.close()
 
 
-def _cfg(host, port, out, **kw):
+def _cfg(host, port, out, methods=("proxy",), **kw):
     return ClientConfig(host=host, port=port, trace="synth-turns", start_s=5.0, duration_s=1.0, rate_hz=30.0,
-                        methods=("proxy",), out_dir=str(out), width=160, height=96, progress="none", **kw)
+                        methods=methods, out_dir=str(out), width=160, height=96, progress="none", **kw)
 
 
 async def test_proxy_extrapolates_from_the_transforms_on_the_wire(dynamic_server, tmp_path):
@@ -57,6 +57,25 @@ async def test_proxy_extrapolates_from_the_transforms_on_the_wire(dynamic_server
     assert len(shown["static"]) == len(shown["velocity"]) == 30
     differ = [not np.array_equal(a, b) for a, b in zip(shown["static"], shown["velocity"])]
     assert sum(differ) >= 10            # the moving objects are placed by the transforms received
+
+
+async def test_the_client_extrapolates_along_the_motion_flow_on_the_wire(dynamic_server, tmp_path):
+    """--motion flow: the frames' MOTION_FLOW decoded in the decode pool, the primary view warped on
+    the GL thread, for a method without proxies and for proxy alike."""
+    host, port = dynamic_server
+    shown = {}
+    for motion in ("static", "flow"):
+        client = Client(_cfg(host, port, tmp_path / motion, methods=("rotation", "proxy"),
+                             options={"motion": motion}))
+        result = await client.run()
+        assert result.frames_received >= 8
+        assert (client._motion_decoder is not None) == (motion == "flow")
+        assert (client._newest.flow is not None) == (motion == "flow")
+        shown[motion] = {m: _frames(tmp_path / motion / f"{m}.lossless.mkv") for m in ("rotation", "proxy")}
+    for m in ("rotation", "proxy"):
+        assert len(shown["static"][m]) == len(shown["flow"][m]) == 30
+        differ = [not np.array_equal(a, b) for a, b in zip(shown["static"][m], shown["flow"][m])]
+        assert sum(differ) >= 10, m     # the moving pixels moved
 
 
 async def test_the_oracle_is_not_a_client_option(dynamic_server, tmp_path):

@@ -45,7 +45,7 @@ def _looking(eye, target, yaw_offset_rad):
 
 
 def _truth(sim, pose, t):
-    sim.renderer.render_perspective(sim.truth, pose, t, sim.output.fov_deg, mark_moving=True)
+    sim.renderer.render_perspective(sim.truth, pose, t, sim.output.fov_deg)
     return sim.truth.read_color().copy(), sim.truth.read_motion()[1].copy()
 
 

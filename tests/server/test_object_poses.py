@@ -19,7 +19,7 @@ from ..loopback import exchange_virtual
 
 pytestmark = pytest.mark.gl
 
-MOTION_KINDS = (PayloadKind.OBJECT_POSES, PayloadKind.EDGE_MOTION)
+MOTION_KINDS = (PayloadKind.OBJECT_POSES, PayloadKind.EDGE_MOTION, PayloadKind.MOTION_FLOW)
 
 
 @pytest.fixture
@@ -88,3 +88,35 @@ async def test_a_static_scene_sends_no_motion_of_any_kind(server, depth_codec):
                 assert decoder.motion is None
         finally:
             decoder.close()
+
+
+@pytest.mark.parametrize("depth_codec", ["h264", "edge"])
+async def test_a_moving_scene_sends_its_motion_flow_with_either_depth_codec(server, depth_codec):
+    """MOTION_FLOW in every frame, a flow of the primary view; the edge codec's depth carries none."""
+    from pibr.client.motion_flow import MotionFlowDecoder
+
+    cfg, _, frames = await _session(*server, "dynamic", depth_codec)
+    assert frames
+    decoder = MotionFlowDecoder(cfg.primary.width, cfg.primary.height)
+    moving_frames = 0
+    for f in frames:
+        flow, moving = decoder.decode(f.payload(PayloadKind.MOTION_FLOW))
+        assert flow.shape == (cfg.primary.height, cfg.primary.width, 2)
+        assert np.all(flow[~moving] == 0)
+        moving_frames += bool(moving.any())
+    assert moving_frames >= 1     # the viewer origin looks at the spinning turnstile
+    if depth_codec == "edge":
+        depth = EdgeDepthDecoder(cfg)
+        try:
+            for f in frames:
+                depth.decode(f)
+                assert depth.motion is None
+        finally:
+            depth.close()
+
+
+def test_the_flow_coder_is_checked():
+    from pibr.protocol.errors import ConfigError
+
+    with pytest.raises(ConfigError, match="flow coder must be one of blocks, edges, got 'dct'"):
+        ServerConfig(flow_coder="dct")

@@ -1,0 +1,105 @@
+"""The ``MOTION_FLOW`` payload of a ``Frame``: the primary view's motion flow of moving objects.
+
+Per pixel of the primary view, how far the surface there moved on screen over the last server
+frame interval by itself (pixels, x right, y down): the flow the server renders for moving
+objects (the camera's own motion is known from the poses, so static surfaces have none).
+Frames of a scene that moves carry it whatever the depth transport; a static scene's frames
+carry none. Two coders, chosen by the server (``pibr serve --flow-coder``):
+
+* ``blocks`` (:mod:`.edgecodec.motion`): the moving mask, losslessly, and one non-linearly
+  quantized mean vector per 8 x 8 block with a moving pixel; the decoded flow is the block's
+  vector on its moving pixels, 0 elsewhere;
+* ``edges`` (:mod:`.edgecodec.flow`, Pajak et al. 2011's way): edge samples of the quantized
+  flow, regular samples and their values; the client diffuses them (``pibr.client.motion_flow``).
+
+Layout (little-endian)::
+
+    u8  coder: 0 nothing moves in this view (no section), 1 blocks, 2 edges
+    u16 width, u16 height of the view (must be the session's primary view)
+    the coder's section (nothing for coder 0)
+
+A frame in which no moving pixel is visible costs the 5 bytes of the head.
+"""
+from __future__ import annotations
+
+import struct
+from dataclasses import dataclass
+
+import numpy as np
+
+from .edgecodec.flow import FlowSamples, decode_flow_edges, encode_flow_edges
+from .edgecodec.motion import decode_motion, encode_motion
+from .errors import CodecError
+
+_HEAD = struct.Struct("<BHH")
+HEAD_BYTES = _HEAD.size
+FLOW_CODERS = ("blocks", "edges")
+DEFAULT_FLOW_CODER = "blocks"
+_IDS = {"blocks": 1, "edges": 2}
+_NONE = 0
+
+
+@dataclass
+class DecodedFlow:
+    """A payload as parsed: ``dense`` (flow (h, w, 2) float32, moving (h, w) bool) from the
+    ``blocks`` coder or when nothing moves, or ``samples`` (:class:`FlowSamples`) from the
+    ``edges`` coder, which the client diffuses."""
+
+    coder: str
+    width: int
+    height: int
+    dense: tuple | None = None
+    samples: FlowSamples | None = None
+
+
+def encode_motion_flow(flow, moving, coder: str = DEFAULT_FLOW_CODER, scale: int = 8, **options) -> tuple[bytes, DecodedFlow]:
+    """flow (h, w, 2) float pixels, moving (h, w) bool -> (payload, what the decoder will see).
+
+    options go to the coder (``blocks``: block_log2; ``edges``: threshold, spacing_log2, q)."""
+    moving = np.asarray(moving, dtype=bool)
+    h, w = moving.shape
+    if coder not in _IDS:
+        raise ValueError(f"unknown flow coder {coder!r}; choose from {', '.join(FLOW_CODERS)}")
+    if not (1 <= w <= 0xFFFF and 1 <= h <= 0xFFFF):
+        raise ValueError(f"view size {w}x{h} outside 1..65535")
+    flow = np.asarray(flow, dtype=np.float64)
+    if flow.shape != (h, w, 2):
+        raise ValueError(f"flow must have shape ({h}, {w}, 2), got {flow.shape}")
+    flow = np.where(moving[..., None], np.nan_to_num(flow), 0.0)
+    if not moving.any():
+        return _HEAD.pack(_NONE, w, h), _still(w, h)
+    if coder == "blocks":
+        section, dense, mov = encode_motion(flow, moving, scale, **options)
+        return _HEAD.pack(_IDS[coder], w, h) + section, DecodedFlow(coder, w, h, dense=(dense, mov))
+    section, samples = encode_flow_edges(flow, moving, scale, **options)
+    return _HEAD.pack(_IDS[coder], w, h) + section, DecodedFlow(coder, w, h, samples=samples)
+
+
+def _still(w, h) -> DecodedFlow:
+    return DecodedFlow("none", w, h, dense=(np.zeros((h, w, 2), np.float32), np.zeros((h, w), bool)))
+
+
+def decode_motion_flow(payload, width: int, height: int) -> DecodedFlow:
+    """Payload -> :class:`DecodedFlow` for a primary view of ``width`` x ``height``. Raises CodecError."""
+    if not isinstance(payload, (bytes, bytearray, memoryview)):
+        raise CodecError(f"motion flow: payload must be bytes, got {type(payload).__name__}")
+    view = memoryview(payload).cast("B")
+    if len(view) < _HEAD.size:
+        raise CodecError(f"motion flow: payload of {len(view)} bytes is shorter than its {_HEAD.size}-byte head")
+    coder, w, h = _HEAD.unpack_from(view, 0)
+    if (w, h) != (width, height):
+        raise CodecError(f"motion flow: payload is {w}x{h}, the primary view {width}x{height}")
+    section = view[_HEAD.size:]
+    if coder == _NONE:
+        if len(section):
+            raise CodecError(f"motion flow: {len(section)} bytes after a head that says nothing moves")
+        return _still(w, h)
+    if coder == _IDS["blocks"]:
+        try:
+            flow, moving = decode_motion(section, h, w)
+        except CodecError as exc:   # the block coder's messages name the edge codec it lives in
+            raise CodecError(f"motion flow: {exc}".replace("edge codec: ", "")) from None
+        return DecodedFlow("blocks", w, h, dense=(flow, moving))
+    if coder == _IDS["edges"]:
+        return DecodedFlow("edges", w, h, samples=decode_flow_edges(section, h, w))
+    raise CodecError(f"motion flow: unknown coder {coder}")
