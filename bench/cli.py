@@ -154,10 +154,7 @@ def register(sub) -> None:
     d.add_argument("--method", type=parse_methods, default=("none", "rotation", "proxy"),
                    help="methods to compare, comma-separated (default none,rotation,proxy)")
     d.add_argument("--depth-codec", choices=("h264", "edge"), default="h264", help="depth transport")
-    from pibr.client.object_motion import CLIENT_MOTION_MODES
 
-    d.add_argument("--motion", choices=CLIENT_MOTION_MODES, default=None,
-                   help="proxy: how moving objects are placed at the display time (see 'pibr client --help')")
     d.add_argument("--clock", choices=("virtual", "real"), default="virtual")
     d.add_argument("--flip-every", type=_non_negative_int, default=4, help="FLIP on every Nth frame, 0: never (default 4)")
     d.add_argument("--motion", choices=CLIENT_MOTION_MODES, default=None,
