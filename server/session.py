@@ -227,8 +227,8 @@ class Session:
         if produced.object_poses is not None:
             payloads.append((PayloadKind.OBJECT_POSES, produced.object_poses))
         if produced.motion is not None:   # a scene that moves: its flow, whatever the depth codec
-            payloads.append((PayloadKind.MOTION_FLOW, await loop.run_in_executor(
-                self.server.encode_pool, motion_flow_payload, produced, self.server.config.flow_coder)))
+            payloads.append((PayloadKind.MOTION_FLOW, await self.server.encode(
+                self.id, motion_flow_payload, produced, self.server.config.flow_coder)))
         encode_ms = (time.perf_counter() - t0) * 1e3   # H.264 and, with the edge codec, depth (and quadtrees)
         frame = Frame(frame_id=self.frames_sent, render_t_us=t_us, pose_t_us=pose_msg.t_us, pose_seq=pose_msg.seq,
                       scene_t_us=t_us, primary_pose=produced.primary_pose, extra_pose=produced.extra_pose,
