@@ -109,14 +109,18 @@ class _Peer:
     async def read_until_closed(self, stop: asyncio.Event) -> bool:
         """Read (parsing the replies) until the server closes, ``stop`` is set or we give up.
         -> True when the server closed the connection."""
-        deadline = self.t0 + GIVE_UP_S
-        while not stop.is_set():
-            left = deadline - time.monotonic()
-            if left <= 0:
-                self.tally.gave_up += 1
-                return False
+        closed = await self.read_for(stop, self.t0 + GIVE_UP_S - time.monotonic())
+        if not closed and not stop.is_set():
+            self.tally.gave_up += 1
+        return closed
+
+    async def read_for(self, stop: asyncio.Event, seconds: float) -> bool:
+        """Read the server's replies for ``seconds`` (or until ``stop``). -> True when it closed
+        the connection meanwhile."""
+        end = time.monotonic() + seconds
+        while not stop.is_set() and time.monotonic() < end:
             try:
-                data = await asyncio.wait_for(self.reader.read(1 << 16), min(left, 0.5))
+                data = await asyncio.wait_for(self.reader.read(1 << 16), max(0.01, min(0.5, end - time.monotonic())))
             except asyncio.TimeoutError:
                 continue
             except ConnectionError:
@@ -181,7 +185,7 @@ async def _one(kind: str, host: str, port: int, stop: asyncio.Event, tally: Tall
                     break
                 send(data[i:i + 1])
                 await writer.drain()
-                closed = await _sleep_watching(peer, stop, slow_byte_s)
+                closed = await peer.read_for(stop, slow_byte_s)
                 if closed:
                     break
             if not closed:
@@ -247,22 +251,6 @@ def _misbehaviour(kind: str, rng) -> bytes:
     if kind == "half-hello":
         return _frame(_hello())[:10]
     raise ValueError(f"unknown hostile kind {kind!r}")
-
-
-async def _sleep_watching(peer: _Peer, stop: asyncio.Event, seconds: float) -> bool:
-    """Sleep ``seconds`` while reading the server's replies. -> True when it closed the connection."""
-    end = time.monotonic() + seconds
-    while not stop.is_set() and time.monotonic() < end:
-        try:
-            data = await asyncio.wait_for(peer.reader.read(1 << 16), max(0.01, min(0.5, end - time.monotonic())))
-        except asyncio.TimeoutError:
-            continue
-        except ConnectionError:
-            return True
-        if not data:
-            return True
-        peer._take(data)
-    return False
 
 
 async def hostile_loop(kind: str, host: str, port: int, stop: asyncio.Event, tally: Tally, seed: int = 0,
