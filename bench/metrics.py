@@ -88,9 +88,9 @@ def nearly_uniform(image: np.ndarray, fraction: float = 0.95, tolerance: int = 2
 MIN_PIXELS = 30
 
 
-def masked_metrics(gt: np.ndarray, rgb: np.ndarray, masks: dict) -> dict:
+def masked_metrics(gt: np.ndarray, rgb: np.ndarray, masks: dict, min_pixels: int = MIN_PIXELS) -> dict:
     """Whole-frame PSNR / DSSIM of (H, W, 3) uint8 images and, per mask (H, W) bool, the PSNR and
-    DSSIM of its pixels (the SSIM map averaged there); NaN where a mask has fewer than MIN_PIXELS."""
+    DSSIM of its pixels (the SSIM map averaged there); NaN where a mask has fewer than ``min_pixels``."""
     from skimage.metrics import structural_similarity
 
     _check_pair(gt, rgb)
@@ -98,7 +98,7 @@ def masked_metrics(gt: np.ndarray, rgb: np.ndarray, masks: dict) -> dict:
     out = {"psnr": psnr(gt, rgb), "dssim": dssim(float(mean))}
     err = (gt.astype(np.float64) - rgb.astype(np.float64)) ** 2
     for name, mask in masks.items():
-        if mask.sum() < MIN_PIXELS:
+        if mask.sum() < max(1, min_pixels):
             out[f"psnr_{name}"] = out[f"dssim_{name}"] = float("nan")
             continue
         mse = float(err[mask].mean())

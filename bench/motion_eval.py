@@ -13,34 +13,22 @@ the mean of the SSIM map there, (1 - mean) / 2; PSNR over them likewise.
 """
 from __future__ import annotations
 
-import math
 import time
 
 import numpy as np
 
 from .coverage import LatencyModel, display_samples
-from .metrics import PSNR_CAP, dssim, psnr, ssim
+from .metrics import masked_metrics
 
 MODES = ("static", "velocity", "accel", "oracle")
 
 
-def ssim_map(ref: np.ndarray, test: np.ndarray) -> np.ndarray:
-    """(H, W) SSIM of uint8 (H, W, 3) images (scikit-image, averaged over the channels)."""
-    from skimage.metrics import structural_similarity
-
-    _, full = structural_similarity(ref, test, channel_axis=2, data_range=255, full=True)
-    return full.mean(axis=2)
-
-
-def masked_quality(ref: np.ndarray, test: np.ndarray, mask: np.ndarray, ssim_full=None) -> tuple:
+def masked_quality(ref: np.ndarray, test: np.ndarray, mask: np.ndarray) -> tuple:
     """(DSSIM, PSNR dB) over the pixels of ``mask`` (H, W) bool; (None, None) for an empty mask."""
     if not mask.any():
         return None, None
-    s = ssim_map(ref, test) if ssim_full is None else ssim_full
-    d = ref[mask].astype(np.float64) - test[mask].astype(np.float64)
-    mse = float(np.mean(d * d))
-    p = PSNR_CAP if mse <= 0 else min(PSNR_CAP, 10.0 * math.log10(255.0 ** 2 / mse))
-    return dssim(float(s[mask].mean())), p
+    q = masked_metrics(ref, test, {"mask": mask}, min_pixels=1)
+    return q["dssim_mask"], q["psnr_mask"]
 
 
 def measure_motion(scene, windows, modes=MODES, latency_ms: float = 128.0, rate_hz: float = 30.0, stride: int = 3,
@@ -75,10 +63,10 @@ def measure_motion(scene, windows, modes=MODES, latency_ms: float = 128.0, rate_
                 mask = truth.read_motion()[1] | stale
                 for mode, m in methods.items():
                     rgb, _, ms = sim.display(m, display, frame, t_disp)
-                    full = ssim_map(gt, rgb)
-                    moving = masked_quality(gt, rgb, mask, full)
+                    q = masked_metrics(gt, rgb, {"moving": mask}, min_pixels=1)   # one SSIM map for both
+                    moving = (q["dssim_moving"], q["psnr_moving"]) if mask.any() else (None, None)
                     rows[mode].setdefault(window.label, []).append(
-                        (t_disp, dssim(ssim(gt, rgb)), psnr(gt, rgb), *moving, ms, int(mask.sum())))
+                        (t_disp, q["dssim"], q["psnr"], *moving, ms, int(mask.sum())))
                 if bar is not None:
                     bar.update(1)
         for m in methods.values():
