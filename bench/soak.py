@@ -19,8 +19,6 @@ connections that never complete a Hello must not take a slot.
 from __future__ import annotations
 
 import asyncio
-import csv
-import json
 import os
 import threading
 import time
@@ -42,10 +40,12 @@ def _client_args(trace: str, start_s: float, duration_s: float, method: str, sce
 def read_run(out_dir: str, method: str) -> dict:
     """What must not change between a solo and a soaked run: the records without timing
     columns, the frame count and arrival times."""
-    with open(os.path.join(out_dir, "session.json")) as f:
-        result = json.load(f)["result"]
-    with open(os.path.join(out_dir, f"{method}.records.csv"), newline="") as f:
-        rows = list(csv.DictReader(f))
+    from pibr.client.recorder import read_records
+
+    from .evaluate import read_session
+
+    result = read_session(out_dir)["result"]
+    rows = read_records(os.path.join(out_dir, f"{method}.records.csv"))
     records = [{k: v for k, v in r.items() if k not in _TIMING_COLUMNS} for r in rows]
     return {"frames_received": result["frames_received"], "ticks": result["ticks"],
             "missed_deadlines": result["missed_deadlines"], "frame_arrivals_s": result["frame_arrivals_s"],
