@@ -137,37 +137,43 @@ class CoverageProbe:
         self.mark_peeled = mark_peeled   # peeled views mark what they peeled (as the server does by default)
         self.peel_tolerance = PEEL_TOLERANCE
         self._own_renderer = renderer is None
-        with self.ctx:   # current even if a probe before this one left it (see below)
+        with self._current():
             self.renderer = Renderer(self.ctx, scene, projection) if renderer is None else renderer
             self.primary = RenderTarget(self.ctx, *view_size)
             self.extra = RenderTarget(self.ctx, view_size[0] // 2, view_size[1] // 2)
             self.gt = RenderTarget(self.ctx, *out_size)
         self._dirs = camera_rays(*out_size, fov_deg)
 
-    # Every GL entry point makes this probe's context current first (``with self.ctx``):
-    # another context created on the same thread since would otherwise receive the calls.
+    # Every GL entry point makes this probe's own context current first (``with self.ctx``):
+    # another context created on the same thread since would otherwise receive the calls. A
+    # context it was given is its owner's, current on the owner's thread (the server's GL
+    # thread): leaving ``with ctx`` would make it not current there, so it is used as it is.
+    def _current(self):
+        import contextlib
+
+        return self.ctx if self._own else contextlib.nullcontext()
 
     def display_points(self, pose: Pose, t: float):
         """Ground truth at the displayed pose: world points (n, 3), sky mask (n,), world directions (n, 3)."""
-        with self.ctx:
+        with self._current():
             self.renderer.render_perspective(self.gt, pose, t, self.fov_deg)
             distance = self.gt.read_distance()
         return displayed_points(self._dirs, pose, distance)
 
     def render_primary(self, pose: Pose, t: float) -> np.ndarray:
-        with self.ctx:
+        with self._current():
             self.renderer.render_wide(self.primary, pose, t, self.projection)
             return self.primary.read_distance().copy()
 
     def load_primary(self, distance: np.ndarray) -> None:
         """Put a primary distance map rendered earlier back where peeling reads it."""
-        with self.ctx:
+        with self._current():
             self.primary.distance.write(np.ascontiguousarray(distance, np.float32).tobytes())
 
     def render_extra(self, primary_pose: Pose, offset: Pose, t: float, peel: bool) -> np.ndarray:
         """The extra view's distance map; the primary must be the last one rendered."""
         peel_arg = (self.primary, primary_pose, self.peel_tolerance) if peel else None
-        with self.ctx:
+        with self._current():
             self.renderer.render_wide(self.extra, primary_pose.compose(offset), t, self.projection, peel=peel_arg,
                                       mark_peeled=self.mark_peeled)
             return self.extra.read_distance().copy()
@@ -183,7 +189,7 @@ class CoverageProbe:
         return float(holes.mean()), geo_missing
 
     def close(self) -> None:
-        with self.ctx:
+        with self._current():
             if self._own_renderer:
                 self.renderer.release()
             for t in (self.primary, self.extra, self.gt):
