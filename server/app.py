@@ -236,6 +236,11 @@ class Server(TrackedListener):
         coverage = await self.get_coverage(scene)
         config, spec = plan_session(self.config, scene, hello, proxies, coverage,
                                     bundle.levels if bundle is not None else None)
+        plan = config.options["plan"]
+        log.info("session %d plan: extra view %s, motion %s, view %dx%d, depth %s at %g kbit/s video", session_id,
+                 "on" if plan["extra_view"]["value"] else "off", "on" if plan["motion"]["value"] else "off",
+                 *plan["view_size"]["value"], plan["depth_codec"]["value"]["codec"],
+                 plan["depth_codec"]["value"]["video_kbps"])
 
         def make_producer(ctx):
             return FrameProducer(ctx, self._renderer(ctx, scene), spec)

@@ -273,7 +273,7 @@ def decide_proxies(scene, lods: dict | None) -> Decision:
         (proxy if level == "proxy" else box).append(obj.name)
     tri_proxy = sum(objects[n]["triangles_proxy"] for n in proxy)
     reason = (f"{len(proxy)} object(s) get their encaging proxy ({tri_proxy} triangles), {len(box)} their box "
-              f"(a proxy not tighter than {BOX_VOLUME_RATIO:.2f} of the box's volume, or none was made)")
+              f"(its proxy holds {BOX_VOLUME_RATIO:.2f} of the box's volume or more, or the LoD made none)")
     return Decision({"proxy": proxy, "box": box}, reason, {"objects": objects, "box_volume_ratio": BOX_VOLUME_RATIO})
 
 
@@ -371,7 +371,7 @@ def make_plan(scene, *, extra_view_mode: str, coverage: dict | None, proxies: De
 
 def format_plan(plan: dict) -> str:
     """A plan's JSON (:meth:`ScenePlan.to_json`) as a readable table."""
-    lines = [f"plan for scene {plan['scene']}", f"{'aspect':<12} {'value':<24} reason"]
+    lines = [f"plan for scene {plan['scene']}", f"{'aspect':<12} {'value':<26} reason"]
     for aspect in ScenePlan.ASPECTS:
         d = plan[aspect]
         value = d["value"]
@@ -383,9 +383,11 @@ def format_plan(plan: dict) -> str:
             shown = f"{value['codec']} ({value['video_kbps']:g} kbit/s video)"
         elif isinstance(value, bool):
             shown = "on" if value else "off"
+        elif value is None:
+            shown = "none"
         else:
             shown = str(value)
-        lines.append(f"{aspect:<12} {shown:<24} {d['reason']}")
+        lines.append(f"{aspect:<12} {shown:<26} {d['reason']}")
     objects = plan["proxies"]["measured"].get("objects", {})
     if objects:
         lines.append("")

@@ -50,6 +50,8 @@ def plan_session(cfg: ServerConfig, scene, hello: Hello, proxies: dict | None = 
     be measured rather than the scene's own setting)."""
     if hello.depth_codec not in ("", "h264", "edge"):
         raise ConfigError(f"unknown depth codec {hello.depth_codec!r}; choose h264 or edge")
+    if proxies is not None and proxy_levels is None:   # a bundle built by the caller (benchmarks)
+        proxy_levels = Decision(None, "proxies sent as the caller built them: their levels are not planned here")
     plan = scene_plan(cfg, scene, hello, coverage, proxy_levels if proxies is not None else None)
     depth_codec = plan.depth_codec.value["codec"]
     video_kbps = float(plan.depth_codec.value["video_kbps"])
