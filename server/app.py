@@ -199,9 +199,10 @@ class Server(TrackedListener):
 
         return await self._once(self._bundles, id(scene), build_bundle, scene, self.config.proxy_settings)
 
-    async def get_coverage(self, scene) -> dict | None:
+    async def get_coverage(self, scene, session_id: int | None = None) -> dict | None:
         """How much the extra view covers in ``scene`` (scene_plan.py), measured on the GL thread once
-        per server and scene, or read from the on-disk cache; None unless ``extra_view`` is auto."""
+        per server and scene (in ``session_id``'s fair turn when a session asks), or read from the
+        on-disk cache; None unless ``extra_view`` is auto."""
         if self.config.extra_view != "auto":
             return None
         future = self._coverage.get(id(scene))
@@ -212,7 +213,8 @@ class Server(TrackedListener):
             def measure(ctx):
                 return cached_extra_view(ctx, scene, extra_offset_for(self.config, scene), self.config.projection,
                                          renderer=self._renderer(ctx, scene))
-            future = asyncio.ensure_future(self.gl.run(measure))
+            future = asyncio.ensure_future(self.gl.run(measure) if session_id is None
+                                           else self.render(session_id, measure))
             self._coverage[id(scene)] = future
 
             def forget_failure(f):
@@ -233,7 +235,7 @@ class Server(TrackedListener):
             proxies = bundle.info(self.proxy_chunk_bytes) if bundle is not None else None
         except ValueError as exc:   # a bundle too big for the protocol's chunk limit
             raise ConfigError(f"proxies of scene {scene.name!r}: {exc}") from None
-        coverage = await self.get_coverage(scene)
+        coverage = await self.get_coverage(scene, session_id)
         config, spec = plan_session(self.config, scene, hello, proxies, coverage,
                                     bundle.levels if bundle is not None else None)
         plan = config.options["plan"]
