@@ -25,6 +25,7 @@ def register(subparsers) -> None:
                    help="as 'pibr serve' (default auto)")
     g.add_argument("--view-size", type=_size, default=None, metavar="WxH", help="as 'pibr serve' (default: for the output)")
     g.add_argument("--bitrate-kbps", type=float, default=16000.0, help="as 'pibr serve' (default 16000)")
+    g.add_argument("--edge-kbps", type=float, default=0.0, help="as 'pibr serve' (default 0: a fixed threshold)")
     p.set_defaults(func=run)
 
 
@@ -47,7 +48,7 @@ def run(args) -> int:
 
     plan = plan_for(with_up(args.plan, args.up), output=args.output, fov_deg=args.fov,
                     bandwidth_kbps=args.bandwidth_kbps, extra_view=args.extra_view, depth_codec=args.depth_codec,
-                    view_size=args.view_size, bitrate_kbps=args.bitrate_kbps)
+                    view_size=args.view_size, bitrate_kbps=args.bitrate_kbps, edge_kbps=args.edge_kbps)
     if args.json:
         print(json.dumps(plan, indent=2))
     else:
@@ -59,7 +60,7 @@ def run(args) -> int:
 
 def plan_for(spec: str, output=(960, 540), fov_deg: float = 90.0, bandwidth_kbps: float = 0.0,
              extra_view: str = "auto", depth_codec: str = "auto", view_size=None, bitrate_kbps: float = 16000.0,
-             progress: bool = True) -> dict:
+             edge_kbps: float = 0.0, progress: bool = True) -> dict:
     """The plan a server with these settings makes for ``spec`` and a client with this output and
     bandwidth that asks for proxies, as JSON (what the client's session.json records)."""
     from pibr.protocol.errors import ConfigError, MalformedMessage
@@ -71,7 +72,10 @@ def plan_for(spec: str, output=(960, 540), fov_deg: float = 90.0, bandwidth_kbps
     from pibr.server.scene_plan import cached_extra_view, decide_proxies
     from pibr.server.session_plan import extra_offset_for, scene_plan
 
-    cfg = ServerConfig(extra_view=extra_view, depth_codec=depth_codec, view_size=view_size, bitrate_kbps=bitrate_kbps)
+    from pibr.server.depth_stream import EdgeSettings
+
+    cfg = ServerConfig(extra_view=extra_view, depth_codec=depth_codec, view_size=view_size, bitrate_kbps=bitrate_kbps,
+                       edge=EdgeSettings(kbps=edge_kbps))
     try:   # the bounds a Hello from a client would be held to
         hello = Hello.parse(Hello(output=OutputConfig(output[0], output[1], fov_deg), want_proxies=True,
                                   bandwidth_kbps=bandwidth_kbps).serialize())

@@ -22,12 +22,13 @@ def test_plan_table_for_a_builtin_scene(capsys):
 
 
 def test_plan_json_with_a_bandwidth_and_a_dynamic_scene(capsys):
-    assert main(["scenes", "--plan", "dynamic", "--json", "--bandwidth-kbps", "4000", "--extra-view", "on"]) == 0
+    assert main(["scenes", "--plan", "dynamic", "--json", "--bandwidth-kbps", "8000", "--edge-kbps", "500",
+                 "--extra-view", "on"]) == 0
     plan = json.loads(capsys.readouterr().out)
     assert plan["scene"] == "dynamic" and plan["extra_view"]["value"] is True
     assert plan["motion"]["value"] is True and plan["motion"]["measured"]["moving_objects"]["spinner"] == "spin"
-    assert plan["depth_codec"]["measured"]["bandwidth_kbps"] == 4000
-    assert plan["depth_codec"]["value"]["video_kbps"] <= 4000
+    assert plan["depth_codec"]["measured"]["bandwidth_kbps"] == 8000
+    assert plan["depth_codec"]["value"] == {"codec": "edge", "video_kbps": 7500.0}
 
 
 @pytest.mark.parametrize("argv, message", [
