@@ -21,201 +21,22 @@ that had reached the server.
 """
 from __future__ import annotations
 
-import math
 import os
-from dataclasses import dataclass
 
 import numpy as np
 
 from pibr.protocol.pose import Pose
-from pibr.protocol.projection import FORWARD
+# The coverage test itself lives with the server, which uses it to plan sessions (scene_plan.py);
+# it is re-exported here for the benchmarks.
+from pibr.server.coverage import (COVERAGE_TOLERANCE, CoverageProbe, LatencyModel, camera_rays,  # noqa: F401
+                                  display_samples, displayed_points, matches_view, project_to_view,
+                                  sky_in_view, trace_samples, uncovered)
 from .results import write_result
 
 VARIANTS = ("primary", "peel_no_offset", "offset_no_peel", "offset_peel")
 VARIANT_LABELS = {"primary": "primary only", "peel_no_offset": "extra: peeling, no offset",
                   "offset_no_peel": "extra: offset, no peeling", "offset_peel": "extra: offset + peeling",
                   "floor": "primary, no latency (floor)"}
-#: Relative distance tolerance of the coverage test (as depth peeling's, see renderer.py).
-COVERAGE_TOLERANCE = 0.03
-
-
-@dataclass(frozen=True)
-class LatencyModel:
-    """The virtual clock's schedule without a network in between (integer microseconds)."""
-
-    rate_hz: float = 60.0
-    server_fps: float = 10.0
-    up_ms: float = 64.0
-    down_ms: float = 64.0
-    server_delay_ms: float = 20.0
-
-    def frame_for(self, t_us: int) -> tuple[int, int]:
-        """-> (render time, client time of the pose used) of the frame shown at display time t."""
-        interval = int(round(1e6 / self.server_fps))
-        tick = int(round(1e6 / self.rate_hz))
-        up, down, delay = (int(round(x * 1000)) for x in (self.up_ms, self.down_ms, self.server_delay_ms))
-        render = ((t_us - delay - down) // interval) * interval
-        pose_t = ((render - up) // tick) * tick
-        return render, pose_t
-
-
-def project_to_view(points: np.ndarray, view_pose: Pose):
-    """World points (n, 3) -> (t' (n, 2), distance (n,), in front (n,) bool) in a wide-angle view."""
-    local = (points - view_pose.p) @ view_pose.rotation()
-    tx, ty, r = FORWARD.numpy(px=local[:, 0], py=local[:, 1], pz=local[:, 2])
-    return np.stack([tx, ty], axis=1), r, local[:, 2] <= 0.0
-
-
-def matches_view(points, view_pose: Pose, distance: np.ndarray, tolerance: float) -> np.ndarray:
-    """(n,) True where the view's distance map (h, w), row 0 on top, shows the point."""
-    h, w = distance.shape
-    t, r, front = project_to_view(points, view_pose)
-    tx = (t[:, 0] + 1.0) * 0.5 * w - 0.5
-    ty = (1.0 - t[:, 1]) * 0.5 * h - 0.5
-    x0, y0 = np.floor(tx).astype(np.int64), np.floor(ty).astype(np.int64)
-    hit = np.zeros(len(points), bool)
-    for dx, dy in ((0, 0), (1, 0), (0, 1), (1, 1)):
-        d = distance[np.clip(y0 + dy, 0, h - 1), np.clip(x0 + dx, 0, w - 1)]
-        hit |= (d > 0) & (np.abs(d - r) < tolerance * r)
-    return hit & front
-
-
-def sky_in_view(directions: np.ndarray, view_pose: Pose, distance: np.ndarray) -> np.ndarray:
-    """(n,) True where the view shows sky along world directions (n, 3)."""
-    h, w = distance.shape
-    local = directions @ view_pose.rotation()
-    tx, ty, _ = FORWARD.numpy(px=local[:, 0], py=local[:, 1], pz=local[:, 2])
-    x = np.clip(((tx + 1.0) * 0.5 * w).astype(np.int64), 0, w - 1)
-    y = np.clip(((1.0 - ty) * 0.5 * h).astype(np.int64), 0, h - 1)
-    return (local[:, 2] <= 0.0) & (distance[y, x] == 0)
-
-
-def camera_rays(width: int, height: int, fov_deg: float) -> np.ndarray:
-    """Unit directions (width * height, 3) of a perspective camera's pixel centres, row 0 on top,
-    in camera space (looking along -Z); ``fov_deg`` is horizontal."""
-    tan_x = math.tan(math.radians(fov_deg) / 2)
-    tan_y = tan_x * height / width
-    xs = ((np.arange(width) + 0.5) / width * 2 - 1) * tan_x
-    ys = (1 - (np.arange(height) + 0.5) / height * 2) * tan_y
-    gx, gy = np.meshgrid(xs, ys)
-    d = np.stack([gx, gy, -np.ones_like(gx)], axis=-1).reshape(-1, 3)
-    return d / np.linalg.norm(d, axis=1, keepdims=True)
-
-
-def displayed_points(rays: np.ndarray, pose: Pose, distance: np.ndarray):
-    """What a perspective view at ``pose`` shows: world points (n, 3), sky (n,), world directions
-    (n, 3), from its camera rays (n, 3) and ground-truth radial distance (h, w), 0 = sky."""
-    r = distance.reshape(-1).astype(np.float64)
-    dirs = rays @ pose.rotation().T
-    return pose.p + dirs * r[:, None], r == 0, dirs
-
-
-def uncovered(points, sky, dirs, views, tolerance: float = COVERAGE_TOLERANCE,
-              peeled_marked: bool = True) -> np.ndarray:
-    """(n,) True where no transmitted view saw what the displayed pixel shows: the one
-    geometric definition of a hole, the same for every method.
-
-    points, dirs : (n, 3) world points and directions of the displayed pixels (ground truth);
-    sky : (n,) the pixel shows sky; views : [(pose, distance map (h, w), peeled)]. A view
-    vouches for sky where it stores sky (distance 0); a depth-peeled view only if it marks the
-    pixels it peeled away apart (``peeled_marked``: a negative distance, protocol/depth.py
-    PEELED), else its 0 may be a surface the primary shows."""
-    covered = np.zeros(len(points), bool)
-    geo = ~sky
-    for pose, dist, peeled in views:
-        todo = geo & ~covered
-        covered[todo] = matches_view(points[todo], pose, dist, tolerance)
-        if not peeled or peeled_marked:
-            s = sky & ~covered
-            covered[s] = sky_in_view(dirs[s], pose, dist)
-    return ~covered
-
-
-class CoverageProbe:
-    """Renders ground truth and wide-angle views of one scene at small sizes, on this thread."""
-
-    def __init__(self, scene, view_size=(512, 512), out_size=(320, 180), fov_deg=90.0, projection="vertex",
-                 tolerance=COVERAGE_TOLERANCE, ctx=None, mark_peeled: bool = True):
-        from pibr.protocol.gl import create_context
-        from pibr.server.renderer import PEEL_TOLERANCE, RenderTarget, Renderer
-
-        self._own = ctx is None
-        self.ctx = create_context() if ctx is None else ctx
-        self.scene, self.fov_deg, self.projection, self.tolerance = scene, fov_deg, projection, tolerance
-        self.mark_peeled = mark_peeled   # peeled views mark what they peeled (as the server does by default)
-        self.peel_tolerance = PEEL_TOLERANCE
-        self.renderer = Renderer(self.ctx, scene, projection)
-        self.primary = RenderTarget(self.ctx, *view_size)
-        self.extra = RenderTarget(self.ctx, view_size[0] // 2, view_size[1] // 2)
-        self.gt = RenderTarget(self.ctx, *out_size)
-        self._dirs = camera_rays(*out_size, fov_deg)
-
-    # Every GL entry point makes this probe's context current first (``with self.ctx``):
-    # another context created on the same thread since would otherwise receive the calls.
-
-    def display_points(self, pose: Pose, t: float):
-        """Ground truth at the displayed pose: world points (n, 3), sky mask (n,), world directions (n, 3)."""
-        with self.ctx:
-            self.renderer.render_perspective(self.gt, pose, t, self.fov_deg)
-            distance = self.gt.read_distance()
-        return displayed_points(self._dirs, pose, distance)
-
-    def render_primary(self, pose: Pose, t: float) -> np.ndarray:
-        with self.ctx:
-            self.renderer.render_wide(self.primary, pose, t, self.projection)
-            return self.primary.read_distance().copy()
-
-    def load_primary(self, distance: np.ndarray) -> None:
-        """Put a primary distance map rendered earlier back where peeling reads it."""
-        with self.ctx:
-            self.primary.distance.write(np.ascontiguousarray(distance, np.float32).tobytes())
-
-    def render_extra(self, primary_pose: Pose, offset: Pose, t: float, peel: bool) -> np.ndarray:
-        """The extra view's distance map; the primary must be the last one rendered."""
-        peel_arg = (self.primary, primary_pose, self.peel_tolerance) if peel else None
-        with self.ctx:
-            self.renderer.render_wide(self.extra, primary_pose.compose(offset), t, self.projection, peel=peel_arg,
-                                      mark_peeled=self.mark_peeled)
-            return self.extra.read_distance().copy()
-
-    def missing(self, points, sky, dirs, views) -> tuple[float, float]:
-        """(fraction of all pixels, fraction of pixels showing geometry) no view covers.
-
-        views: [(pose, distance map, peeled)]."""
-        holes = uncovered(points, sky, dirs, views, self.tolerance, self.mark_peeled)
-        geo = ~sky
-        n_geo = int(geo.sum())
-        geo_missing = float((geo & holes).sum() / n_geo) if n_geo else 0.0
-        return float(holes.mean()), geo_missing
-
-    def close(self) -> None:
-        with self.ctx:
-            self.renderer.release()
-            for t in (self.primary, self.extra, self.gt):
-                t.release()
-        if self._own:
-            self.ctx.release()
-
-
-def display_samples(scene, trace_spec: str, start_s: float, duration_s: float | None, rate_hz: float,
-                    latency: LatencyModel, stride: int = 1, anchor: str = "start"):
-    """[(display time s, display pose, render time s, render pose)] along a trace window,
-    placed in the scene as the client places it (``protocol.trace.placement``)."""
-    from pibr.protocol.trace import load_trace, placement
-
-    trace = load_trace(trace_spec)
-    _, end = trace.window(start_s, duration_s)
-    n = max(1, int(math.floor((end - start_s) * rate_hz + 1e-9)))
-    tick_us = int(round(1e6 / rate_hz))
-    origin = placement(trace, start_s, scene.viewer_origin, anchor)
-    out = []
-    for i in range(0, n, stride):
-        t_us = i * tick_us
-        render_us, pose_us = latency.frame_for(t_us)
-        display = origin.compose(trace.pose_at(start_s + t_us / 1e6))
-        rendered = origin.compose(trace.pose_at(start_s + max(pose_us, 0) / 1e6))
-        out.append((t_us / 1e6, display, render_us / 1e6, rendered))
-    return out
 
 
 def measure_coverage(probe: CoverageProbe, samples, offset: Pose, variants=VARIANTS + ("floor",)) -> dict:

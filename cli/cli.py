@@ -14,7 +14,7 @@ from pibr import __version__
 COMMAND_MODULES = (
     "pibr.server.cli",      # serve, relay
     "pibr.client.cli",      # client
-    "pibr.scenes.cli",      # scenes
+    "pibr.scenes_cli",      # scenes (pibr.scenes.cli, and --plan from pibr.server.scene_plan)
     "pibr.trace_cli",       # trace convert|show|synth
     "pibr.bench.cli",       # demo, evaluate, bench ...
 )

@@ -35,8 +35,8 @@ import numpy as np
 
 from pibr.protocol.errors import ConfigError, MalformedMessage, UnexpectedMessage
 from pibr.protocol.gl import GLThread
-from pibr.protocol.messages import (FRAMES_DECODED, Clock, Frame, Hello, OutputConfig, PayloadKind, PoseMsg,
-                                    ProxyChunk, Stats)
+from pibr.protocol.messages import (FRAMES_DECODED, MAX_BANDWIDTH_KBPS, Clock, Frame, Hello, OutputConfig,
+                                    PayloadKind, PoseMsg, ProxyChunk, Stats)
 from pibr.protocol.pose import Pose
 from pibr.protocol.tls import ClientTLS
 
@@ -70,6 +70,7 @@ class ClientConfig:
     preroll_s: float = 0.5
     scene: str = ""
     depth_codec: str = ""
+    bandwidth_kbps: float = 0.0   # stated to the server in the Hello (0: not stated)
     record: bool = True
     lossless: bool = True
     video: bool = True       # False: records only (no MP4 / lossless copy), the least work per tick
@@ -97,6 +98,9 @@ class ClientConfig:
             raise ConfigError(f"output rate must be in 1..1000 Hz, got {self.rate_hz}")
         if self.duration_s is not None and self.duration_s <= 0:
             raise ConfigError(f"duration must be positive, got {self.duration_s}")
+        if not (0 <= self.bandwidth_kbps <= MAX_BANDWIDTH_KBPS):
+            raise ConfigError(f"bandwidth must be in 0..{MAX_BANDWIDTH_KBPS:g} kbit/s (0: not stated), "
+                              f"got {self.bandwidth_kbps}")
         from pibr.protocol.trace import ANCHORS
 
         if self.anchor not in ANCHORS:
@@ -283,6 +287,7 @@ class Client:
         hello = Hello(client="pibr-client/0.1", scene=cfg.scene, clock=cfg.clock,
                       output=OutputConfig(cfg.width, cfg.height, cfg.fov_deg, cfg.rate_hz),
                       want_proxies=needs_proxies(cfg.methods), depth_codec=cfg.depth_codec,
+                      bandwidth_kbps=cfg.bandwidth_kbps,
                       quadtree_threshold=quadtree_threshold(cfg.methods, cfg.options), token=cfg.token or "")
         try:
             self.session = await self.conn.handshake(hello)

@@ -55,6 +55,9 @@ def register(sub) -> None:
                    help="seconds of poses sent before the first displayed tick (default 0.5)")
     p.add_argument("--scene", default="", help="ask the server for this scene (default: the server's)")
     p.add_argument("--depth-codec", choices=("h264", "edge"), default=None, help="ask for this depth transport")
+    p.add_argument("--bandwidth-kbps", type=float, default=0.0, metavar="KBPS",
+                   help="tell the server the bandwidth this client receives: it fits its streams into it and "
+                        "picks the depth codec for it (default 0: not stated)")
     p.add_argument("--no-lossless", action="store_true", help="skip the lossless recording used for metrics")
     p.add_argument("--no-video", action="store_true",
                    help="write the per-tick records only, no video: the least work per tick (timing runs)")
@@ -178,7 +181,8 @@ def cmd_client(args) -> int:
                        methods=tuple(args.method), out_dir=args.out, width=args.size[0], height=args.size[1],
                        fov_deg=args.fov, start_s=args.start, duration_s=args.duration, preroll_s=args.preroll,
                        anchor=args.anchor,
-                       scene=args.scene, depth_codec=args.depth_codec or "", lossless=not args.no_lossless,
+                       scene=args.scene, depth_codec=args.depth_codec or "",
+                       bandwidth_kbps=args.bandwidth_kbps, lossless=not args.no_lossless,
                        video=not args.no_video,
                        progress=args.progress, tau=args.tau, lod_pixels=args.lod_pixels,
                        lod_level=args.lod_level, receive_timeout_s=args.receive_timeout_s,

@@ -30,6 +30,8 @@ MAX_JSON_BODY = 1 << 20
 MAX_QUADTREE_THRESHOLD = 10.0
 #: Longest access token a Hello may carry (see access.py).
 MAX_TOKEN = 256
+#: Largest bandwidth a Hello may state, kbit/s (10 Gbit/s).
+MAX_BANDWIDTH_KBPS = 1e7
 
 
 class Message:
@@ -133,6 +135,10 @@ class Hello(Message):
 
     ``token`` is the shared secret of a server that requires one (see access.py); left out
     of the JSON when empty, at most ``MAX_TOKEN`` characters, and kept out of ``repr``.
+
+    ``bandwidth_kbps`` > 0 is the bandwidth the client can receive (kbit/s); the server fits its
+    streams into it and picks the depth codec for it (server/scene_plan.py). 0 (the default, left
+    out of the JSON, so older peers read the same bytes): not stated. At most ``MAX_BANDWIDTH_KBPS``.
     """
 
     TYPE: ClassVar[int] = 1
@@ -146,6 +152,7 @@ class Hello(Message):
     protocol: int = PROTOCOL_VERSION
     quadtree_threshold: float = 0.0   # 0 = no quadtree payload
     token: str = field(default="", repr=False)
+    bandwidth_kbps: float = 0.0   # 0 = not stated
 
     def serialize(self) -> bytes:
         obj = {"protocol": self.protocol, "client": self.client, "scene": self.scene,
@@ -155,6 +162,8 @@ class Hello(Message):
             obj["quadtree_threshold"] = float(self.quadtree_threshold)
         if self.token:
             obj["token"] = self.token
+        if self.bandwidth_kbps:
+            obj["bandwidth_kbps"] = float(self.bandwidth_kbps)
         return _dump_json(obj)
 
     @classmethod
@@ -172,6 +181,7 @@ class Hello(Message):
             quadtree_threshold=_get(cls.NAME, o, "quadtree_threshold", float, 0.0, lo=0.0,
                                     hi=MAX_QUADTREE_THRESHOLD),
             token=_token(_get(cls.NAME, o, "token", str, "")),
+            bandwidth_kbps=_get(cls.NAME, o, "bandwidth_kbps", float, 0.0, lo=0.0, hi=MAX_BANDWIDTH_KBPS),
         )
 
 

@@ -4,7 +4,8 @@ from __future__ import annotations
 import json
 
 
-def register(subparsers) -> None:
+def register(subparsers):
+    """Add the ``scenes`` command; -> its parser (pibr/scenes_cli.py adds ``--plan``, which needs the server)."""
     p = subparsers.add_parser(
         "scenes", help="list built-in scenes, or show one scene",
         description="List the built-in scenes, or summarise a scene (built-in name, .toml/.json "
@@ -14,6 +15,7 @@ def register(subparsers) -> None:
     p.add_argument("--up", choices=("y", "z", "auto"), default=None,
                    help="with --show ASSET: its up axis (default auto: decided from its geometry)")
     p.set_defaults(func=run)
+    return p
 
 
 def run(args) -> int:

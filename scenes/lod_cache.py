@@ -121,7 +121,8 @@ def _decode(path: Path, key: str) -> LodResult:
     return result
 
 
-def _write_atomic(path: Path, data: bytes) -> None:
+def write_atomic(path: Path, data: bytes) -> None:
+    """Write ``data`` to ``path`` whole or not at all (a temporary file in the same directory, renamed)."""
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.stem[:16] + ".", suffix=".tmp")
     try:
@@ -169,7 +170,7 @@ def cached_lod(mesh: Mesh, resolution: int = 128, target_fraction: float = 0.005
     result = simplify_encaging(mesh, progress=progress, **params)
     _count("generated")
     try:
-        _write_atomic(path, _encode(result, key))
+        write_atomic(path, _encode(result, key))
         _count("written")
     except OSError as exc:
         _count("write_errors")

@@ -45,6 +45,7 @@ class Server(TrackedListener):
         self._scenes: dict[str, asyncio.Future] = {}    # spec -> its load (one per scene)
         self._renderers: dict = {}  # touched only on the GL thread
         self._bundles: dict[int, asyncio.Future] = {}   # id(scene) -> its ProxyBundle's build
+        self._coverage: dict[int, asyncio.Future] = {}  # id(scene) -> its extra view's coverage measurement
         self.gl: GLThread | None = None
         workers = max(2, os.cpu_count() or 2)
         self.encode_pool = concurrent.futures.ThreadPoolExecutor(max_workers=workers, thread_name_prefix="pibr-encode")
@@ -60,6 +61,7 @@ class Server(TrackedListener):
         self.gl = await loop.run_in_executor(None, GLThread, "pibr-server-gl")
         scene = await self.get_scene(self.config.scene)  # load and upload the default scene before accepting
         await self.gl.run(self._renderer, scene)
+        await self.get_coverage(scene)
         tls = None
         if self.config.tls_cert is not None:
             from pibr.protocol.tls import certificate_fingerprint, server_context
@@ -197,22 +199,58 @@ class Server(TrackedListener):
 
         return await self._once(self._bundles, id(scene), build_bundle, scene, self.config.proxy_settings)
 
+    async def get_coverage(self, scene, session_id: int | None = None) -> dict | None:
+        """How much the extra view covers in ``scene`` (scene_plan.py), measured on the GL thread once
+        per server and scene (in ``session_id``'s fair turn when a session asks), or read from the
+        on-disk cache; None unless ``extra_view`` is auto."""
+        if self.config.extra_view != "auto":
+            return None
+        future = self._coverage.get(id(scene))
+        if future is None:
+            from .scene_plan import cached_extra_view
+            from .session_plan import extra_offset_for
+
+            def measure(ctx):
+                return cached_extra_view(ctx, scene, extra_offset_for(self.config, scene), self.config.projection,
+                                         renderer=self._renderer(ctx, scene))
+            future = asyncio.ensure_future(self.gl.run(measure) if session_id is None
+                                           else self.render(session_id, measure))
+            self._coverage[id(scene)] = future
+
+            def forget_failure(f):
+                if (f.cancelled() or f.exception() is not None) and self._coverage.get(id(scene)) is f:
+                    del self._coverage[id(scene)]
+            future.add_done_callback(forget_failure)
+        measured = await asyncio.shield(future)
+        if not measured.get("cached"):
+            log.info("extra view coverage of %s: %.2f %% -> %.2f %% uncovered in %.1f s", scene.name,
+                     100 * measured["uncovered_primary"], 100 * measured["uncovered_with_extra"], measured["seconds"])
+        return measured
+
     async def setup_session(self, session_id: int, hello: Hello):
-        """Scene, session parameters, GL producer, encoders (and proxy bundle) for a client's Hello."""
+        """Scene, session parameters (its plan), GL producer, encoders (and proxy bundle) for a client's Hello."""
         scene = await self.get_scene(hello.scene)
         bundle = await self.get_bundle(scene) if hello.want_proxies else None
         try:
             proxies = bundle.info(self.proxy_chunk_bytes) if bundle is not None else None
         except ValueError as exc:   # a bundle too big for the protocol's chunk limit
             raise ConfigError(f"proxies of scene {scene.name!r}: {exc}") from None
-        config, spec = plan_session(self.config, scene, hello, proxies)
+        coverage = await self.get_coverage(scene, session_id)
+        config, spec = plan_session(self.config, scene, hello, proxies, coverage,
+                                    bundle.levels if bundle is not None else None)
+        plan = config.options["plan"]
+        log.info("session %d plan: extra view %s, motion %s, view %dx%d, depth %s at %g kbit/s video", session_id,
+                 "on" if plan["extra_view"]["value"] else "off", "on" if plan["motion"]["value"] else "off",
+                 *plan["view_size"]["value"], plan["depth_codec"]["value"]["codec"],
+                 plan["depth_codec"]["value"]["video_kbps"])
 
         def make_producer(ctx):
             return FrameProducer(ctx, self._renderer(ctx, scene), spec)
 
         producer = await self.render(session_id, make_producer)
         cfg = self.config
-        encoder = H264Encoder(spec.layout.width, spec.layout.height, cfg.fps, cfg.bitrate_kbps, cfg.keyint, cfg.preset,
+        encoder = H264Encoder(spec.layout.width, spec.layout.height, cfg.fps, config.video_bitrate_kbps, cfg.keyint,
+                              cfg.preset,
                               deterministic=hello.clock == "virtual")
         depth_encoder = None
         if config.depth_codec == "edge":

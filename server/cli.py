@@ -83,10 +83,12 @@ def register(sub) -> None:
                    help="address to listen on (default 127.0.0.1, this machine only; any other needs a token)")
     p.add_argument("--port", type=int, default=DEFAULT_PORT, help=f"TCP port, 0 for any free one (default {DEFAULT_PORT})")
     p.add_argument("--fps", type=float, default=10.0, help="server frame rate (default 10)")
-    p.add_argument("--view-size", type=_size, default=(1024, 1024), metavar="WxH",
-                   help="primary wide-angle view size (default 1024x1024); the extra view is half")
+    p.add_argument("--view-size", type=_size, default=None, metavar="WxH",
+                   help="primary wide-angle view size; the extra view is half (default: sized for each client's "
+                        "output, 1.12 x its angular density, as Reinert et al.; 'pibr scenes --plan')")
     p.add_argument("--extra-view", choices=("auto", "on", "off"), default="auto",
-                   help="render the dual view's extra view: as the scene asks (auto), always, never")
+                   help="render the dual view's extra view: when it measurably adds coverage (auto, see "
+                        "'pibr scenes --plan'), always, never")
     p.add_argument("--no-peel-marker", action="store_true",
                    help="the extra view leaves peeled pixels empty like sky instead of marking them (saves the "
                         "early depth test: about a quarter of the extra view's render time; clients then cannot "
@@ -107,8 +109,11 @@ def register(sub) -> None:
                         f"{MAX_EDGE_ANGLE_DEG:g}; 'pibr bench server --max-edge-deg 3,6,12' measures the trade)")
     p.add_argument("--server-delay-ms", type=float, default=20.0,
                    help="virtual clock: modelled render + encode time of a frame (default 20)")
-    p.add_argument("--depth-codec", choices=("h264", "edge"), default="h264",
-                   help="depth transport: 8-bit disparity in the H.264 atlas, or the edge codec")
+    p.add_argument("--depth-codec", choices=("auto", "h264", "edge"), default="auto",
+                   help="depth transport: 8-bit disparity in the H.264 atlas, the edge codec, or auto (default: "
+                        "H.264 unless a stated bandwidth favours the edge codec; 'pibr scenes --plan')")
+    p.add_argument("--bandwidth-kbps", type=float, default=None, metavar="KBPS",
+                   help="the most a session may send; streams are fitted into it (default: no cap)")
     p.add_argument("--edge-kbps", type=float, default=0.0,
                    help="edge codec: target bitrate of the depth streams, reached by scaling the edge threshold "
                         "(default 0: a fixed threshold)")
@@ -178,7 +183,8 @@ def cmd_serve(args) -> int:
     from pibr.scenes.registry import with_up
 
     config = ServerConfig(host=args.host, port=args.port, scene=with_up(args.scene, args.up), fps=args.fps,
-                          view_size=tuple(args.view_size), extra_view=args.extra_view,
+                          view_size=None if args.view_size is None else tuple(args.view_size),
+                          extra_view=args.extra_view, bandwidth_kbps=args.bandwidth_kbps,
                           peel_marker=not args.no_peel_marker,
                           extra_offset=args.extra_offset, bitrate_kbps=args.bitrate_kbps, keyint=args.keyint,
                           preset=args.preset, projection=args.projection, max_edge_deg=args.max_edge_deg,

@@ -33,8 +33,8 @@ class ServerConfig:
     port: int = DEFAULT_PORT
     scene: str = "room"                 # default scene when a client asks for none
     fps: float = 10.0
-    view_size: tuple = (1024, 1024)     # primary view; the extra view is half of it
-    extra_view: str = "auto"            # "auto" (as the scene says), "on", "off"
+    view_size: tuple | None = None      # primary view (the extra view is half of it); None: sized for the output
+    extra_view: str = "auto"            # "auto" (on when it measurably buys coverage: scene_plan.py), "on", "off"
     peel_marker: bool = True            # the extra view marks peeled pixels apart from sky
     extra_offset: tuple | None = None   # (forward m, up m, tilt deg); None: the scene's or the paper's
     bitrate_kbps: float = 16000.0
@@ -43,7 +43,8 @@ class ServerConfig:
     projection: str = DEFAULT_PROJECTION
     max_edge_deg: float = MAX_EDGE_ANGLE_DEG  # longest edge (view angle) the projection rasterises straight
     server_delay_ms: float = 20.0       # virtual clock: render + encode time model
-    depth_codec: str = "h264"
+    depth_codec: str = "auto"           # "h264", "edge", or "auto": for the bandwidth (scene_plan.py)
+    bandwidth_kbps: float | None = None  # the most any session may send (kbit/s); None: no cap
     max_message_size: int = DEFAULT_MAX_MESSAGE_SIZE
     max_sessions: int = 8               # sessions past their Hello
     admit_wait_s: float = 5.0           # a Hello at a full server waits this long for a slot
@@ -65,10 +66,11 @@ class ServerConfig:
             raise ConfigError(f"port must be in 1..65535 (or 0 for any free port), got {self.port}")
         if not (0.1 <= self.fps <= 240):
             raise ConfigError(f"server fps must be in 0.1..240, got {self.fps}")
-        try:
-            check_view_size(*self.view_size, what="server view")
-        except ValueError as exc:
-            raise ConfigError(str(exc)) from None
+        if self.view_size is not None:
+            try:
+                check_view_size(*self.view_size, what="server view")
+            except ValueError as exc:
+                raise ConfigError(str(exc)) from None
         if self.extra_view not in ("auto", "on", "off"):
             raise ConfigError(f"extra view must be auto, on or off, got {self.extra_view!r}")
         if not (16 <= self.bitrate_kbps <= 1e6):
@@ -82,8 +84,10 @@ class ServerConfig:
                               f"got {self.max_edge_deg}")
         if not (0 <= self.server_delay_ms <= 10000):
             raise ConfigError(f"server delay must be in 0..10000 ms, got {self.server_delay_ms}")
-        if self.depth_codec not in ("h264", "edge"):
-            raise ConfigError(f"depth codec must be h264 or edge, got {self.depth_codec!r}")
+        if self.depth_codec not in ("auto", "h264", "edge"):
+            raise ConfigError(f"depth codec must be auto, h264 or edge, got {self.depth_codec!r}")
+        if self.bandwidth_kbps is not None and not (16 <= self.bandwidth_kbps <= 1e7):
+            raise ConfigError(f"bandwidth cap must be in 16..10000000 kbit/s, got {self.bandwidth_kbps}")
         if self.flow_coder not in FLOW_CODERS:
             raise ConfigError(f"flow coder must be one of {', '.join(FLOW_CODERS)}, got {self.flow_coder!r}")
         if self.max_sessions < 1:

@@ -1,4 +1,5 @@
-"""What a session will send, decided from the server's settings, the scene and the client's Hello."""
+"""What a session will send, decided from the server's settings, the scene and the client's Hello,
+through the scene plan (scene_plan.py), which also travels in ``SessionConfig.options["plan"]``."""
 from __future__ import annotations
 
 from pibr.protocol.atlas import build_layout
@@ -11,6 +12,7 @@ from .config import PAPER_EXTRA_OFFSET, ServerConfig, extra_offset_pose
 from .depth_stream import edge_quantizer
 from .pipeline import ProducerSpec
 from .quadtree import ROOT_TILE as QUADTREE_ROOT_TILE
+from .scene_plan import Decision, ScenePlan, decide_proxies, make_plan
 
 
 def extra_offset_for(cfg: ServerConfig, scene):
@@ -22,12 +24,39 @@ def extra_offset_for(cfg: ServerConfig, scene):
     return extra_offset_pose(*PAPER_EXTRA_OFFSET)
 
 
-def plan_session(cfg: ServerConfig, scene, hello: Hello, proxies: dict | None = None) -> tuple[SessionConfig, ProducerSpec]:
-    depth_codec = hello.depth_codec or cfg.depth_codec
-    if depth_codec not in ("h264", "edge"):
-        raise ConfigError(f"unknown depth codec {depth_codec!r}; choose h264 or edge")
-    use_extra = cfg.extra_view == "on" or (cfg.extra_view == "auto" and scene.extra_view)
-    pw, ph = cfg.view_size
+def bandwidth_for(cfg: ServerConfig, hello: Hello) -> float | None:
+    """The tighter of the client's stated bandwidth and the server's cap (kbit/s), None when neither is set."""
+    stated = [b for b in (hello.bandwidth_kbps or None, cfg.bandwidth_kbps) if b is not None]
+    return min(stated) if stated else None
+
+
+def scene_plan(cfg: ServerConfig, scene, hello: Hello, coverage: dict | None = None,
+               proxies: Decision | None = None) -> ScenePlan:
+    """The plan of one session: ``coverage`` is the extra view's measurement (scene_plan.cached_extra_view;
+    None: not measured), ``proxies`` the bundle's proxy/box decision (None: no proxies sent)."""
+    return make_plan(scene, extra_view_mode=cfg.extra_view, coverage=coverage,
+                     proxies=proxies if proxies is not None else decide_proxies(scene, None),
+                     output=hello.output, view_size=cfg.view_size, asked_codec=hello.depth_codec,
+                     server_codec=cfg.depth_codec, bandwidth_kbps=bandwidth_for(cfg, hello),
+                     video_kbps=cfg.bitrate_kbps, edge_kbps=cfg.edge.kbps)
+
+
+def plan_session(cfg: ServerConfig, scene, hello: Hello, proxies: dict | None = None, coverage: dict | None = None,
+                 proxy_levels: Decision | None = None) -> tuple[SessionConfig, ProducerSpec]:
+    """The session's parameters and its producer's spec, as :func:`scene_plan` decides them.
+
+    proxies : the bundle's announcement (BundleInfo JSON) or None; proxy_levels : the bundle's
+    proxy/box decision; coverage : the extra view's measurement (needed for ``extra_view`` auto to
+    be measured rather than the scene's own setting)."""
+    if hello.depth_codec not in ("", "h264", "edge"):
+        raise ConfigError(f"unknown depth codec {hello.depth_codec!r}; choose h264 or edge")
+    if proxies is not None and proxy_levels is None:   # a bundle built by the caller (benchmarks)
+        proxy_levels = Decision(None, "proxies sent as the caller built them: their levels are not planned here")
+    plan = scene_plan(cfg, scene, hello, coverage, proxy_levels if proxies is not None else None)
+    depth_codec = plan.depth_codec.value["codec"]
+    video_kbps = float(plan.depth_codec.value["video_kbps"])
+    use_extra = bool(plan.extra_view.value)
+    pw, ph = plan.view_size.value
     extra_size = (pw // 2, ph // 2) if use_extra else None
     offset = extra_offset_for(cfg, scene) if use_extra else None
     edge = depth_codec == "edge"
@@ -35,8 +64,8 @@ def plan_session(cfg: ServerConfig, scene, hello: Hello, proxies: dict | None = 
     quantizer = edge_quantizer(scene.near, scene.far) if edge else h264_quantizer(scene.near, scene.far)
     # A scene with nothing moving sends no motion at all. One that moves sends its objects'
     # transforms and their motion flow with every frame, whatever the depth codec.
-    motion = scene.is_dynamic
-    options = {"projection": cfg.projection}
+    motion = bool(plan.motion.value)
+    options = {"projection": cfg.projection, "plan": plan.to_json()}
     if use_extra:   # whether the extra view's sky (distance 0) is sky, not also peeled pixels
         options["peel_marker"] = bool(cfg.peel_marker)
     quadtree = hello.quadtree_threshold > 0   # a quadtree payload in every frame, built from the float distances
@@ -46,7 +75,7 @@ def plan_session(cfg: ServerConfig, scene, hello: Hello, proxies: dict | None = 
         scene=scene.info(), clock=hello.clock, server_fps=cfg.fps,
         server_delay_us=int(round(cfg.server_delay_ms * 1000)),
         primary=ViewConfig(pw, ph), extra=ViewConfig(*extra_size) if extra_size else None,
-        extra_offset=offset, atlas=layout, video_bitrate_kbps=cfg.bitrate_kbps, keyint=cfg.keyint,
+        extra_offset=offset, atlas=layout, video_bitrate_kbps=video_kbps, keyint=cfg.keyint,
         depth_codec=depth_codec, depth_bits=quantizer.bits, depth_min_code=quantizer.min_code,
         motion=motion, proxies=proxies, options=options)
     spec = ProducerSpec((pw, ph), layout, None if edge else quantizer, cfg.projection, extra_size, offset,

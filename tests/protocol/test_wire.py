@@ -160,3 +160,17 @@ def test_send_respects_size_limit():
     conn = Connection(max_message_size=100)
     with pytest.raises(ValueError, match="exceeds the message size limit"):
         conn.send(Error(1, "x" * 200))
+
+
+def test_hello_states_a_bandwidth_and_old_bytes_stay_the_same():
+    from pibr.protocol.messages import MAX_BANDWIDTH_KBPS
+
+    hello = Hello(client="t", bandwidth_kbps=2500.0)
+    assert b'"bandwidth_kbps":2500.0' in hello.serialize()
+    assert Hello.parse(hello.serialize()) == hello
+    # Not stated: left out, so a Hello reads (and the golden bytes stay) as before the field existed.
+    assert b"bandwidth" not in Hello(client="t").serialize() and b"bandwidth" not in golden_bytes("hello")
+    assert Hello.parse(golden_bytes("hello")[HEADER_SIZE:]).bandwidth_kbps == 0.0
+    for bad, message in (("-1", "outside"), (str(MAX_BANDWIDTH_KBPS * 2), "outside"), ('"fast"', "must be float")):
+        with pytest.raises(MalformedMessage, match=f"Hello: field 'bandwidth_kbps'.*{message}"):
+            Hello.parse(b'{"protocol": 1, "bandwidth_kbps": ' + bad.encode() + b"}")
