@@ -426,6 +426,7 @@ class Client:
         self._newest = _Decoded(frame, arrival_us, image, distances, flow)
         self.frames_received += len(frames)
         self._arrivals_us.extend(arrival for _, arrival in frames)
+        # 0 only for a frame id the server sent twice (the second copy's size was taken with the first)
         self._frame_bytes.extend(self._wire_sizes.pop(f.frame_id, 0) for f, _ in frames)
 
     def _flow_frame(self, frame: Frame, image, distances):
