@@ -242,8 +242,10 @@ def test_virtual_bandwidth_cap_adds_each_frames_transmission_time(virtual_runs):
 #: Real clock: the server's render + encode, the client's decode and a late tick on a loaded
 #: 2-core machine, on top of what the link and the schedules account for (measured up to 40 ms).
 REAL_ALLOWANCE_MS = 150
-#: Real clock: how late the client may stamp a frame's arrival after the relay released it.
-ARRIVAL_LAG_MS = 20
+#: Real clock: how late the client may stamp a frame's arrival after the relay released it (its
+#: event loop shares the GIL with the decode and GL threads; measured up to 6 ms, but a loaded
+#: machine stretches it). Ignoring the cap would put about 2 s more in a 1 s stretch here.
+ARRIVAL_LAG_MS = 50
 
 
 def _server_session_stats(server: PibrProcess, scene: str, count: int) -> list[dict]:
