@@ -162,6 +162,8 @@ class ClientResult:
     summary: dict = field(default_factory=dict)
     #: client time (s) each frame was decoded at; the real clock's warm-up ones are negative
     frame_arrivals_s: list = field(default_factory=list)
+    #: bytes each of those frames took on the wire (header included), in the same order
+    frame_bytes: list = field(default_factory=list)
 
 
 class _Progress:
@@ -213,6 +215,9 @@ class Client:
         #: and warm-up poses are stamped from that start, ticks' poses in client time
         self._time_base_us = 0
         self._arrivals_us: list[int] = []
+        self._frame_bytes: list[int] = []
+        #: frame id -> wire size of the frames received and not decoded yet
+        self._wire_sizes: dict[int, int] = {}
 
     # ------------------------------------------------------------------ set-up
 
@@ -330,7 +335,7 @@ class Client:
                                         "frames_received": self.frames_received}))
             result = ClientResult(n_ticks, self.frames_received, self.missed, self.conn.bytes_received,
                                   handshake_ms, {"proxies": self.proxy_stats or None},
-                                  [(a - self._time_base_us) / 1e6 for a in self._arrivals_us])
+                                  [(a - self._time_base_us) / 1e6 for a in self._arrivals_us], self._frame_bytes)
             self._write_session(result, trace)
             return result
         finally:
@@ -426,6 +431,8 @@ class Client:
         self._newest = _Decoded(frame, arrival_us, image, distances, flow)
         self.frames_received += len(frames)
         self._arrivals_us.extend(arrival for _, arrival in frames)
+        # 0 only for a frame id the server sent twice (the second copy's size was taken with the first)
+        self._frame_bytes.extend(self._wire_sizes.pop(f.frame_id, 0) for f, _ in frames)
 
     def _flow_frame(self, frame: Frame, image, distances):
         """The frame's primary view ready for ``flow`` extrapolation (decode pool), or None when no
@@ -491,6 +498,7 @@ class Client:
                     raise UnexpectedMessage(f"server's virtual time went backwards ({env.vtime_us} < {horizon})")
                 horizon = env.vtime_us
                 if isinstance(env.message, Frame):
+                    self._wire_sizes[env.message.frame_id] = env.wire_size
                     inbox.append(env)
                 elif not isinstance(env.message, (Clock, Stats)):
                     raise UnexpectedMessage(f"unexpected {env.message.NAME} from the server")
@@ -603,6 +611,7 @@ class Client:
         while True:
             env = await self.conn.recv()
             if isinstance(env.message, Frame):
+                self._wire_sizes[env.message.frame_id] = env.wire_size
                 await inbox.put(env.message, int((loop.time() - origin) * 1e6), env.wire_size)
             elif not isinstance(env.message, (Clock, Stats)):
                 raise UnexpectedMessage(f"unexpected {env.message.NAME} from the server")
