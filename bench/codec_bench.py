@@ -270,7 +270,7 @@ def end_to_end(scene_spec="room", windows=None, totals_kbps=DEFAULT_TOTALS_KBPS,
     """Client DSSIM of ``proxy`` at equal *total* bitrate, per depth codec and total: the 8-bit
     disparity in the atlas gets the whole total; every other codec's colour gets the total minus
     its depth streams' measured rate (both views), learnt in a first pass (depth bits do not depend
-    on the colour's rate). H.264 depth alone is targeted at the edge codec's measured rate.
+    on the colour's rate); a moving scene's object poses and motion flow are subtracted too. H.264 depth alone is targeted at the edge codec's measured rate.
     A codec that leaves the colour less than :data:`MIN_COLOUR_KBPS` is marked infeasible."""
     from pibr.scenes.registry import load_scene
 
@@ -301,26 +301,33 @@ def end_to_end(scene_spec="room", windows=None, totals_kbps=DEFAULT_TOTALS_KBPS,
     per_window = []
     for win in windows:
         samples = display_samples(scene, win.trace, win.start_s, win.duration_s, rate_hz, latency)[::stride]
-        depth_kbps = {"h264-8bit-atlas": 0.0}
-        for codec in ("edge", "log-zstd", "zstd-lossless"):   # the depth streams' rate, before colour
+        depth_kbps, motion_kbps = {"h264-8bit-atlas": 0.0}, {}
+        # the depth streams' rate (and a moving scene's object poses and motion flow), before colour
+        for codec in ("edge", "log-zstd", "zstd-lossless", *(["h264-8bit-atlas"] if scene.is_dynamic else [])):
             probe = sim(max(totals_kbps), codec)
             try:
                 for s in samples:
                     probe.frame_at(s[2], s[3])
-                depth_kbps[codec] = float(np.mean(probe.depth_bytes) * 8 * probe.fps / 1000)
+                kbps = 8 * probe.fps / 1000
+                if probe.depth_bytes:
+                    depth_kbps[codec] = float(np.mean(probe.depth_bytes) * kbps)
+                motion_kbps[codec] = float((np.mean(probe.flow_bytes) if probe.flow_bytes else 0.0) * kbps
+                                           + (np.mean(probe.pose_bytes) if probe.pose_bytes else 0.0) * kbps)
             finally:
                 probe.close()
                 probe.ctx.release()
         for c in ("h264-8bit", "h264-10bit"):
-            depth_kbps[c] = depth_kbps["edge"]
+            depth_kbps[c], motion_kbps[c] = depth_kbps["edge"], motion_kbps["edge"]
+        motion_kbps.setdefault("h264-8bit-atlas", 0.0)
         rows = {}
         for total in totals_kbps:
             for codec in codecs:
-                colour = total - depth_kbps[codec]
+                colour = total - depth_kbps[codec] - motion_kbps[codec]
                 key = f"{total:g}/{codec}"
                 if colour < MIN_COLOUR_KBPS:
                     rows[key] = {"total_kbps": total, "codec": codec, "feasible": False,
-                                 "depth_kbps": depth_kbps[codec], "colour_kbps": colour}
+                                 "depth_kbps": depth_kbps[codec], "motion_kbps": motion_kbps[codec],
+                                 "colour_kbps": colour}
                     continue
                 s = sim(colour, codec, depth_kbps[codec])
                 try:
@@ -328,7 +335,8 @@ def end_to_end(scene_spec="room", windows=None, totals_kbps=DEFAULT_TOTALS_KBPS,
                     rows[key] = summarize(res["proxy"]) | {
                         "total_kbps": total, "codec": codec, "feasible": True, "colour_kbps": colour,
                         "video_kbps": float(np.mean(s.bytes) * 8 * s.fps / 1000),
-                        "depth_kbps": float(np.mean(s.depth_bytes) * 8 * s.fps / 1000) if s.depth_bytes else 0.0}
+                        "depth_kbps": float(np.mean(s.depth_bytes) * 8 * s.fps / 1000) if s.depth_bytes else 0.0,
+                        "motion_kbps": motion_kbps[codec]}
                 finally:
                     s.close()
                     s.ctx.release()
@@ -340,9 +348,11 @@ def end_to_end(scene_spec="room", windows=None, totals_kbps=DEFAULT_TOTALS_KBPS,
         first = rs[0]
         out = {"total_kbps": first["total_kbps"], "codec": first["codec"],
                "feasible": all(r["feasible"] for r in rs)}
-        for k in ("dssim_mean", "psnr_mean", "hole_fraction_mean", "video_kbps", "depth_kbps", "colour_kbps"):
+        for k in ("dssim_mean", "psnr_mean", "hole_fraction_mean", "video_kbps", "depth_kbps", "motion_kbps",
+                  "colour_kbps"):
             vals = [r[k] for r in rs if r.get(k) is not None]
-            out[k] = float(np.mean(vals)) if vals and (out["feasible"] or k in ("depth_kbps", "colour_kbps")) \
+            out[k] = float(np.mean(vals)) if vals and (out["feasible"] or k in ("depth_kbps", "motion_kbps",
+                                                                               "colour_kbps")) \
                 else None
         results[key] = out
     best = {}
@@ -383,8 +393,9 @@ def extremes_table(near: float = 1e-2, far: float = 1e4, per_decade: int = 4) ->
         else:
             half = 0.5 / (q.max_code - q.min_code)
             bound = {"disparity_error_max": half,
-                     # beyond near / (2 * half) the disparity is within half a code of 0: no resolution left
-                     "resolves_up_to_m": near / (2 * half)}
+                     # beyond near / half the disparity rounds to the lowest surface code: every farther
+                     # distance decodes to near / half
+                     "resolves_up_to_m": min(near / half, far)}
         out["quantizers"][name] = {
             "decoded_m": back.tolist(), "relative_error": rel.tolist(), "bound": bound,
             "max_relative_error": float(rel.max()),
@@ -419,8 +430,13 @@ def print_codec_table(r: dict) -> None:
     for p in r["h264_8bit_atlas"]:
         row("h264-8bit-atlas", p)
     for metric in ("psnr_db", "outliers_1pct"):
-        print(f"best {metric} within a budget: " + "; ".join(
-            f"{w['bits_per_frame'] / 1000:.0f} kbit -> {w['winner']}" for w in r["wins"][metric]))
+        runs = []
+        for w in r["wins"][metric]:
+            if not runs or runs[-1][0] != w["winner"]:
+                runs.append([w["winner"], w["bits_per_frame"], w["bits_per_frame"]])
+            runs[-1][2] = w["bits_per_frame"]
+        print(f"best {metric} within a bit budget: " + "; ".join(
+            f"{a / 1000:.0f}-{b / 1000:.0f} kbit/frame: {name}" for name, a, b in runs))
     e2e = r.get("end_to_end")
     if e2e:
         print(f"end to end (proxy IBR, {e2e['latency_ms']:g} ms, {len(e2e['per_window'])} windows), DSSIM at equal "
