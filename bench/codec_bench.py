@@ -19,9 +19,9 @@ the primary view, each codec over its rate settings:
                      (its depth share is not separable: no bits per frame of its own).
 
 Axes: bits per frame against disparity PSNR and against the share of pixels more than 1 %
-off in distance; and end to end, ``proxy`` DSSIM at equal *total* bitrate (colour + depth;
-the room has no motion stream): the colour stream gets the total minus the depth codec's
-measured rate. ``wins`` says which codec is best at each bit budget; ``extremes`` tabulates
+off in distance; and end to end, ``proxy`` DSSIM at equal *total* bitrate (colour + depth +
+the moving objects' poses and motion flow): the colour stream gets the total minus the depth
+codec's and the motion streams' measured rates. ``wins`` says which codec is best at each bit budget; ``extremes`` tabulates
 each quantiser's error against distance from 1 cm to 10 km.
 """
 from __future__ import annotations

@@ -174,7 +174,7 @@ def test_rendered_10_km_wall_behind_a_1_cm_speck():
     # between its samples the speck's face is diffused: within one code step of disparity
     # the speck's face: its samples within half a code step of disparity (the quantisation), the few
     # pixels diffused between them (its corners) within two
-    d_err = np.abs(NEAR / dense - NEAR / np.where(r > 0, r, 1.0)) * 4093
+    d_err = np.abs(NEAR / np.where(dense > 0, dense, 1.0) - NEAR / np.where(r > 0, r, 1.0)) * 4093
     assert np.all(d_err[speck & valid] <= 0.5 + 1e-3) and np.all(d_err[speck] <= 2.0)
     assert (speck & valid).sum() >= speck.sum() * 3 // 4
     assert np.all(dense[wall] == pytest.approx(NEAR * 2 * 4093, rel=1e-6))
