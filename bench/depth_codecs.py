@@ -123,6 +123,11 @@ def _spatial_delta(blocks: np.ndarray) -> np.ndarray:
     return (d & 0xFFFF).astype(np.uint16)
 
 
+def _residual_cost(v: np.ndarray) -> np.ndarray:
+    """(n, b, b) uint16 residuals -> (n,) sum of |residual| read as signed 16-bit: what zstd pays, roughly."""
+    return np.abs(v.view(np.int16).astype(np.int32)).sum(axis=(1, 2))
+
+
 def _undo_spatial_delta(d: np.ndarray) -> np.ndarray:
     return (np.cumsum(d.astype(np.int64), axis=-1) & 0xFFFF).astype(np.uint16)
 
@@ -174,10 +179,7 @@ class LogDepthEncoder:
             cur_c, prev_c = cb[changed], pb[changed]                  # (n, b, b)
             temporal = ((cur_c.astype(np.int32) - prev_c.astype(np.int32)) & 0xFFFF).astype(np.uint16)
             spatial = _spatial_delta(cur_c)
-            # cost proxy of a residual: sum of |value| as a signed 16-bit number
-            def cost(v):
-                return np.abs(v.astype(np.int16).astype(np.int32)).sum(axis=(1, 2))
-            use_spatial = cost(spatial) < cost(temporal)
+            use_spatial = _residual_cost(spatial) < _residual_cost(temporal)
             res = np.where(use_spatial[:, None, None], spatial, temporal)
             body = np.packbits(changed).tobytes() + np.packbits(use_spatial).tobytes() + _planes(res)
             recon_b = pb.copy()
@@ -199,7 +201,7 @@ class LogDepthDecoder:
         import zstandard
 
         self.width, self.height, self.quantizer = width, height, quantizer
-        self._zd = zstandard.ZstdDecompressor()
+        self._zd, self._zerror = zstandard.ZstdDecompressor(), zstandard.ZstdError
         self._prev: np.ndarray | None = None
         self.codes: np.ndarray | None = None   # the newest frame's codes (h, w) uint16
 
@@ -219,7 +221,7 @@ class LogDepthDecoder:
         by, bx = ph // b, pw // b
         try:
             body = self._zd.decompress(payload[_LOG_HEAD.size:], max_output_size=4 * ph * pw + by * bx)
-        except Exception as exc:   # zstandard.ZstdError: not importable here without the module
+        except self._zerror as exc:
             raise CodecError(f"log depth: zstd body does not decompress: {exc}") from None
         if flags & _KEYFRAME:
             if len(body) != 2 * ph * pw:
@@ -262,6 +264,7 @@ class ZstdDepthEncoder:
         self._zc = zstandard.ZstdCompressor(level=level)
 
     def encode(self, distance) -> bytes:
+        """distance (h, w) -> payload."""
         d = np.asarray(distance)
         if d.shape != (self.height, self.width):
             raise ValueError(f"distance must have shape ({self.height}, {self.width}), got {d.shape}")
@@ -273,13 +276,14 @@ class ZstdDepthDecoder:
         import zstandard
 
         self.width, self.height, self.quantizer = width, height, quantizer
-        self._zd = zstandard.ZstdDecompressor()
+        self._zd, self._zerror = zstandard.ZstdDecompressor(), zstandard.ZstdError
 
     def decode(self, payload: bytes) -> np.ndarray:
+        """payload -> distance (h, w) float32."""
         n = 2 * self.width * self.height
         try:
             raw = self._zd.decompress(payload, max_output_size=n)
-        except Exception as exc:
+        except self._zerror as exc:
             raise CodecError(f"zstd depth: payload does not decompress: {exc}") from None
         if len(raw) != n:
             raise CodecError(f"zstd depth: {len(raw)} bytes, expected {n}")
@@ -442,4 +446,4 @@ class ViewDepthStreams:
         return out
 
     def close(self) -> None:
-        pass
+        """Nothing to release (the codecs hold no threads); here for ``Simulation.close``."""
