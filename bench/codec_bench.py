@@ -41,6 +41,8 @@ DEFAULT_THRESHOLDS = (2.0, 3.5, 8.0, 16.0, 32.0, 64.0, 128.0)
 DEFAULT_LOG_BITS = (16, 12, 10, 8)
 #: Total bitrates of the end-to-end comparison.
 DEFAULT_TOTALS_KBPS = (4000.0, 8000.0, 16000.0)
+#: The end-to-end competitors (see :func:`end_to_end`).
+E2E_CODECS = ("h264-8bit-atlas", "edge", "edge-rc", "h264-8bit", "h264-10bit", "log-zstd", "zstd-lossless")
 #: A codec whose depth leaves the colour less than this is infeasible at a total.
 MIN_COLOUR_KBPS = 250.0
 
@@ -120,6 +122,23 @@ def winners(curves: dict, metric: str, higher_is_better: bool) -> list[dict]:
         win = (max if higher_is_better else min)(best, key=best.get)
         out.append({"bits_per_frame": b, "winner": win, "value": best[win], "by_codec": best})
     return out
+
+
+def matched_pairs(curves: dict) -> list[dict]:
+    """Per edge threshold, the edge codec beside H.264 depth alone coded at its rate (Pajak et al.'s
+    Table 2 comparison): [{"threshold", codec: {"bits_per_frame", "psnr_db", "outliers_1pct",
+    "outliers_5pct"}}]."""
+    keys = ("bits_per_frame", "psnr_db", "outliers_1pct", "outliers_5pct")
+    rows = []
+    for e in curves["edge"]:
+        t = e["setting"]["threshold"]
+        row = {"threshold": t, "edge": {k: e[k] for k in keys}}
+        for name in ("h264-8bit", "h264-10bit"):
+            m = [p for p in curves.get(name, []) if p["setting"]["matched_to_edge_threshold"] == t]
+            if m:
+                row[name] = {k: m[0][k] for k in keys}
+        rows.append(row)
+    return rows
 
 
 def run_codec_bench(scene_spec="room", windows=None, window_s=2.0, fps=10.0, view_size=(1024, 1024),
@@ -247,6 +266,7 @@ def run_codec_bench(scene_spec="room", windows=None, window_s=2.0, fps=10.0, vie
               "h264_10bit": ten_bit, "curves": curves,
               "edge_variants": {k: v.summary(fps) for k, v in variant_pts.items()},
               "h264_8bit_atlas": atlas,
+              "matched": matched_pairs(curves),
               "wins": {"psnr_db": winners(curves, "psnr_db", True),
                        "outliers_1pct": winners(curves, "outliers_1pct", False)},
               "extremes": extremes_table()}
@@ -266,11 +286,14 @@ def run_codec_bench(scene_spec="room", windows=None, window_s=2.0, fps=10.0, vie
 
 def end_to_end(scene_spec="room", windows=None, totals_kbps=DEFAULT_TOTALS_KBPS, rate_hz=30.0, latency_ms=128.0,
                view_size=(1024, 1024), out_size=(960, 540), stride=3, log_bits=10, with_10bit=True,
-               progress=True) -> dict:
+               edge_share=0.2, codecs=None, progress=True) -> dict:
     """Client DSSIM of ``proxy`` at equal *total* bitrate, per depth codec and total: the 8-bit
     disparity in the atlas gets the whole total; every other codec's colour gets the total minus
     its depth streams' measured rate (both views), learnt in a first pass (depth bits do not depend
-    on the colour's rate); a moving scene's object poses and motion flow are subtracted too. H.264 depth alone is targeted at the edge codec's measured rate.
+    on the colour's rate); a moving scene's object poses and motion flow are subtracted too.
+    ``edge`` runs at the default threshold, ``edge-rc`` rate-controlled to ``edge_share`` of the
+    total (its depth budget is that target); H.264 depth alone is targeted at ``edge``'s measured
+    rate, log depth has ``log_bits``. ``codecs``: a subset of :data:`E2E_CODECS` (default all).
     A codec that leaves the colour less than :data:`MIN_COLOUR_KBPS` is marked infeasible."""
     from pibr.scenes.registry import load_scene
 
@@ -288,22 +311,29 @@ def end_to_end(scene_spec="room", windows=None, totals_kbps=DEFAULT_TOTALS_KBPS,
         if codec == "h264-8bit-atlas":
             return Simulation(scene, view_size, out_size, proxies=proxies, depth_codec="h264",
                               bitrate_kbps=colour_kbps)
-        if codec == "edge":
+        if codec in ("edge", "edge-rc"):
             return Simulation(scene, view_size, out_size, proxies=proxies, depth_codec="edge",
-                              bitrate_kbps=colour_kbps)
+                              bitrate_kbps=colour_kbps, edge_kbps=depth_kbps if codec == "edge-rc" else 0.0)
         name, opts = {"log-zstd": ("log", {"bits": log_bits}), "zstd-lossless": ("zstd", {}),
                       "h264-8bit": ("h264-8bit", {}), "h264-10bit": ("h264-10bit", {})}[codec]
         return Simulation(scene, view_size, out_size, proxies=proxies, depth_codec="edge", bitrate_kbps=colour_kbps,
                           depth_streams=lambda session, fps: ViewDepthStreams(name, session, fps, depth_kbps, **opts))
 
-    codecs = ["h264-8bit-atlas", "edge", "h264-8bit", *(["h264-10bit"] if with_10bit else []), "log-zstd",
-              "zstd-lossless"]
+    codecs = [c for c in (codecs or E2E_CODECS) if with_10bit or c != "h264-10bit"]
+    unknown = set(codecs) - set(E2E_CODECS)
+    if unknown:
+        raise ValueError(f"unknown end-to-end codecs {sorted(unknown)}: expected some of {E2E_CODECS}")
+    # what the colour budgets need measured first: edge for itself, H.264 alone and edge-rc's motion
+    probes = [c for c in ("edge", "log-zstd", "zstd-lossless") if c in codecs or (
+        c == "edge" and set(codecs) & {"edge-rc", "h264-8bit", "h264-10bit"})]
+    if scene.is_dynamic and "h264-8bit-atlas" in codecs:
+        probes.append("h264-8bit-atlas")
     per_window = []
     for win in windows:
         samples = display_samples(scene, win.trace, win.start_s, win.duration_s, rate_hz, latency)[::stride]
         depth_kbps, motion_kbps = {"h264-8bit-atlas": 0.0}, {}
         # the depth streams' rate (and a moving scene's object poses and motion flow), before colour
-        for codec in ("edge", "log-zstd", "zstd-lossless", *(["h264-8bit-atlas"] if scene.is_dynamic else [])):
+        for codec in probes:
             probe = sim(max(totals_kbps), codec)
             try:
                 for s in samples:
@@ -316,11 +346,13 @@ def end_to_end(scene_spec="room", windows=None, totals_kbps=DEFAULT_TOTALS_KBPS,
             finally:
                 probe.close()
                 probe.ctx.release()
-        for c in ("h264-8bit", "h264-10bit"):
-            depth_kbps[c], motion_kbps[c] = depth_kbps["edge"], motion_kbps["edge"]
+        if "edge" in probes:
+            for c in ("h264-8bit", "h264-10bit", "edge-rc"):
+                depth_kbps[c], motion_kbps[c] = depth_kbps["edge"], motion_kbps["edge"]
         motion_kbps.setdefault("h264-8bit-atlas", 0.0)
         rows = {}
         for total in totals_kbps:
+            depth_kbps["edge-rc"] = edge_share * total
             for codec in codecs:
                 colour = total - depth_kbps[codec] - motion_kbps[codec]
                 key = f"{total:g}/{codec}"
@@ -355,16 +387,21 @@ def end_to_end(scene_spec="room", windows=None, totals_kbps=DEFAULT_TOTALS_KBPS,
                                                                                "colour_kbps")) \
                 else None
         results[key] = out
+    return {"windows": windows_json(windows, "reporting"), "rate_hz": rate_hz, "latency_ms": latency_ms,
+            "stride": stride, "log_bits": log_bits, "edge_share": edge_share, "min_colour_kbps": MIN_COLOUR_KBPS,
+            "totals_kbps": list(totals_kbps), "results": results, "wins": e2e_winners(results),
+            "per_window": per_window}
+
+
+def e2e_winners(results: dict) -> dict:
+    """Per total bitrate, the feasible codec with the lowest proxy DSSIM: {total: {"winner", "dssim", "by_codec"}}."""
     best = {}
-    for total in totals_kbps:
-        ok = {v["codec"]: v["dssim_mean"] for v in results.values()
-              if v["total_kbps"] == total and v["feasible"]}
+    for total in sorted({v["total_kbps"] for v in results.values()}):
+        ok = {v["codec"]: v["dssim_mean"] for v in results.values() if v["total_kbps"] == total and v["feasible"]}
         if ok:
             win = min(ok, key=ok.get)
             best[f"{total:g}"] = {"winner": win, "dssim": ok[win], "by_codec": ok}
-    return {"windows": windows_json(windows, "reporting"), "rate_hz": rate_hz, "latency_ms": latency_ms,
-            "stride": stride, "log_bits": log_bits, "min_colour_kbps": MIN_COLOUR_KBPS,
-            "totals_kbps": list(totals_kbps), "results": results, "wins": best, "per_window": per_window}
+    return best
 
 
 def extremes_table(near: float = 1e-2, far: float = 1e4, per_decade: int = 4) -> dict:
@@ -429,6 +466,11 @@ def print_codec_table(r: dict) -> None:
         row(name, p)
     for p in r["h264_8bit_atlas"]:
         row("h264-8bit-atlas", p)
+    print("edge codec against H.264 depth alone at its rate (kbit/frame, PSNR dB, % > 1 % off):")
+    for m in r["matched"]:
+        print(f"  threshold {m['threshold']:>5g}: " + "; ".join(
+            f"{name} {v['bits_per_frame'] / 1000:.0f} kbit {v['psnr_db']:.2f} dB {100 * v['outliers_1pct']:.1f} %"
+            for name, v in m.items() if name != "threshold"))
     for metric in ("psnr_db", "outliers_1pct"):
         runs = []
         for w in r["wins"][metric]:

@@ -219,7 +219,18 @@ def plot_depth_rd(result: dict, path: str) -> None:
                 ax.plot([v["total_kbps"] / 1000 for v in rows], [v["dssim_mean"] for v in rows],
                         styles.get(c, "o-"), label=c, ms=5)
         ax.set_xscale("log")
-        ax.set_xlabel("total Mbit/s (colour + depth)")
+        totals = sorted({v["total_kbps"] for v in e2e["results"].values()})
+        ax.set_xticks([t / 1000 for t in totals], [f"{t / 1000:g}" for t in totals])
+        ax.minorticks_off()
+        never = sorted({v["codec"] for v in e2e["results"].values()} -
+                       {v["codec"] for v in e2e["results"].values() if v["feasible"]})
+        if never:
+            rates = {c: max(v["depth_kbps"] for v in e2e["results"].values() if v["codec"] == c) for c in never}
+            ax.text(0.02, 0.02, "infeasible at every total (depth alone):\n" + "\n".join(
+                f"{c}{' (%d-bit)' % e2e['log_bits'] if c == 'log-zstd' else ''} {rates[c] / 1000:.1f} Mbit/s"
+                for c in never), transform=ax.transAxes, fontsize=8,
+                va="bottom")
+        ax.set_xlabel("total Mbit/s (colour + depth + motion)")
         ax.set_ylabel("proxy DSSIM (lower is better)")
         ax.set_title(f"end to end at equal total bitrate, {e2e['latency_ms']:g} ms")
         ax.grid(alpha=0.3, which="both")

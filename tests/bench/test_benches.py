@@ -90,16 +90,19 @@ def test_bench_codec(tmp_path, capsys):
     assert all(p["exact_codes"] == 1.0 for p in curves["log-zstd"])
     assert curves["log-zstd"][-1]["outliers_1pct"] == 0.0 and curves["log-zstd"][-1]["psnr_db"] > 90
     assert set(r["edge_variants"]) == {"edge-intra", "edge-raster"}
+    assert [m["threshold"] for m in r["matched"]] == [128.0, 16.0, 2.0] and all(set(h264) <= set(m)
+                                                                                  for m in r["matched"])
     assert [p["setting"]["total_kbps"] for p in r["h264_8bit_atlas"]] == [600.0, 2000.0]
     assert all(p["bits_per_frame"] is None and p["atlas_kbps"] > 0 for p in r["h264_8bit_atlas"])
     for metric in ("psnr_db", "outliers_1pct"):
         assert {w["winner"] for w in r["wins"][metric]} <= set(curves)
     e2e = r["end_to_end"]
-    assert {v["codec"] for v in e2e["results"].values()} == {"h264-8bit-atlas", "edge", *h264, "log-zstd",
-                                                             "zstd-lossless"}
+    assert {v["codec"] for v in e2e["results"].values()} == {"h264-8bit-atlas", "edge", "edge-rc", *h264,
+                                                             "log-zstd", "zstd-lossless"}
     for v in e2e["results"].values():
         # the depth streams' rate is the same in the probe and the run; H.264 depth is targeted at the edge's
-        depth = e2e["results"][f"{v['total_kbps']:g}/edge"]["depth_kbps"] if v["codec"] in h264 else v["depth_kbps"]
+        depth = e2e["results"][f"{v['total_kbps']:g}/edge"]["depth_kbps"] if v["codec"] in h264 else \
+            e2e["edge_share"] * v["total_kbps"] if v["codec"] == "edge-rc" else v["depth_kbps"]
         assert v["colour_kbps"] == pytest.approx(v["total_kbps"] - depth - v["motion_kbps"], rel=1e-9)
         assert v["feasible"] == (v["colour_kbps"] >= MIN_COLOUR_KBPS)
         if v["feasible"]:
