@@ -194,8 +194,8 @@ def plot_depth_rd(result: dict, path: str) -> None:
     plt = _pyplot()
     e2e = result.get("end_to_end")
     fig, axes = plt.subplots(1, 3 if e2e else 2, figsize=(17 if e2e else 12, 4.6))
-    styles = {"edge": "o-", "h264-8bit": "s-", "h264-10bit": "D-", "log-zstd": "^-", "zstd-lossless": "*",
-              "h264-8bit-atlas": "x-"}
+    styles = {"edge": "o-", "edge-rc": "o--", "h264-8bit": "s-", "h264-10bit": "D-", "log-zstd": "^-",
+              "zstd-lossless": "*", "h264-8bit-atlas": "x-"}
     for name, pts in result["curves"].items():
         x = np.array([p["bits_per_frame"] for p in pts]) / 1000
         axes[0].plot(x, [p["psnr_db"] for p in pts], styles.get(name, "o-"), label=name, ms=5)
@@ -216,8 +216,9 @@ def plot_depth_rd(result: dict, path: str) -> None:
             rows = sorted((v for v in e2e["results"].values() if v["codec"] == c and v["feasible"]),
                           key=lambda v: v["total_kbps"])
             if rows:
+                label = f"{c} ({e2e['edge_share']:.0%} of the total)" if c == "edge-rc" else c
                 ax.plot([v["total_kbps"] / 1000 for v in rows], [v["dssim_mean"] for v in rows],
-                        styles.get(c, "o-"), label=c, ms=5)
+                        styles.get(c, "o-"), label=label, ms=5)
         ax.set_xscale("log")
         totals = sorted({v["total_kbps"] for v in e2e["results"].values()})
         ax.set_xticks([t / 1000 for t in totals], [f"{t / 1000:g}" for t in totals])
