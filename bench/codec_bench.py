@@ -21,7 +21,8 @@ the primary view, each codec over its rate settings:
 Axes: bits per frame against disparity PSNR and against the share of pixels more than 1 %
 off in distance; and end to end, ``proxy`` DSSIM at equal *total* bitrate (colour + depth +
 the moving objects' poses and motion flow): the colour stream gets the total minus the depth
-codec's and the motion streams' measured rates. ``wins`` says which codec is best at each bit budget; ``extremes`` tabulates
+codec's and the motion streams' measured rates. ``wins`` says which codec is best at each bit
+budget, ``matched`` sets the edge codec beside H.264 at its rate; ``extremes`` tabulates
 each quantiser's error against distance from 1 cm to 10 km.
 """
 from __future__ import annotations
@@ -91,10 +92,12 @@ class _Point:
             vals = [r[k] for r in self.rows if r.get(k) is not None]
             out[k] = float(np.mean(vals)) if vals else None
         windows = list(dict.fromkeys(r["window"] for r in self.rows))
-        out["by_window"] = {w: {k: float(np.mean([r[k] for r in self.rows if r["window"] == w and r.get(k) is not None]))
-                                for k in ("bits", "psnr_db", "outliers_1pct") if any(
-                                    r.get(k) is not None for r in self.rows if r["window"] == w)}
-                            for w in windows}
+        out["by_window"] = {}
+        for w in windows:
+            rows = [r for r in self.rows if r["window"] == w]
+            out["by_window"][w] = {k: float(np.mean([r[k] for r in rows if r.get(k) is not None]))
+                                   for k in ("bits", "psnr_db", "outliers_1pct")
+                                   if any(r.get(k) is not None for r in rows)}
         return out
 
 
@@ -445,7 +448,8 @@ def print_codec_table(r: dict) -> None:
     print(f"pibr bench codec: scene {r['scene']}, primary view {r['view_size'][0]}x{r['view_size'][1]}, "
           f"{r['fps']:g} fps, {r['frames']} frames over {len(r['windows']['used'])} windows")
     t = r["h264_10bit"]
-    print(f"10-bit H.264 (libx264 {t['pix_fmt']}): {'available' if t['available'] else 'NOT available: ' + str(t['error'])}")
+    status = "available" if t["available"] else f"NOT available: {t['error']}"
+    print(f"10-bit H.264 (libx264 {t['pix_fmt']}): {status}")
     head = f"{'codec':<16}{'setting':<22}{'kbit/frame':>11}{'kbit/s':>9}{'PSNR dB':>9}{'>1% off':>9}" \
            f"{'>5% off':>9}{'enc ms':>8}{'dec ms':>8}"
     print(head)

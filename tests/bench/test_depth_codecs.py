@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from pibr.bench.depth_codecs import (LOG_PEELED, LOG_SKY, H264DepthDecoder, H264DepthEncoder, LogDepthDecoder,
+from pibr.bench.depth_codecs import (H264DepthDecoder, H264DepthEncoder, LogDepthDecoder,
                                      LogDepthEncoder, LogDepthQuantizer, ZstdDepthDecoder, ZstdDepthEncoder,
                                      h264_depth_quantizer, make_pair, probe_h264_10bit)
 from pibr.bench.codec_bench import winners

@@ -110,7 +110,8 @@ def test_extremes_table():
     assert set(qs) == {"8bit-disparity", "edge-12bit-disparity", "log16"}
     assert all(v["monotone"] and v["finite"] for v in qs.values())
     assert qs["log16"]["max_relative_error"] <= qs["log16"]["bound"]["relative_error_max"] + 2 ** -23
-    assert qs["8bit-disparity"]["farthest_decoded_m"] == pytest.approx(qs["8bit-disparity"]["bound"]["resolves_up_to_m"])
+    eight = qs["8bit-disparity"]
+    assert eight["farthest_decoded_m"] == pytest.approx(eight["bound"]["resolves_up_to_m"])
     assert qs["edge-12bit-disparity"]["farthest_decoded_m"] == pytest.approx(4093 * 2 * NEAR, rel=1e-6)
     # linear disparity loses the far end entirely; log depth does not
     assert qs["8bit-disparity"]["relative_error"][-1] > 0.99 and qs["log16"]["relative_error"][-1] < 1.1e-4
@@ -136,8 +137,9 @@ def test_rendered_10_km_wall_behind_a_1_cm_speck():
     from pibr.server.renderer import MAX_EDGE_ANGLE_DEG, Renderer
 
     speck_z, wall_z = 0.0195, 8995.0
+    wall = box((30000.0, 30000.0, 10.0), (0, 0, -wall_z - 5.0), max_cell=500.0)
     scene = Scene("extremes", [SceneObject("speck", box((0.01, 0.01, 0.001), (0, 0, -speck_z - 0.0005))),
-                               SceneObject("wall", box((30000.0, 30000.0, 10.0), (0, 0, -wall_z - 5.0), max_cell=500.0))],
+                               SceneObject("wall", wall)],
                   near=NEAR, far=FAR, extra_view=False)
     size = 64
     ctx = create_context()
