@@ -5,7 +5,9 @@ the primary view, each codec over its rate settings:
 
 * ``edge``           the edge codec (Pajak et al. 2011) as the server and client run it
                      (temporal context, rate-free threshold), over a sweep of significance
-                     thresholds; ``edge-intra`` / ``edge-raster`` at the default threshold;
+                     thresholds; at the default threshold also ``edge-intra`` (no temporal
+                     context), ``edge-raster`` (one raster pass) and ``edge-plain-diffusion``
+                     (plain push-pull instead of edge-aware diffusion on the client);
 * ``h264-8bit``      8-bit disparity in its *own* monochrome libx264 stream, rate control
                      targeted at the edge codec's measured bits per frame of each threshold
                      (per window): Pajak et al.'s comparison at equal bandwidth (their Table 2);
@@ -187,7 +189,8 @@ def run_codec_bench(scene_spec="room", windows=None, window_s=2.0, fps=10.0, vie
     producer = FrameProducer(ctx, renderer, ProducerSpec((w, h), with_depth, q8, keep_distance=True))
     edge_pts = {t: _Point("edge", {"threshold": t}) for t in thresholds}
     variant_pts = {"edge-intra": _Point("edge-intra", {"threshold": 3.5, "temporal": False}),
-                   "edge-raster": _Point("edge-raster", {"threshold": 3.5, "passes": 1})}
+                   "edge-raster": _Point("edge-raster", {"threshold": 3.5, "passes": 1}),
+                   "edge-plain-diffusion": _Point("edge-plain-diffusion", {"threshold": 3.5, "edge_aware": False})}
     h264_pts = {(c, t): _Point(c, {"matched_to_edge_threshold": t}) for c in h264_codecs for t in thresholds}
     log_pts = {b: _Point("log-zstd", {"bits": b}) for b in log_bits}
     zstd_pt = _Point("zstd-lossless", {"bits": EDGE_BITS})
@@ -209,19 +212,21 @@ def run_codec_bench(scene_spec="room", windows=None, window_s=2.0, fps=10.0, vie
                 frames.append((pose, p.distances["primary"].copy(), p.yuv.copy()))
             label = win.label
 
-            def run_edge(point, **opts):
+            def run_edge(point, edge_aware=True, **opts):
                 enc = EdgeDepthStream(w, h, q12, fps, **opts)
-                dec = EdgeDepthStreamDecoder(w, h, q12)
+                dec = EdgeDepthStreamDecoder(w, h, q12, edge_aware=edge_aware)
                 for pose, r, _ in frames:
                     (payload, stats), e_ms = _timed(enc.encode, r, pose)
                     (dense, _), d_ms = _timed(dec.decode, payload, pose)
+                    parts = {f"bits_{k}": v for k, v in stats.bits().items()}
                     point.add(label, stats.total_bits, disparity_error(r, dense, near), e_ms, d_ms,
-                              edge_fraction=stats.n_edges / (w * h))
+                              edge_fraction=stats.n_edges / (w * h), **parts)
 
             for t, pt in edge_pts.items():
                 run_edge(pt, threshold=t)
             run_edge(variant_pts["edge-intra"], temporal=False)
             run_edge(variant_pts["edge-raster"], passes=1)
+            run_edge(variant_pts["edge-plain-diffusion"], edge_aware=False)
             # the other codecs' streams
             streams = [(zstd_pt, make_pair("zstd", w, h, near, far, fps))]
             streams += [(pt, make_pair("log", w, h, near, far, fps, bits=b)) for b, pt in log_pts.items()]

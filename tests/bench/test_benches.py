@@ -89,7 +89,11 @@ def test_bench_codec(tmp_path, capsys):
     assert curves["zstd-lossless"][0]["exact_codes"] == 1.0
     assert all(p["exact_codes"] == 1.0 for p in curves["log-zstd"])
     assert curves["log-zstd"][-1]["outliers_1pct"] == 0.0 and curves["log-zstd"][-1]["psnr_db"] > 90
-    assert set(r["edge_variants"]) == {"edge-intra", "edge-raster"}
+    assert set(r["edge_variants"]) == {"edge-intra", "edge-raster", "edge-plain-diffusion"}
+    default = next(p for p in curves["edge"] if p["setting"]["threshold"] == 2.0)
+    assert all(default[f"bits_{k}"] > 0 for k in ("edges", "values", "regular", "header"))
+    assert sum(default[f"bits_{k}"] for k in ("edges", "values", "regular", "header")) == \
+        pytest.approx(default["bits_per_frame"])
     assert [m["threshold"] for m in r["matched"]] == [128.0, 16.0, 2.0] and all(set(h264) <= set(m)
                                                                                   for m in r["matched"])
     assert [p["setting"]["total_kbps"] for p in r["h264_8bit_atlas"]] == [600.0, 2000.0]
