@@ -1,19 +1,31 @@
-"""``pibr bench codec``: depth on the wire — the edge codec against the alternatives.
+"""``pibr bench codec``: depth codecs on rate-distortion curves, at equal bitrate.
 
-Along real traces on the built-in scene, per server frame (primary view) and averaged:
+Along the evaluation windows (``bench/windows.py``) on a built-in scene, per server frame of
+the primary view, each codec over its rate settings:
 
-* ``edge``          edge codec, four interleaved passes, temporal context (the default);
-* ``edge-intra``    the same without the temporal context;
-* ``edge-raster``   a one-pass raster context coder (no interleaved passes);
-* ``zstd-lossless`` the 12-bit quantized depth, zstd-compressed: lossless up to quantization;
-* ``h264-8bit``     8-bit disparity in the H.264 atlas beside the colour, as the atlas path sends it.
+* ``edge``           the edge codec (Pajak et al. 2011) as the server and client run it
+                     (temporal context, rate-free threshold), over a sweep of significance
+                     thresholds; at the default threshold also ``edge-intra`` (no temporal
+                     context), ``edge-raster`` (one raster pass) and ``edge-plain-diffusion``
+                     (plain push-pull instead of edge-aware diffusion on the client);
+* ``h264-8bit``      8-bit disparity in its *own* monochrome libx264 stream, rate control
+                     targeted at the edge codec's measured bits per frame of each threshold
+                     (per window): Pajak et al.'s comparison at equal bandwidth (their Table 2);
+* ``h264-10bit``     the same at 10 bits (``gray10le``), when PyAV's libx264 offers it
+                     (``h264_10bit`` in the JSON says whether, and the error if not);
+* ``log-zstd``       Koniaris et al. 2018: log-quantised distance (16 bits in the paper, fewer
+                     as rate settings) with block-skip temporal coding and zstd
+                     (``bench/depth_codecs.py``);
+* ``zstd-lossless``  the edge codec's 12-bit codes, zstd-compressed;
+* ``h264-8bit-atlas`` 8-bit disparity beside the colour in the atlas at each total bitrate
+                     (its depth share is not separable: no bits per frame of its own).
 
-For each: bits per frame (edge image / values / regular samples for the edge variants;
-the depth rectangle's share of the atlas for H.264, estimated by coding the atlas with and
-without it at the same bitrate), disparity PSNR and maximum error after reconstruction
-against the true depth (edge variants: edge-aware diffusion; ``edge`` also with plain
-push-pull), and encode / decode ms. At equal *total* bitrate, the colour quality of the
-atlas with depth inside against the colour-only atlas beside the edge stream.
+Axes: bits per frame against disparity PSNR and against the share of pixels more than 1 %
+off in distance; and end to end, ``proxy`` DSSIM at equal *total* bitrate (colour + depth +
+the moving objects' poses and motion flow): the colour stream gets the total minus the depth
+codec's and the motion streams' measured rates. ``wins`` says which codec is best at each bit
+budget, ``matched`` sets the edge codec beside H.264 at its rate; ``extremes`` tabulates
+each quantiser's error against distance from 1 cm to 10 km.
 """
 from __future__ import annotations
 
@@ -25,6 +37,17 @@ import time
 import numpy as np
 
 from .results import write_result
+
+#: Edge codec significance thresholds of the rate sweep (code units; 3.5 is the default).
+DEFAULT_THRESHOLDS = (2.0, 3.5, 8.0, 16.0, 32.0, 64.0, 128.0)
+#: Bits of the log-depth codec's rate settings (16: Koniaris et al.).
+DEFAULT_LOG_BITS = (16, 12, 10, 8)
+#: Total bitrates of the end-to-end comparison.
+DEFAULT_TOTALS_KBPS = (4000.0, 8000.0, 16000.0)
+#: The end-to-end competitors (see :func:`end_to_end`).
+E2E_CODECS = ("h264-8bit-atlas", "edge", "edge-rc", "h264-8bit", "h264-10bit", "log-zstd", "zstd-lossless")
+#: A codec whose depth leaves the colour less than this is infeasible at a total.
+MIN_COLOUR_KBPS = 250.0
 
 
 def disparity_error(r_true: np.ndarray, r_test: np.ndarray, near: float) -> dict:
@@ -43,255 +66,442 @@ def disparity_error(r_true: np.ndarray, r_test: np.ndarray, near: float) -> dict
             "outliers_5pct": float(np.mean(rel > 0.05)) if rel.size else 0.0}
 
 
-def _colour_psnr(decoded_rgb: np.ndarray, true_rgb: np.ndarray) -> float:
-    from .metrics import psnr
+class _Point:
+    """One codec at one setting: per-frame measurements, by window."""
 
-    return psnr(true_rgb, decoded_rgb)
+    KEYS = ("bits", "psnr_db", "max_error", "mean_error", "outliers_1pct", "outliers_5pct", "encode_ms",
+            "decode_ms")
+
+    def __init__(self, codec: str, setting: dict):
+        self.codec, self.setting = codec, setting
+        self.rows: list[dict] = []
+
+    def add(self, window: str, bits, err: dict, encode_ms: float, decode_ms: float, **extra) -> None:
+        self.rows.append({"window": window, "bits": bits, **err, "encode_ms": encode_ms, "decode_ms": decode_ms,
+                          **extra})
+
+    def window_bits(self, window: str) -> float:
+        return float(np.mean([r["bits"] for r in self.rows if r["window"] == window]))
+
+    def summary(self, fps: float) -> dict:
+        out = {"codec": self.codec, "setting": self.setting, "frames": len(self.rows)}
+        for k in self.KEYS:
+            vals = [r[k] for r in self.rows if r.get(k) is not None]
+            out[k if k != "bits" else "bits_per_frame"] = float(np.mean(vals)) if vals else None
+        out["kbps"] = None if out["bits_per_frame"] is None else out["bits_per_frame"] * fps / 1000
+        extra = sorted({k for r in self.rows for k in r} - set(self.KEYS) - {"window"})
+        for k in extra:
+            vals = [r[k] for r in self.rows if r.get(k) is not None]
+            out[k] = float(np.mean(vals)) if vals else None
+        windows = list(dict.fromkeys(r["window"] for r in self.rows))
+        out["by_window"] = {}
+        for w in windows:
+            rows = [r for r in self.rows if r["window"] == w]
+            out["by_window"][w] = {k: float(np.mean([r[k] for r in rows if r.get(k) is not None]))
+                                   for k in ("bits", "psnr_db", "outliers_1pct")
+                                   if any(r.get(k) is not None for r in rows)}
+        return out
 
 
-def run_codec_bench(scene_spec="room", windows=None, window_s=4.0, fps=10.0, view_size=(1024, 1024),
-                    bitrate_kbps=16000.0, out_dir="out/bench", progress=True, with_end_to_end=True,
-                    out_size=(960, 540)) -> dict:
-    import zstandard
+def _timed(fn, *args):
+    t0 = time.perf_counter()
+    out = fn(*args)
+    return out, (time.perf_counter() - t0) * 1e3
 
-    from pibr.client.diffusion import codes_to_distance, diffuse, diffuse_plain
+
+def winners(curves: dict, metric: str, higher_is_better: bool) -> list[dict]:
+    """At each bit budget (every operating point's bits per frame), the codec whose best point
+    within the budget scores best on ``metric``. -> [{"bits_per_frame", "winner", "value", "by_codec"}]."""
+    pts = [(c, p) for c, ps in curves.items() for p in ps if p.get("bits_per_frame") is not None]
+    budgets = sorted({p["bits_per_frame"] for _, p in pts})
+    out = []
+    for b in budgets:
+        best = {}
+        for c, p in pts:
+            if p["bits_per_frame"] <= b * (1 + 1e-9) and p.get(metric) is not None:
+                v = p[metric]
+                if c not in best or (v > best[c] if higher_is_better else v < best[c]):
+                    best[c] = v
+        if not best:
+            continue
+        win = (max if higher_is_better else min)(best, key=best.get)
+        out.append({"bits_per_frame": b, "winner": win, "value": best[win], "by_codec": best})
+    return out
+
+
+def matched_pairs(curves: dict) -> list[dict]:
+    """Per edge threshold, the edge codec beside H.264 depth alone coded at its rate (Pajak et al.'s
+    Table 2 comparison): [{"threshold", codec: {"bits_per_frame", "psnr_db", "outliers_1pct",
+    "outliers_5pct"}}]."""
+    keys = ("bits_per_frame", "psnr_db", "outliers_1pct", "outliers_5pct")
+    rows = []
+    for e in curves["edge"]:
+        t = e["setting"]["threshold"]
+        row = {"threshold": t, "edge": {k: e[k] for k in keys}}
+        for name in ("h264-8bit", "h264-10bit"):
+            m = [p for p in curves.get(name, []) if p["setting"]["matched_to_edge_threshold"] == t]
+            if m:
+                row[name] = {k: m[0][k] for k in keys}
+        rows.append(row)
+    return rows
+
+
+def run_codec_bench(scene_spec="room", windows=None, window_s=2.0, fps=10.0, view_size=(1024, 1024),
+                    thresholds=DEFAULT_THRESHOLDS, log_bits=DEFAULT_LOG_BITS, totals_kbps=DEFAULT_TOTALS_KBPS,
+                    out_dir="out/bench", progress=True, with_end_to_end=True, out_size=(960, 540),
+                    e2e_windows=2, e2e_log_bits=10, plot_path=None) -> dict:
+    """The rate-distortion curves (module docstring) on the first ``window_s`` seconds of each
+    window, the end-to-end comparison on the first ``e2e_windows`` of them, the extremes table.
+    Writes ``codec.json`` and ``codec.png`` (and ``plot_path`` if given) under ``out_dir``."""
+    from pibr.client.depth_stream import EdgeDepthStreamDecoder
     from pibr.client.video import H264Decoder
     from pibr.protocol.atlas import build_layout
     from pibr.protocol.depth import h264_quantizer
-    from pibr.protocol.edgecodec.codec import EdgeDecoder, EdgeEncoder, warp_samples
+    from pibr.protocol.errors import ConfigError
     from pibr.protocol.gl import create_context
     from pibr.protocol.trace import load_trace, placement
     from pibr.scenes.registry import load_scene
-    from pibr.server.depth_stream import EDGE_BITS, edge_quantizer
-    from pibr.server.edge_extract import extract_edge_samples
-    from pibr.server.packer import AtlasPacker
+    from pibr.server.depth_stream import EDGE_BITS, EdgeDepthStream, edge_quantizer
     from pibr.server.pipeline import FrameProducer, ProducerSpec
     from pibr.server.renderer import Renderer
     from pibr.server.video import H264Encoder
 
-    from pibr.protocol.errors import ConfigError
-
+    from .depth_codecs import make_pair, probe_h264_10bit
     from .windows import EVALUATION_WINDOWS, Window, windows_json
 
-    # The first window_s seconds of each window (default: the evaluation windows).
     windows = tuple(Window(w.trace, w.start_s, min(w.duration_s, window_s)) for w in (windows or EVALUATION_WINDOWS))
     if min(int(w.duration_s * fps) for w in windows) < 1:
         raise ConfigError(f"{min(w.duration_s for w in windows)} s at {fps:g} fps is not a single frame")
+    if not thresholds or not log_bits:
+        raise ConfigError("need at least one edge threshold and one log-depth bit depth")
     scene = load_scene(scene_spec)
     for w in windows:
         load_trace(w.trace).window(w.start_s, w.duration_s)  # a start outside a trace is refused before any work
     w, h = view_size
-    q8 = h264_quantizer(scene.near, scene.far)
-    q12 = edge_quantizer(scene.near, scene.far, EDGE_BITS)
+    near, far = scene.near, scene.far
+    q8 = h264_quantizer(near, far)
+    q12 = edge_quantizer(near, far, EDGE_BITS)
+    ten_bit = probe_h264_10bit()
+    h264_codecs = ("h264-8bit", "h264-10bit") if ten_bit["available"] else ("h264-8bit",)
     with_depth = build_layout((w, h), None, depth_in_atlas=True)
-    colour_only = build_layout((w, h), None, depth_in_atlas=False)
     ctx = create_context()
     renderer = Renderer(ctx, scene)
     producer = FrameProducer(ctx, renderer, ProducerSpec((w, h), with_depth, q8, keep_distance=True))
-    colour_packer = AtlasPacker(ctx, colour_only, None)
-    variants = {"edge": dict(temporal=True, passes=4), "edge-intra": dict(temporal=False, passes=4),
-                "edge-raster": dict(temporal=True, passes=1)}
-    per_frame = []
-    frames_colour, frames_true_rgb = [], []
+    edge_pts = {t: _Point("edge", {"threshold": t}) for t in thresholds}
+    variant_pts = {"edge-intra": _Point("edge-intra", {"threshold": 3.5, "temporal": False}),
+                   "edge-raster": _Point("edge-raster", {"threshold": 3.5, "passes": 1}),
+                   "edge-plain-diffusion": _Point("edge-plain-diffusion", {"threshold": 3.5, "edge_aware": False})}
+    h264_pts = {(c, t): _Point(c, {"matched_to_edge_threshold": t}) for c in h264_codecs for t in thresholds}
+    log_pts = {b: _Point("log-zstd", {"bits": b}) for b in log_bits}
+    zstd_pt = _Point("zstd-lossless", {"bits": EDGE_BITS})
+    atlas_pts = {T: _Point("h264-8bit-atlas", {"total_kbps": T}) for T in totals_kbps}
+    n_frames = sum(int(win.duration_s * fps) for win in windows)
     bar = None
-    n_frames = sum(int(w.duration_s * fps) for w in windows)
     if progress:
         from tqdm import tqdm
 
-        bar = tqdm(total=2 * n_frames, unit="frame", desc="bench codec", file=sys.stderr, leave=False, disable=None)
-    zc = zstandard.ZstdCompressor(level=3)
-    zd = zstandard.ZstdDecompressor()
+        bar = tqdm(total=n_frames, unit="frame", desc="bench codec", file=sys.stderr, leave=False, disable=None)
     try:
         for win in windows:
             trace, start_s = load_trace(win.trace), win.start_s
             origin = placement(trace, start_s, scene.viewer_origin)
-            enc_h264 = H264Encoder(with_depth.width, with_depth.height, fps, bitrate_kbps, 30, deterministic=True)
-            dec_h264 = H264Decoder(with_depth.width, with_depth.height)
-            coders = {name: (EdgeEncoder(w, h, EDGE_BITS, q12, temporal=v["temporal"], passes=v["passes"]),
-                             EdgeDecoder(w, h, EDGE_BITS, q12), {"enc": None, "dec": None}) for name, v in variants.items()}
+            frames = []
             for k in range(int(win.duration_s * fps)):
-                t = k / fps
-                pose = origin.compose(trace.pose_at(min(start_s + t, trace.duration)))
-                p = producer.produce(pose, t)
-                r_true = p.distances["primary"]
-                row = {"window": win.label, "frame": k}
-                # (a) 8-bit disparity inside the H.264 atlas
-                t0 = time.perf_counter()
-                data, _ = enc_h264.encode(p.yuv)
-                t1 = time.perf_counter()
-                img = dec_h264.decode(data)
-                t2 = time.perf_counter()
+                pose = origin.compose(trace.pose_at(min(start_s + k / fps, trace.duration)))
+                p = producer.produce(pose, k / fps)
+                frames.append((pose, p.distances["primary"].copy(), p.yuv.copy()))
+            label = win.label
+
+            def run_edge(point, edge_aware=True, **opts):
+                enc = EdgeDepthStream(w, h, q12, fps, **opts)
+                dec = EdgeDepthStreamDecoder(w, h, q12, edge_aware=edge_aware)
+                for pose, r, _ in frames:
+                    (payload, stats), e_ms = _timed(enc.encode, r, pose)
+                    (dense, _), d_ms = _timed(dec.decode, payload, pose)
+                    parts = {f"bits_{k}": v for k, v in stats.bits().items()}
+                    point.add(label, stats.total_bits, disparity_error(r, dense, near), e_ms, d_ms,
+                              edge_fraction=stats.n_edges / (w * h), **parts)
+
+            for t, pt in edge_pts.items():
+                run_edge(pt, threshold=t)
+            run_edge(variant_pts["edge-intra"], temporal=False)
+            run_edge(variant_pts["edge-raster"], passes=1)
+            run_edge(variant_pts["edge-plain-diffusion"], edge_aware=False)
+            # the other codecs' streams
+            streams = [(zstd_pt, make_pair("zstd", w, h, near, far, fps))]
+            streams += [(pt, make_pair("log", w, h, near, far, fps, bits=b)) for b, pt in log_pts.items()]
+            streams += [(pt, make_pair(c, w, h, near, far, fps, edge_pts[t].window_bits(label) * fps / 1000))
+                        for (c, t), pt in h264_pts.items()]
+            for pt, (enc, dec) in streams:
+                for _, r, _ in frames:
+                    payload, e_ms = _timed(enc.encode, r)
+                    back, d_ms = _timed(dec.decode, payload)
+                    extra = {}
+                    if pt is zstd_pt or pt.codec == "log-zstd":   # lossless relative to the quantisation
+                        extra["exact_codes"] = float(np.array_equal(dec.quantizer.dequantize(
+                            dec.quantizer.quantize(r)), back))
+                    pt.add(label, 8 * len(payload), disparity_error(r, back, near), e_ms, d_ms, **extra)
+            for T, pt in atlas_pts.items():
+                enc = H264Encoder(with_depth.width, with_depth.height, fps, T, 30, deterministic=True)
+                dec = H264Decoder(with_depth.width, with_depth.height)
                 x, y, rw, rh = with_depth.rect("primary.depth")
-                r8 = q8.dequantize(img.y[y:y + rh, x:x + rw])
-                row["h264-8bit"] = {"atlas_bytes": len(data), "encode_ms": (t1 - t0) * 1e3,
-                                    "decode_ms": (t2 - t1) * 1e3, **disparity_error(r_true, r8, scene.near)}
-                cx, cy, cw, ch = with_depth.rect("primary.color")
-                true_rgb = producer.primary.read_color().copy()
-                row["h264-8bit"]["colour_psnr_db"] = _colour_psnr(img.to_rgb()[cy:cy + ch, cx:cx + cw], true_rgb)
-                # colour-only atlas for the equal-total-bitrate comparison (second pass below)
-                colour_packer.pack({"primary.color": producer.primary.color})
-                frames_colour.append(colour_packer.read().copy())
-                frames_true_rgb.append(true_rgb)
-                # (b) lossless 12-bit codes with zstd
-                codes = q12.quantize(r_true)
-                t0 = time.perf_counter()
-                z = zc.compress(codes.astype("<u2").tobytes())
-                t1 = time.perf_counter()
-                back = np.frombuffer(zd.decompress(z), "<u2").reshape(h, w)
-                t2 = time.perf_counter()
-                row["zstd-lossless"] = {"bytes": len(z), "encode_ms": (t1 - t0) * 1e3, "decode_ms": (t2 - t1) * 1e3,
-                                        **disparity_error(r_true, q12.dequantize(back), scene.near)}
-                # (c), (d) edge codec variants
-                for name, (enc, dec, state) in coders.items():
-                    t0 = time.perf_counter()
-                    warped = warp_samples(state["enc"][0], state["enc"][1], pose, q12) if state["enc"] else None
-                    found = extract_edge_samples(r_true, q12)
-                    e = enc.encode(r_true, None if warped is None else warped.edges,
-                                   None if warped is None else warped.values, edges=found.edges, signs=found.signs,
-                                   codes=found.codes)
-                    t1 = time.perf_counter()
-                    warped_d = warp_samples(state["dec"][0], state["dec"][1], pose, q12) if state["dec"] else None
-                    samples = dec.decode(e.payload, None if warped_d is None else warped_d.edges,
-                                         None if warped_d is None else warped_d.values)
-                    t2 = time.perf_counter()
-                    dense = diffuse(samples)
-                    t3 = time.perf_counter()
-                    state["enc"], state["dec"] = (e.samples, pose), (samples, pose)
-                    bits = e.stats.bits()
-                    row[name] = {"bytes": e.stats.total_bytes, "bits_edges": bits["edges"], "bits_values": bits["values"],
-                                 "bits_regular": bits["regular"], "bits_header": bits["header"],
-                                 "edge_fraction": float(samples.edges.mean()), "encode_ms": (t1 - t0) * 1e3,
-                                 "decode_ms": (t2 - t1) * 1e3, "diffusion_ms": (t3 - t2) * 1e3,
-                                 **disparity_error(r_true, codes_to_distance(dense, q12), scene.near)}
-                    if name == "edge":
-                        t4 = time.perf_counter()
-                        plain = diffuse_plain(samples)
-                        row[name]["plain_diffusion_ms"] = (time.perf_counter() - t4) * 1e3
-                        row[name]["plain"] = disparity_error(r_true, codes_to_distance(plain, q12), scene.near)
-                per_frame.append(row)
-                if bar is not None:
-                    bar.update(1)
-        # Equal total bitrate: colour-only atlas at (bitrate - the edge stream's mean rate).
-        edge_kbps = float(np.mean([r["edge"]["bytes"] for r in per_frame]) * 8 * fps / 1000)
-        colour_kbps = max(16.0, bitrate_kbps - edge_kbps)
-        enc_c = dec_c = None
-        for i, (yuv, true_rgb) in enumerate(zip(frames_colour, frames_true_rgb)):
-            if i == 0 or per_frame[i]["frame"] == 0:
-                enc_c = H264Encoder(colour_only.width, colour_only.height, fps, colour_kbps, 30, deterministic=True)
-                dec_c = H264Decoder(colour_only.width, colour_only.height)
-            data, _ = enc_c.encode(yuv)
-            img = dec_c.decode(data)
-            per_frame[i]["edge"]["colour_atlas_bytes"] = len(data)
-            per_frame[i]["edge"]["colour_psnr_db"] = _colour_psnr(img.to_rgb()[:h, :w], true_rgb)
+                for _, r, yuv in frames:
+                    (data, _), e_ms = _timed(enc.encode, yuv)
+                    img, d_ms = _timed(dec.decode, data)
+                    pt.add(label, None, disparity_error(r, q8.dequantize(img.y[y:y + rh, x:x + rw]), near), e_ms,
+                           d_ms, atlas_bits=8 * len(data))
             if bar is not None:
-                bar.update(1)
+                bar.update(len(frames))
     finally:
         if bar is not None:
             bar.close()
         producer.release()
-        colour_packer.release()
         renderer.release()
         ctx.release()
 
-    def mean(name, key):
-        vals = [r[name][key] for r in per_frame if key in r[name]]
-        return float(np.mean(vals)) if vals else None
+    def curve(points):
+        return sorted((p.summary(fps) for p in points), key=lambda s: (s["bits_per_frame"] or 0.0))
 
-    summary = {}
-    for name in ("h264-8bit", "zstd-lossless", *variants):
-        keys = sorted({k for r in per_frame for k, v in r[name].items() if not isinstance(v, dict)})
-        summary[name] = {k: mean(name, k) for k in keys}
-        if name == "edge":
-            summary[name]["plain"] = {k: float(np.mean([r[name]["plain"][k] for r in per_frame]))
-                                      for k in per_frame[0][name]["plain"]}
-    for name in ("zstd-lossless", *variants):
-        summary[name]["kbps"] = summary[name]["bytes"] * 8 * fps / 1000
-    summary["h264-8bit"]["atlas_kbps"] = summary["h264-8bit"]["atlas_bytes"] * 8 * fps / 1000
+    curves = {"edge": curve(edge_pts.values())}
+    for c in h264_codecs:
+        curves[c] = curve(pt for (cc, _), pt in h264_pts.items() if cc == c)
+    curves["log-zstd"] = curve(log_pts.values())
+    curves["zstd-lossless"] = curve([zstd_pt])
+    atlas = [atlas_pts[T].summary(fps) | {"atlas_kbps": atlas_pts[T].summary(fps)["atlas_bits"] * fps / 1000}
+             for T in totals_kbps]
     result = {"scene": scene.name, "windows": windows_json(windows, "reporting"), "fps": fps,
-              "view_size": list(view_size),
-              "total_bitrate_kbps": bitrate_kbps, "edge_kbps": edge_kbps, "colour_only_kbps": colour_kbps,
-              "summary": summary, "frames": per_frame}
+              "view_size": list(view_size), "frames": n_frames, "near": near, "far": far,
+              "h264_10bit": ten_bit, "curves": curves,
+              "edge_variants": {k: v.summary(fps) for k, v in variant_pts.items()},
+              "h264_8bit_atlas": atlas,
+              "matched": matched_pairs(curves),
+              "wins": {"psnr_db": winners(curves, "psnr_db", True),
+                       "outliers_1pct": winners(curves, "outliers_1pct", False)},
+              "extremes": extremes_table()}
     if with_end_to_end:
-        w0 = windows[0]
-        result["end_to_end"] = end_to_end(scene_spec, w0.trace, w0.start_s, w0.duration_s, total_kbps=bitrate_kbps,
-                                          view_size=view_size, out_size=out_size, progress=progress)
+        e2e_wins = windows[:max(1, e2e_windows)]
+        result["end_to_end"] = end_to_end(scene_spec, e2e_wins, totals_kbps, view_size=view_size, out_size=out_size,
+                                          log_bits=e2e_log_bits, with_10bit=ten_bit["available"],
+                                          progress=progress)
     write_result(out_dir, "codec.json", result)
-    from .plots import plot_codec
+    from .plots import plot_depth_rd
 
-    plot_codec(result, os.path.join(out_dir, "codec.png"))
+    plot_depth_rd(result, os.path.join(out_dir, "codec.png"))
+    if plot_path:
+        plot_depth_rd(result, plot_path)
     return result
 
 
-def end_to_end(scene_spec="room", trace="pred6dof-1", start_s=10.0, duration_s=4.0, rate_hz=30.0,
-               latency_ms=128.0, total_kbps=16000.0, view_size=(1024, 1024), out_size=(960, 540), stride=3,
-               progress=True) -> dict:
-    """Client DSSIM of ``proxy`` with 8-bit depth in the H.264 atlas against edge-coded depth,
-    at the same total bitrate: the edge session's colour gets what its depth streams leave."""
+def end_to_end(scene_spec="room", windows=None, totals_kbps=DEFAULT_TOTALS_KBPS, rate_hz=30.0, latency_ms=128.0,
+               view_size=(1024, 1024), out_size=(960, 540), stride=3, log_bits=10, with_10bit=True,
+               edge_share=0.2, codecs=None, progress=True) -> dict:
+    """Client DSSIM of ``proxy`` at equal *total* bitrate, per depth codec and total: the 8-bit
+    disparity in the atlas gets the whole total; every other codec's colour gets the total minus
+    its depth streams' measured rate (both views), learnt in a first pass (depth bits do not depend
+    on the colour's rate); a moving scene's object poses and motion flow are subtracted too.
+    ``edge`` runs at the default threshold, ``edge-rc`` rate-controlled to ``edge_share`` of the
+    total (its depth budget is that target); H.264 depth alone is targeted at ``edge``'s measured
+    rate, log depth has ``log_bits``. ``codecs``: a subset of :data:`E2E_CODECS` (default all).
+    A codec that leaves the colour less than :data:`MIN_COLOUR_KBPS` is marked infeasible."""
     from pibr.scenes.registry import load_scene
 
     from .coverage import LatencyModel, display_samples
+    from .depth_codecs import ViewDepthStreams
     from .ibr_bench import Simulation, evaluate_methods, load_proxies, summarize
+    from .windows import EVALUATION_WINDOWS, Window, windows_json
 
+    windows = tuple(windows or (Window(EVALUATION_WINDOWS[0].trace, EVALUATION_WINDOWS[0].start_s, 2.0),))
     scene = load_scene(scene_spec)
     proxies, _ = load_proxies(scene, progress)
     latency = LatencyModel(rate_hz=rate_hz, up_ms=latency_ms / 2, down_ms=latency_ms / 2)
-    samples = display_samples(scene, trace, start_s, duration_s, rate_hz, latency)[::stride]
-    out = {}
-    edge_kbps = None
-    for codec in ("edge", "h264"):
-        if codec == "edge":  # a first pass learns the depth streams' rate, then colour gets the rest
-            probe = Simulation(scene, view_size, out_size, proxies=proxies, depth_codec="edge",
-                               bitrate_kbps=total_kbps)
+
+    def sim(colour_kbps, codec, depth_kbps=0.0):
+        if codec == "h264-8bit-atlas":
+            return Simulation(scene, view_size, out_size, proxies=proxies, depth_codec="h264",
+                              bitrate_kbps=colour_kbps)
+        if codec in ("edge", "edge-rc"):
+            return Simulation(scene, view_size, out_size, proxies=proxies, depth_codec="edge",
+                              bitrate_kbps=colour_kbps, edge_kbps=depth_kbps if codec == "edge-rc" else 0.0)
+        name, opts = {"log-zstd": ("log", {"bits": log_bits}), "zstd-lossless": ("zstd", {}),
+                      "h264-8bit": ("h264-8bit", {}), "h264-10bit": ("h264-10bit", {})}[codec]
+        return Simulation(scene, view_size, out_size, proxies=proxies, depth_codec="edge", bitrate_kbps=colour_kbps,
+                          depth_streams=lambda session, fps: ViewDepthStreams(name, session, fps, depth_kbps, **opts))
+
+    codecs = [c for c in (codecs or E2E_CODECS) if with_10bit or c != "h264-10bit"]
+    unknown = set(codecs) - set(E2E_CODECS)
+    if unknown:
+        raise ValueError(f"unknown end-to-end codecs {sorted(unknown)}: expected some of {E2E_CODECS}")
+    # what the colour budgets need measured first: edge for itself, H.264 alone and edge-rc's motion
+    probes = [c for c in ("edge", "log-zstd", "zstd-lossless") if c in codecs or (
+        c == "edge" and set(codecs) & {"edge-rc", "h264-8bit", "h264-10bit"})]
+    if scene.is_dynamic and "h264-8bit-atlas" in codecs:
+        probes.append("h264-8bit-atlas")
+    per_window = []
+    for win in windows:
+        samples = display_samples(scene, win.trace, win.start_s, win.duration_s, rate_hz, latency)[::stride]
+        depth_kbps, motion_kbps = {"h264-8bit-atlas": 0.0}, {}
+        # the depth streams' rate (and a moving scene's object poses and motion flow), before colour
+        for codec in probes:
+            probe = sim(max(totals_kbps), codec)
             try:
                 for s in samples:
                     probe.frame_at(s[2], s[3])
-                edge_kbps = float(np.mean(probe.depth_bytes) * 8 * probe.fps / 1000)
+                kbps = 8 * probe.fps / 1000
+                if probe.depth_bytes:
+                    depth_kbps[codec] = float(np.mean(probe.depth_bytes) * kbps)
+                motion_kbps[codec] = float((np.mean(probe.flow_bytes) if probe.flow_bytes else 0.0) * kbps
+                                           + (np.mean(probe.pose_bytes) if probe.pose_bytes else 0.0) * kbps)
             finally:
                 probe.close()
                 probe.ctx.release()
-            colour_kbps = max(16.0, total_kbps - edge_kbps)
+        if "edge" in probes:
+            for c in ("h264-8bit", "h264-10bit", "edge-rc"):
+                depth_kbps[c], motion_kbps[c] = depth_kbps["edge"], motion_kbps["edge"]
+        motion_kbps.setdefault("h264-8bit-atlas", 0.0)
+        rows = {}
+        for total in totals_kbps:
+            depth_kbps["edge-rc"] = edge_share * total
+            for codec in codecs:
+                colour = total - depth_kbps[codec] - motion_kbps[codec]
+                key = f"{total:g}/{codec}"
+                if colour < MIN_COLOUR_KBPS:
+                    rows[key] = {"total_kbps": total, "codec": codec, "feasible": False,
+                                 "depth_kbps": depth_kbps[codec], "motion_kbps": motion_kbps[codec],
+                                 "colour_kbps": colour}
+                    continue
+                s = sim(colour, codec, depth_kbps[codec])
+                try:
+                    res = evaluate_methods(s, samples, {"proxy": ("proxy", {})})
+                    rows[key] = summarize(res["proxy"]) | {
+                        "total_kbps": total, "codec": codec, "feasible": True, "colour_kbps": colour,
+                        "video_kbps": float(np.mean(s.bytes) * 8 * s.fps / 1000),
+                        "depth_kbps": float(np.mean(s.depth_bytes) * 8 * s.fps / 1000) if s.depth_bytes else 0.0,
+                        "motion_kbps": motion_kbps[codec]}
+                finally:
+                    s.close()
+                    s.ctx.release()
+        per_window.append({"window": win.label, "samples": len(samples), "results": rows})
+    # mean over windows, per total and codec
+    results = {}
+    for key in per_window[0]["results"]:
+        rs = [pw["results"][key] for pw in per_window]
+        first = rs[0]
+        out = {"total_kbps": first["total_kbps"], "codec": first["codec"],
+               "feasible": all(r["feasible"] for r in rs)}
+        for k in ("dssim_mean", "psnr_mean", "hole_fraction_mean", "video_kbps", "depth_kbps", "motion_kbps",
+                  "colour_kbps"):
+            vals = [r[k] for r in rs if r.get(k) is not None]
+            out[k] = float(np.mean(vals)) if vals and (out["feasible"] or k in ("depth_kbps", "motion_kbps",
+                                                                               "colour_kbps")) \
+                else None
+        results[key] = out
+    return {"windows": windows_json(windows, "reporting"), "rate_hz": rate_hz, "latency_ms": latency_ms,
+            "stride": stride, "log_bits": log_bits, "edge_share": edge_share, "min_colour_kbps": MIN_COLOUR_KBPS,
+            "totals_kbps": list(totals_kbps), "results": results, "wins": e2e_winners(results),
+            "per_window": per_window}
+
+
+def e2e_winners(results: dict) -> dict:
+    """Per total bitrate, the feasible codec with the lowest proxy DSSIM: {total: {"winner", "dssim", "by_codec"}}."""
+    best = {}
+    for total in sorted({v["total_kbps"] for v in results.values()}):
+        ok = {v["codec"]: v["dssim_mean"] for v in results.values() if v["total_kbps"] == total and v["feasible"]}
+        if ok:
+            win = min(ok, key=ok.get)
+            best[f"{total:g}"] = {"winner": win, "dssim": ok[win], "by_codec": ok}
+    return best
+
+
+def extremes_table(near: float = 1e-2, far: float = 1e4, per_decade: int = 4) -> dict:
+    """Error against distance of the depth quantisers from ``near`` to ``far`` (1 cm to 10 km):
+    8-bit disparity (the H.264 atlas), the edge codec's 12-bit disparity, 16-bit log depth. Per
+    distance: the decoded distance and its relative error; per quantiser its documented bound
+    (half a code step: in disparity for the linear ones, in ln r for log depth) and whether
+    decoding is monotone and finite over the whole range."""
+    from pibr.protocol.depth import h264_quantizer
+    from pibr.server.depth_stream import EDGE_BITS, edge_quantizer
+
+    from .depth_codecs import LogDepthQuantizer
+
+    n = int(round(math.log10(far / near) * per_decade)) + 1
+    r = np.geomspace(near, far, n)
+    dense = np.geomspace(near, far, 20001)
+    out = {"near": near, "far": far, "distances_m": r.tolist(), "quantizers": {}}
+    for name, q in (("8bit-disparity", h264_quantizer(near, far)), ("edge-12bit-disparity",
+                                                                     edge_quantizer(near, far, EDGE_BITS)),
+                    ("log16", LogDepthQuantizer(near, far, 16))):
+        back = q.dequantize(q.quantize(r)).astype(np.float64)
+        dense_back = q.dequantize(q.quantize(dense)).astype(np.float64)
+        rel = np.abs(back - r) / r
+        if isinstance(q, LogDepthQuantizer):
+            bound = {"relative_error_max": q.max_relative_error()}
         else:
-            colour_kbps = total_kbps
-        sim = Simulation(scene, view_size, out_size, proxies=proxies, depth_codec=codec, bitrate_kbps=colour_kbps)
-        try:
-            res = evaluate_methods(sim, samples, {"proxy": ("proxy", {})})
-            out[codec] = summarize(res["proxy"]) | {
-                "video_kbps": float(np.mean(sim.bytes) * 8 * sim.fps / 1000),
-                "depth_kbps": float(np.mean(sim.depth_bytes) * 8 * sim.fps / 1000) if sim.depth_bytes else 0.0}
-        finally:
-            sim.close()
-            sim.ctx.release()
-    return {"trace": trace, "total_kbps": total_kbps, "edge_kbps": edge_kbps, "results": out}
+            half = 0.5 / (q.max_code - q.min_code)
+            bound = {"disparity_error_max": half,
+                     # beyond near / half the disparity rounds to the lowest surface code: every farther
+                     # distance decodes to near / half
+                     "resolves_up_to_m": min(near / half, far)}
+        out["quantizers"][name] = {
+            "decoded_m": back.tolist(), "relative_error": rel.tolist(), "bound": bound,
+            "max_relative_error": float(rel.max()),
+            "monotone": bool(np.all(np.diff(dense_back) >= 0)), "finite": bool(np.all(np.isfinite(dense_back))),
+            "farthest_decoded_m": float(dense_back.max())}
+    return out
 
 
 def print_codec_table(r: dict) -> None:
-    s = r["summary"]
     print(f"pibr bench codec: scene {r['scene']}, primary view {r['view_size'][0]}x{r['view_size'][1]}, "
-          f"{r['fps']:g} fps, {len(r['frames'])} frames")
-    head = f"{'variant':<15}{'kbit/s':>9}{'edges b':>10}{'values b':>10}{'regular b':>10}{'PSNR dB':>9}" \
-           f"{'max err':>9}{'>1% off':>9}{'>5% off':>9}{'enc ms':>8}{'dec ms':>8}"
+          f"{r['fps']:g} fps, {r['frames']} frames over {len(r['windows']['used'])} windows")
+    t = r["h264_10bit"]
+    status = "available" if t["available"] else f"NOT available: {t['error']}"
+    print(f"10-bit H.264 (libx264 {t['pix_fmt']}): {status}")
+    head = f"{'codec':<16}{'setting':<22}{'kbit/frame':>11}{'kbit/s':>9}{'PSNR dB':>9}{'>1% off':>9}" \
+           f"{'>5% off':>9}{'enc ms':>8}{'dec ms':>8}"
     print(head)
     print("-" * len(head))
-    for name in ("edge", "edge-intra", "edge-raster", "zstd-lossless"):
-        v = s[name]
-        print(f"{name:<15}{v['kbps']:>9.0f}{v.get('bits_edges') or 0:>10.0f}{v.get('bits_values') or 0:>10.0f}"
-              f"{v.get('bits_regular') or 0:>10.0f}{v['psnr_db']:>9.2f}{v['max_error']:>9.4f}"
-              f"{100 * v['outliers_1pct']:>8.2f}%{100 * v['outliers_5pct']:>8.2f}%{v['encode_ms']:>8.1f}"
-              f"{v['decode_ms'] + v.get('diffusion_ms', 0):>8.1f}")
-    v = s["h264-8bit"]
-    print(f"{'h264-8bit':<15}{'(atlas)':>9}{'':>30}{v['psnr_db']:>9.2f}{v['max_error']:>9.4f}"
-          f"{100 * v['outliers_1pct']:>8.2f}%{100 * v['outliers_5pct']:>8.2f}%{v['encode_ms']:>8.1f}"
-          f"{v['decode_ms']:>8.1f}")
-    p = s["edge"]["plain"]
-    print(f"\ndiffusion: edge-aware {s['edge']['psnr_db']:.2f} dB (max err {s['edge']['max_error']:.4f}) vs plain "
-          f"push-pull {p['psnr_db']:.2f} dB (max err {p['max_error']:.4f}); decode ms above include diffusion")
-    print(f"equal total bitrate {r['total_bitrate_kbps']:g} kbit/s: colour PSNR with 8-bit depth in the atlas "
-          f"{s['h264-8bit']['colour_psnr_db']:.2f} dB; colour-only atlas at {r['colour_only_kbps']:.0f} kbit/s + "
-          f"edge depth at {r['edge_kbps']:.0f} kbit/s: {s['edge']['colour_psnr_db']:.2f} dB")
+
+    def row(name, p):
+        setting = ",".join(f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}" for k, v in p["setting"].items())
+        bits = p["bits_per_frame"]
+        kbit = "" if bits is None else f"{bits / 1000:.1f}"
+        kbps = "" if bits is None else f"{p['kbps']:.0f}"
+        print(f"{name:<16}{setting[:21]:<22}{kbit:>11}{kbps:>9}{p['psnr_db']:>9.2f}{100 * p['outliers_1pct']:>8.2f}%"
+              f"{100 * p['outliers_5pct']:>8.2f}%{p['encode_ms']:>8.1f}{p['decode_ms']:>8.1f}")
+
+    for name, pts in r["curves"].items():
+        for p in pts:
+            row(name, p)
+    for name, p in r["edge_variants"].items():
+        row(name, p)
+    for p in r["h264_8bit_atlas"]:
+        row("h264-8bit-atlas", p)
+    print("edge codec against H.264 depth alone at its rate (kbit/frame, PSNR dB, % > 1 % off):")
+    for m in r["matched"]:
+        print(f"  threshold {m['threshold']:>5g}: " + "; ".join(
+            f"{name} {v['bits_per_frame'] / 1000:.0f} kbit {v['psnr_db']:.2f} dB {100 * v['outliers_1pct']:.1f} %"
+            for name, v in m.items() if name != "threshold"))
+    for metric in ("psnr_db", "outliers_1pct"):
+        runs = []
+        for w in r["wins"][metric]:
+            if not runs or runs[-1][0] != w["winner"]:
+                runs.append([w["winner"], w["bits_per_frame"], w["bits_per_frame"]])
+            runs[-1][2] = w["bits_per_frame"]
+        print(f"best {metric} within a bit budget: " + "; ".join(
+            f"{a / 1000:.0f}-{b / 1000:.0f} kbit/frame: {name}" for name, a, b in runs))
     e2e = r.get("end_to_end")
     if e2e:
-        print(f"end to end ({e2e['trace']}, proxy IBR, {e2e['total_kbps']:g} kbit/s in total):")
-        for codec, v in e2e["results"].items():
-            print(f"  {codec:>5} depth: DSSIM {v['dssim_mean']:.4f}, PSNR {v['psnr_mean']:.2f} dB, holes "
-                  f"{100 * v['hole_fraction_mean']:.2f} %, colour {v['video_kbps']:.0f} + depth "
-                  f"{v['depth_kbps']:.0f} kbit/s")
+        print(f"end to end (proxy IBR, {e2e['latency_ms']:g} ms, {len(e2e['per_window'])} windows), DSSIM at equal "
+              f"total bitrate (colour + depth):")
+        for v in e2e["results"].values():
+            if v["feasible"]:
+                print(f"  {v['total_kbps']:>6.0f} kbit/s {v['codec']:<16} DSSIM {v['dssim_mean']:.4f}  PSNR "
+                      f"{v['psnr_mean']:.2f} dB  colour {v['video_kbps']:.0f} + depth {v['depth_kbps']:.0f} kbit/s")
+            else:
+                print(f"  {v['total_kbps']:>6.0f} kbit/s {v['codec']:<16} infeasible: depth alone "
+                      f"{v['depth_kbps']:.0f} kbit/s")
+        for total, wv in e2e["wins"].items():
+            print(f"  best at {total} kbit/s: {wv['winner']} (DSSIM {wv['dssim']:.4f})")
+    x = r["extremes"]
+    print(f"extremes {x['near']:g}-{x['far']:g} m: " + "; ".join(
+        f"{k}: max rel err {v['max_relative_error']:.3g}, farthest decoded {v['farthest_decoded_m']:.4g} m, "
+        f"monotone {v['monotone']}, finite {v['finite']}" for k, v in x["quantizers"].items()))

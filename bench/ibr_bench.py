@@ -76,8 +76,11 @@ class Simulation:
     def __init__(self, scene, view_size=(1024, 1024), out_size=(960, 540), fov_deg=90.0, fps=10.0,
                  bitrate_kbps=16000.0, extra_view="auto", proxies=None, ctx=None, depth_codec="h264",
                  edge_kbps=0.0, keep_distances=False, peel_marker=True, flow_coder=None, flow_frames=False,
-                 moving_truth=False):
-        """flow_coder: the server's MOTION_FLOW coder (default its default); flow_frames: decode each
+                 moving_truth=False, depth_streams=None):
+        """depth_streams: a callable (session, fps) -> an object with ``encode(produced)`` ->
+        [(kind, bytes)], ``decode(frame)`` -> {view: distance} and ``close()`` that carries depth
+        instead of the edge codec (``depth_codec="edge"``: no depth in the atlas), e.g. a
+        ``depth_codecs.ViewDepthStreams`` of a competing codec; flow_coder: the server's MOTION_FLOW coder (default its default); flow_frames: decode each
         frame's motion flow and hand the textures a FlowFrame, for methods with ``motion="flow"``;
         moving_truth: the ground truth also says which moving object each pixel shows
         (:meth:`ground_truth_moving`)."""
@@ -104,7 +107,11 @@ class Simulation:
             spec = dataclasses.replace(spec, keep_distance=True)
         self.spec, self.bitrate_kbps, self.keyint = spec, bitrate_kbps, cfg.keyint
         self.depth_encoder = self.depth_decoder = None
-        if depth_codec == "edge":
+        if depth_streams is not None:
+            if depth_codec != "edge":
+                raise ValueError("depth_streams replace the edge codec's streams: use depth_codec='edge'")
+            self.depth_encoder = self.depth_decoder = depth_streams(self.session, fps)
+        elif depth_codec == "edge":
             from pibr.client.depth_stream import EdgeDepthDecoder
             from pibr.server.depth_stream import EdgeDepthEncoder
 
@@ -124,7 +131,7 @@ class Simulation:
         self._quadtrees = {}   # threshold -> the newest frame's quadtree payload
         self._oracle = None    # (encoder, decoder, textures) of the zero-latency stream
         self.bytes = []        # H.264 bytes per frame
-        self.depth_bytes = []  # edge-codec bytes per frame
+        self.depth_bytes = []  # depth bytes per frame (edge codec or depth_streams)
         self.pose_bytes = []   # OBJECT_POSES bytes per frame (scenes that move)
         self.flow_bytes = []   # MOTION_FLOW bytes per frame (scenes that move)
         self.flow = None       # the newest frame's decoded (flow (h, w, 2), moving (h, w)), with flow_frames

@@ -99,36 +99,6 @@ def plot_offset_search(result: dict, path: str) -> None:
     plt.close(fig)
 
 
-def plot_codec(result: dict, path: str) -> None:
-    """Bits per frame by part and variant, and disparity PSNR per frame."""
-    plt = _pyplot()
-    s = result["summary"]
-    fig, (a, b) = plt.subplots(1, 2, figsize=(12, 4.2))
-    names = ["edge", "edge-intra", "edge-raster"]
-    bottom = np.zeros(len(names))
-    for part in ("bits_edges", "bits_values", "bits_regular", "bits_header"):
-        vals = np.array([(s[n].get(part) or 0) / 1000 for n in names])
-        a.bar(names, vals, bottom=bottom, label=part.replace("bits_", ""))
-        bottom += vals
-    a.bar(["zstd-lossless"], [s["zstd-lossless"]["bytes"] * 8 / 1000], label="zstd (all)")
-    a.set_ylabel("kbit per frame")
-    a.set_title("depth bits per frame (primary view)")
-    a.legend(fontsize=8)
-    frames = result["frames"]
-    x = np.arange(len(frames))
-    for n in ("edge", "edge-intra", "edge-raster", "zstd-lossless", "h264-8bit"):
-        b.plot(x, [f[n]["psnr_db"] for f in frames], label=n, lw=1)
-    b.plot(x, [f["edge"]["plain"]["psnr_db"] for f in frames], label="edge, plain push-pull", lw=1, ls=":")
-    b.set_xlabel("frame")
-    b.set_ylabel("disparity PSNR dB")
-    b.set_title("depth after reconstruction")
-    b.legend(fontsize=8)
-    b.grid(alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-
-
 def plot_pareto(result: dict, path: str) -> None:
     """Reinert et al.'s Figure 9 per scene and output size: client ms per frame (log) against
     DSSIM, one marker per method and knob, the Pareto front drawn, the zero-latency oracle as a
@@ -214,4 +184,60 @@ def plot_dynamic(result: dict, path: str) -> None:
     axes[1][0].legend(fontsize=7)
     fig.tight_layout()
     fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
+def plot_depth_rd(result: dict, path: str) -> None:
+    """``pibr bench codec``: bits per frame against disparity PSNR and against the share of pixels
+    more than 1 % off in distance, one curve per depth codec; and proxy DSSIM against the total
+    bitrate (colour + depth), one line per codec (infeasible totals left out)."""
+    plt = _pyplot()
+    e2e = result.get("end_to_end")
+    fig, axes = plt.subplots(1, 3 if e2e else 2, figsize=(17 if e2e else 12, 4.6))
+    styles = {"edge": "o-", "edge-rc": "o--", "h264-8bit": "s-", "h264-10bit": "D-", "log-zstd": "^-",
+              "zstd-lossless": "*", "h264-8bit-atlas": "x-"}
+    for name, pts in result["curves"].items():
+        x = np.array([p["bits_per_frame"] for p in pts]) / 1000
+        axes[0].plot(x, [p["psnr_db"] for p in pts], styles.get(name, "o-"), label=name, ms=5)
+        axes[1].plot(x, [100 * p["outliers_1pct"] for p in pts], styles.get(name, "o-"), label=name, ms=5)
+    for ax in axes[:2]:
+        ax.set_xscale("log")
+        ax.set_xlabel("depth kbit per frame (primary view, log)")
+        ax.grid(alpha=0.3, which="both")
+        ax.legend(fontsize=8)
+    axes[0].set_ylabel("disparity PSNR dB (higher is better)")
+    axes[0].set_title("rate-distortion: disparity PSNR")
+    axes[1].set_ylabel("% of pixels > 1 % off in distance (lower is better)")
+    axes[1].set_title("rate-distortion: 1 % outliers")
+    if e2e:
+        ax = axes[2]
+        codecs = list(dict.fromkeys(v["codec"] for v in e2e["results"].values()))
+        for c in codecs:
+            rows = sorted((v for v in e2e["results"].values() if v["codec"] == c and v["feasible"]),
+                          key=lambda v: v["total_kbps"])
+            if rows:
+                label = f"{c} ({e2e['edge_share']:.0%} of the total)" if c == "edge-rc" else c
+                ax.plot([v["total_kbps"] / 1000 for v in rows], [v["dssim_mean"] for v in rows],
+                        styles.get(c, "o-"), label=label, ms=5)
+        ax.set_xscale("log")
+        totals = sorted({v["total_kbps"] for v in e2e["results"].values()})
+        ax.set_xticks([t / 1000 for t in totals], [f"{t / 1000:g}" for t in totals])
+        ax.minorticks_off()
+        never = sorted({v["codec"] for v in e2e["results"].values()} -
+                       {v["codec"] for v in e2e["results"].values() if v["feasible"]})
+        if never:
+            rates = {c: max(v["depth_kbps"] for v in e2e["results"].values() if v["codec"] == c) for c in never}
+            ax.text(0.02, 0.02, "infeasible at every total (depth alone):\n" + "\n".join(
+                f"{c}{' (%d-bit)' % e2e['log_bits'] if c == 'log-zstd' else ''} {rates[c] / 1000:.1f} Mbit/s"
+                for c in never), transform=ax.transAxes, fontsize=8,
+                va="bottom")
+        ax.set_xlabel("total Mbit/s (colour + depth + motion)")
+        ax.set_ylabel("proxy DSSIM (lower is better)")
+        ax.set_title(f"end to end at equal total bitrate, {e2e['latency_ms']:g} ms")
+        ax.grid(alpha=0.3, which="both")
+        ax.legend(fontsize=8)
+    fig.suptitle(f"depth codecs, scene {result['scene']}, {result['view_size'][0]}x{result['view_size'][1]}, "
+                 f"{result['frames']} frames", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
     plt.close(fig)

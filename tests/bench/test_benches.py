@@ -61,24 +61,67 @@ def test_bench_ibr(tmp_path, capsys):
 
 
 def test_bench_codec(tmp_path, capsys):
-    from pibr.bench.codec_bench import print_codec_table, run_codec_bench
+    """Rate-distortion curves at a tiny size: more bits never lower a codec's PSNR, H.264 depth is
+    coded at the edge codec's rates, the lossless codecs decode exactly their quantisation, the
+    end-to-end split gives colour what depth leaves."""
+    from pibr.bench.codec_bench import MIN_COLOUR_KBPS, print_codec_table, run_codec_bench
 
     r = run_codec_bench(windows=(Window("pred6dof-1", 30.0, 8.0),), window_s=0.3, view_size=TINY_VIEW,
-                        out_size=TINY_OUT, out_dir=str(tmp_path), progress=False)
+                        out_size=TINY_OUT, out_dir=str(tmp_path), progress=False, thresholds=(2.0, 16.0, 128.0),
+                        log_bits=(16, 8), totals_kbps=(600.0, 2000.0), e2e_windows=1,
+                        plot_path=str(tmp_path / "depth_rd.png"))
     assert r["windows"]["used"] == [{"trace": "pred6dof-1", "start_s": 30.0, "duration_s": 0.3}]
-    s = r["summary"]
-    assert {"edge", "edge-intra", "edge-raster", "zstd-lossless", "h264-8bit"} <= set(s)
-    for name in ("edge", "edge-intra", "edge-raster"):
-        assert s[name]["bits_edges"] > 0 and s[name]["bits_values"] > 0
-    # lossless codes are never worse than the edge codec's reconstruction
-    assert s["zstd-lossless"]["psnr_db"] >= s["edge"]["psnr_db"]
-    e2e = r["end_to_end"]["results"]
-    assert set(e2e) == {"edge", "h264"}
-    assert all(0.0 <= v["dssim_mean"] <= 0.5 for v in e2e.values())
-    assert e2e["edge"]["depth_kbps"] > 0 and e2e["h264"]["depth_kbps"] == 0
-    assert (tmp_path / "codec.json").exists() and (tmp_path / "codec.png").stat().st_size > 0
+    assert r["windows"]["disjoint_from_tuning"] and r["frames"] == 3
+    curves = r["curves"]
+    h264 = ["h264-8bit", "h264-10bit"] if r["h264_10bit"]["available"] else ["h264-8bit"]
+    assert set(curves) == {"edge", *h264, "log-zstd", "zstd-lossless"}
+    assert [p["setting"]["threshold"] for p in curves["edge"]] == [128.0, 16.0, 2.0]   # sorted by bits
+    for name, pts in curves.items():
+        bits = [p["bits_per_frame"] for p in pts]
+        assert bits == sorted(bits) and all(b > 0 for b in bits), name
+        psnr = [p["psnr_db"] for p in pts]
+        assert psnr == sorted(psnr), name                     # more bits: PSNR not lower
+        assert all(p["frames"] == 3 for p in pts)
+    for name in h264:   # rate control targets the edge codec's bits of the same threshold
+        for p in curves[name]:
+            edge = next(e for e in curves["edge"] if e["setting"]["threshold"] == p["setting"]["matched_to_edge_threshold"])
+            assert 0.5 < p["bits_per_frame"] / edge["bits_per_frame"] < 2.0
+    assert curves["zstd-lossless"][0]["exact_codes"] == 1.0
+    assert all(p["exact_codes"] == 1.0 for p in curves["log-zstd"])
+    assert curves["log-zstd"][-1]["outliers_1pct"] == 0.0 and curves["log-zstd"][-1]["psnr_db"] > 90
+    assert set(r["edge_variants"]) == {"edge-intra", "edge-raster", "edge-plain-diffusion"}
+    default = next(p for p in curves["edge"] if p["setting"]["threshold"] == 2.0)
+    assert all(default[f"bits_{k}"] > 0 for k in ("edges", "values", "regular", "header"))
+    assert sum(default[f"bits_{k}"] for k in ("edges", "values", "regular", "header")) == \
+        pytest.approx(default["bits_per_frame"])
+    assert [m["threshold"] for m in r["matched"]] == [128.0, 16.0, 2.0] and all(set(h264) <= set(m)
+                                                                                  for m in r["matched"])
+    assert [p["setting"]["total_kbps"] for p in r["h264_8bit_atlas"]] == [600.0, 2000.0]
+    assert all(p["bits_per_frame"] is None and p["atlas_kbps"] > 0 for p in r["h264_8bit_atlas"])
+    for metric in ("psnr_db", "outliers_1pct"):
+        assert {w["winner"] for w in r["wins"][metric]} <= set(curves)
+    e2e = r["end_to_end"]
+    assert {v["codec"] for v in e2e["results"].values()} == {"h264-8bit-atlas", "edge", "edge-rc", *h264,
+                                                             "log-zstd", "zstd-lossless"}
+    for v in e2e["results"].values():
+        # the depth streams' rate is the same in the probe and the run; H.264 depth is targeted at the edge's
+        depth = e2e["results"][f"{v['total_kbps']:g}/edge"]["depth_kbps"] if v["codec"] in h264 else \
+            e2e["edge_share"] * v["total_kbps"] if v["codec"] == "edge-rc" else v["depth_kbps"]
+        assert v["colour_kbps"] == pytest.approx(v["total_kbps"] - depth - v["motion_kbps"], rel=1e-9)
+        assert v["feasible"] == (v["colour_kbps"] >= MIN_COLOUR_KBPS)
+        if v["feasible"]:
+            assert 0.0 <= v["dssim_mean"] <= 0.5
+    atlas = e2e["results"]["2000/h264-8bit-atlas"]
+    assert atlas["feasible"] and atlas["depth_kbps"] == 0 and atlas["colour_kbps"] == 2000.0 - atlas["motion_kbps"]
+    assert e2e["results"]["2000/edge"]["depth_kbps"] > 0
+    assert e2e["wins"]["2000"]["winner"] in {v["codec"] for v in e2e["results"].values() if v["feasible"]}
+    assert set(r["extremes"]["quantizers"]) == {"8bit-disparity", "edge-12bit-disparity", "log16"}
+    data = json.loads((tmp_path / "codec.json").read_text())
+    assert data["curves"]["edge"][0]["bits_per_frame"] == curves["edge"][0]["bits_per_frame"]
+    assert (tmp_path / "codec.png").stat().st_size > 0 and (tmp_path / "depth_rd.png").stat().st_size > 0
     print_codec_table(r)
-    assert "end to end" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "end to end" in out and "10-bit H.264" in out
 
 
 def test_bench_codec_speed_against_a_checkout_of_itself(tmp_path, capsys):
