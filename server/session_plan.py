@@ -1,7 +1,7 @@
 """What a session will send, decided from the server's settings, the scene and the client's Hello."""
 from __future__ import annotations
 
-from pibr.protocol.atlas import build_layout
+from pibr.protocol.atlas import ALIGN, build_layout
 from pibr.protocol.depth import h264_quantizer
 from pibr.protocol.errors import ConfigError
 from pibr.protocol.messages import Hello
@@ -22,13 +22,19 @@ def extra_offset_for(cfg: ServerConfig, scene):
     return extra_offset_pose(*PAPER_EXTRA_OFFSET)
 
 
+def extra_view_size(view_size: tuple, scale: float) -> tuple[int, int]:
+    """The extra view's (w, h): ``scale`` of the primary's, each side a multiple of the atlas
+    alignment (at least one)."""
+    return tuple(max(ALIGN, int(round(side * scale / ALIGN)) * ALIGN) for side in view_size)
+
+
 def plan_session(cfg: ServerConfig, scene, hello: Hello, proxies: dict | None = None) -> tuple[SessionConfig, ProducerSpec]:
     depth_codec = hello.depth_codec or cfg.depth_codec
     if depth_codec not in ("h264", "edge"):
         raise ConfigError(f"unknown depth codec {depth_codec!r}; choose h264 or edge")
     use_extra = cfg.extra_view == "on" or (cfg.extra_view == "auto" and scene.extra_view)
     pw, ph = cfg.view_size
-    extra_size = (pw // 2, ph // 2) if use_extra else None
+    extra_size = extra_view_size(cfg.view_size, cfg.extra_scale) if use_extra else None
     offset = extra_offset_for(cfg, scene) if use_extra else None
     edge = depth_codec == "edge"
     layout = build_layout((pw, ph), extra_size, depth_in_atlas=not edge)
