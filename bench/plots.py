@@ -238,6 +238,11 @@ def plot_trade(result: dict, knob: str, path: str) -> None:
             ms = [r["methods"][label]["client_cpu_ms"] if client else r["stream"]["server_cpu_ms"] for r in rows]
             for ax, x in zip(axes[row], (xs, mbps, ms)):
                 ax.plot(x, dssim, "o-", label=label, ms=4)
+            if label == "proxy":   # which point is which value, on the panels not ordered by it
+                for ax, x in zip(axes[row][1:], (mbps, ms)):
+                    for xi, yi, v in zip(x, dssim, values):
+                        ax.annotate(f"{v:g}" if isinstance(v, float) else str(v), (xi, yi), fontsize=7,
+                                    xytext=(3, 3), textcoords="offset points")
         for r, x, in zip(rows, xs):
             if r["default"]:
                 axes[row][0].axvline(x, color="grey", ls=":", lw=1)

@@ -37,7 +37,7 @@ from .coverage import LinkSchedule, camera_rays, trace_poses
 from .metrics import frame_metrics, nearly_uniform, pixels_per_degree
 from .pareto import Variant, _display_timed, _geometric_holes, _metrics_job
 from .results import write_result
-from .windows import EVALUATION_WINDOWS, windows_json
+from .windows import EVALUATION_WINDOWS, describe_windows, windows_json
 
 #: rotation, proxy, and the best competitors of ``pibr bench pareto`` (README: gridwarp, and
 #: coarse-meshwarp with a vertex every 4th pixel, the fastest of the warps within 45 % of proxy).
@@ -428,10 +428,7 @@ def _sweep_json(name, sweep, measured, points) -> list[dict]:
 
 
 def print_trade_tables(r: dict) -> None:
-    w = r["windows"]
-    used = ", ".join("{trace}@{start_s:g}+{duration_s:g}".format(**x) for x in w["used"])
-    relation = "disjoint from" if w["disjoint_from_tuning"] else "OVERLAPPING"
-    print(f"pibr bench trade: windows {used} ({relation} the tuning windows), every {r['stride']}th tick at "
+    print(f"pibr bench trade: {describe_windows(r['windows'])}, every {r['stride']}th tick at "
           f"{r['rate_hz']:g} Hz, output {r['output'][0]}x{r['output'][1]}, {r['seconds']:.0f} s")
     for scene, s in r["scenes"].items():
         print(f"\n{scene}: {s['ticks_scored_per_point']} ticks scored per point")

@@ -84,9 +84,12 @@ def register(sub) -> None:
     p.add_argument("--port", type=int, default=DEFAULT_PORT, help=f"TCP port, 0 for any free one (default {DEFAULT_PORT})")
     p.add_argument("--fps", type=float, default=10.0, help="server frame rate (default 10)")
     p.add_argument("--view-size", type=_size, default=(1024, 1024), metavar="WxH",
-                   help="primary wide-angle view size (default 1024x1024); the extra view is half")
+                   help="primary wide-angle view size (default 1024x1024)")
     p.add_argument("--extra-view", choices=("auto", "on", "off"), default="auto",
                    help="render the dual view's extra view: as the scene asks (auto), always, never")
+    p.add_argument("--extra-scale", type=float, default=0.5, metavar="S",
+                   help="the extra view's side over the primary view's, 0.125..1 (default 0.5; "
+                        "'pibr bench trade --knobs extra' measures it)")
     p.add_argument("--no-peel-marker", action="store_true",
                    help="the extra view leaves peeled pixels empty like sky instead of marking them (saves the "
                         "early depth test: about a quarter of the extra view's render time; clients then cannot "
@@ -179,6 +182,7 @@ def cmd_serve(args) -> int:
 
     config = ServerConfig(host=args.host, port=args.port, scene=with_up(args.scene, args.up), fps=args.fps,
                           view_size=tuple(args.view_size), extra_view=args.extra_view,
+                          extra_scale=args.extra_scale,
                           peel_marker=not args.no_peel_marker,
                           extra_offset=args.extra_offset, bitrate_kbps=args.bitrate_kbps, keyint=args.keyint,
                           preset=args.preset, projection=args.projection, max_edge_deg=args.max_edge_deg,
