@@ -390,13 +390,15 @@ def run_trade_bench(scenes=("room",), knobs=tuple(KNOBS), windows=EVALUATION_WIN
                 measured[key] = measure_point(scene, point, windows, methods,
                                               client_variants if key == "default" else [], lods, gt, ctx, rate_hz,
                                               stride, out_size, flip_every, seed, pool, bar)
-            result["scenes"][scene.name] = {
-                "ticks_scored_per_point": per_tick, "nearly_uniform_ticks": gt.uniform,
-                "frames": {w.label: len(trace_poses(scene, w.trace, w.start_s, w.duration_s, rate_hz)[0][::stride])
-                           for w in windows},
-                "proxy_bundles": {f"{r}/{f:g}": {"bytes": len(b.compressed), "triangles": b.triangles}
-                                  for (r, f), (_, b) in lods.items()},
-                "sweeps": {name: _sweep_json(name, sweep, measured, points) for name, sweep in sweeps.items()}}
+                result["scenes"][scene.name] = {
+                    "ticks_scored_per_point": per_tick, "nearly_uniform_ticks": gt.uniform,
+                    "frames": {w.label: len(trace_poses(scene, w.trace, w.start_s, w.duration_s, rate_hz)[0][::stride])
+                               for w in windows},
+                    "proxy_bundles": {f"{r}/{f:g}": {"bytes": len(b.compressed), "triangles": b.triangles}
+                                      for (r, f), (_, b) in lods.items()},
+                    "sweeps": {name: _sweep_json(name, sweep, measured, points) for name, sweep in sweeps.items()}}
+                # what is measured so far, for a long run stopped early
+                write_result(out_dir, "trade.json", result | {"complete": False, "seconds": time.perf_counter() - t0})
     finally:
         if bar is not None:
             bar.close()
@@ -404,6 +406,7 @@ def run_trade_bench(scenes=("room",), knobs=tuple(KNOBS), windows=EVALUATION_WIN
             pool.shutdown(cancel_futures=True)
         ctx.release()
     result["seconds"] = time.perf_counter() - t0
+    result["complete"] = True
     write_result(out_dir, "trade.json", result)
     from .plots import plot_trade
 
@@ -413,10 +416,12 @@ def run_trade_bench(scenes=("room",), knobs=tuple(KNOBS), windows=EVALUATION_WIN
 
 
 def _sweep_json(name, sweep, measured, points) -> list[dict]:
-    """The knob's curve: per value, the stream's figures and each method's."""
+    """The knob's curve: per value, the stream's figures and each method's (the values measured so far)."""
     out = []
     default = measured["default"]
     for value, key in sweep:
+        if not KNOBS[name].client and key not in measured:
+            continue
         if KNOBS[name].client:
             row = {"value": value, "stream": default["stream"], "methods": {"proxy": default["methods"][key]}}
         else:
@@ -436,13 +441,14 @@ def print_trade_tables(r: dict) -> None:
             labels = list(rows[0]["methods"])
             unit = KNOBS[name].unit
             print(f"\n  {name} ({unit})" if unit else f"\n  {name}")
+            ref_label = labels[min(1, len(labels) - 1)]
             head = (f"    {'value':>9}{'Mbit/s':>8}{'kbit/fr':>9}{'srv ms':>8}{'age ms':>8}"
                     + "".join(f"{'DSSIM ' + lab[:12]:>20}" for lab in labels)
-                    + f"{'PSNR':>7}{'FLIP':>7}{'holes%':>7}{'cli ms':>8}   (last four: {labels[min(1, len(labels) - 1)]})")
+                    + f"{'PSNR':>7}{'FLIP':>7}{'holes%':>7}{'cli ms':>8}   (last four: {ref_label})")
             print(head)
             for row in rows:
                 st = row["stream"]
-                ref = row["methods"][labels[min(1, len(labels) - 1)]]
+                ref = row["methods"][ref_label]
                 value = row["value"]
                 value = f"{value:g}" if isinstance(value, float) else str(value)
                 age = "-" if st["age_ms_mean"] is None else f"{st['age_ms_mean']:.0f}"
