@@ -78,7 +78,8 @@ class Simulation:
                  edge_kbps=0.0, keep_distances=False, peel_marker=True, flow_coder=None, flow_frames=False,
                  moving_truth=False, keyint=None, preset=None, extra_scale=None):
         """keyint, preset, extra_scale: the server's (None: its defaults); flow_coder: the server's
-        MOTION_FLOW coder (default its default); flow_frames: decode each frame's motion flow and hand the textures a FlowFrame, for methods with ``motion="flow"``;
+        MOTION_FLOW coder (default its default); flow_frames: decode each frame's motion flow and
+        hand the textures a FlowFrame, for methods with ``motion="flow"``;
         moving_truth: the ground truth also says which moving object each pixel shows
         (:meth:`ground_truth_moving`)."""
         from pibr.client.frame_textures import FrameTextures
