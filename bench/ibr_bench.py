@@ -175,8 +175,6 @@ class Simulation:
 
             flow_payload = motion_flow_payload(p, self.flow_coder)
         self.server_cpu_ms.append((time.process_time() - c0) * 1e3)
-        self.distances = p.distances
-        self._quadtrees = {}
         self.bytes.append(len(data))
         payloads = [(PayloadKind.H264_ATLAS, data)]
         if self.depth_encoder is not None:
@@ -208,6 +206,7 @@ class Simulation:
         t_render = frame.render_t_us / 1e6
         if distances is not None:
             self.distances = distances
+            self._quadtrees = {}
         poses = frame.payload(PayloadKind.OBJECT_POSES)
         if poses is not None:
             self._receive_poses(t_render, poses)

@@ -252,7 +252,7 @@ def measure_point(scene, point: StreamPoint, windows, methods, extra_variants, p
                                     LinkParams(half, point.jitter_ms, point.cap_kbps), seed=seed)
             sim.restart_stream()
             in_flight = collections.deque()
-            shown = None
+            shown = shown_distances = None
             for i, t_us in enumerate(ticks):
                 while (due := schedule.next_due(t_us)) is not None:
                     render_us, pose_us = due
@@ -264,7 +264,7 @@ def measure_point(scene, point: StreamPoint, windows, methods, extra_variants, p
                 while in_flight and in_flight[0][0] <= t_us:
                     _, frame, distances = in_flight.popleft()
                     sim.receive(frame, distances)
-                    shown = frame
+                    shown, shown_distances = frame, distances
                 if i % stride:
                     continue
                 if shown is None:
@@ -274,7 +274,7 @@ def measure_point(scene, point: StreamPoint, windows, methods, extra_variants, p
                 display = pose_at(t_us)
                 stream["age_ms"].append((t_us - shown.render_t_us) / 1e3)
                 gt_rgb, gt_distance = gt.get(sim, (w.label, i), display, t)
-                geo = _geometric_holes(rays, display, gt_distance, shown, sim.distances, peeled_marked)
+                geo = _geometric_holes(rays, display, gt_distance, shown, shown_distances, peeled_marked)
                 with_flip = flip_every > 0 and (i // stride) % flip_every == 0
                 for label, m in made.items():
                     rgb, own, _, cpu = _display_timed(sim, m, display, shown, t)

@@ -101,6 +101,8 @@ def test_tiny_trade_sweep(tmp_path):
     for method in ("proxy", "rotation"):
         assert zero["methods"][method]["frames"] == slow["methods"][method]["frames"] == 12
         assert zero["methods"][method]["dssim"] <= slow["methods"][method]["dssim"]
+        # the holes of the frame shown, not of one still in flight
+        assert zero["methods"][method]["geometric_holes"] < slow["methods"][method]["geometric_holes"]
     free, capped = sweeps["cap"]
     assert free["value"] == 0.0 and capped["value"] == 300.0
     assert capped["stream"]["age_ms_mean"] > free["stream"]["age_ms_mean"] + 50
