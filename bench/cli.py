@@ -317,6 +317,28 @@ def register(sub) -> None:
     pa.add_argument("--out", default="out/bench")
     pa.set_defaults(func=cmd_bench_pareto)
 
+    tr = bs.add_parser("trade", help="each knob swept with the others at their defaults: quality against bits and ms",
+                       description="Sweeps colour bitrate, x264 preset, keyframe interval, primary and extra view "
+                                   "size, server fps, latency, jitter, a bandwidth cap, proxy tau and depth slack "
+                                   "and the LoD settings, one at a time, for rotation, proxy, gridwarp and "
+                                   "coarse-meshwarp: DSSIM, PSNR, FLIP, geometric holes, client and server CPU ms, "
+                                   "total bits per frame. Writes trade.json and trade_KNOB.png per knob.")
+    tr.add_argument("--knobs", type=_trade_knobs, default=None, metavar="NAME,...",
+                    help="only these knobs (default all: bitrate, preset, keyint, view, extra, fps, latency, "
+                         "jitter, cap, tau, slack, lod_resolution, lod_fraction)")
+    tr.add_argument("--scenes", type=_names, default=("room",), help="comma-separated scenes (default room)")
+    tr.add_argument("--windows", type=_windows, default="evaluation", help=_WINDOWS_HELP)
+    tr.add_argument("--window-seconds", type=_positive, default=2.0,
+                    help="the first seconds of each window (default 2; every server frame in them is rendered and "
+                         "encoded, ~0.5 CPU-s each at 1024^2 here)")
+    tr.add_argument("--stride", type=_positive_int, default=4,
+                    help="score every Nth displayed tick at 30 Hz (default 4)")
+    tr.add_argument("--size", type=_size, default=(960, 540), metavar="WxH", help="output size (default 960x540)")
+    tr.add_argument("--flip-every", type=_non_negative_int, default=4, help="FLIP on every Nth scored tick, 0: never")
+    tr.add_argument("--seed", type=_non_negative_int, default=0, help="jitter seed (default 0)")
+    tr.add_argument("--out", default="out/bench")
+    tr.set_defaults(func=cmd_bench_trade)
+
     dy = bs.add_parser("dynamic", help="moving objects at the display time: static, velocity, accel, flow and the "
                                        "oracle per latency; both flow coders",
                        description="Every way the client brings moving objects to the display time (proxy with "
@@ -540,6 +562,28 @@ def cmd_bench_pareto(args) -> int:
                               depth_codec=args.depth_codec, out_dir=args.out)
     print_pareto_table(result)
     print(f"written: {args.out}/pareto.json, pareto.png")
+    return 0
+
+
+def _trade_knobs(text: str) -> tuple:
+    from pibr.protocol.errors import ConfigError
+
+    from .trade import parse_knobs
+
+    try:
+        return parse_knobs(text)
+    except ConfigError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def cmd_bench_trade(args) -> int:
+    from .trade import KNOBS, print_trade_tables, run_trade_bench
+
+    knobs = args.knobs or tuple(KNOBS)
+    result = run_trade_bench(scenes=args.scenes, knobs=knobs, windows=args.windows, window_s=args.window_seconds,
+                             stride=args.stride, out_size=args.size, flip_every=args.flip_every, seed=args.seed, out_dir=args.out)
+    print_trade_tables(result)
+    print(f"written: {args.out}/trade.json, " + ", ".join(f"trade_{k}.png" for k in knobs))
     return 0
 
 

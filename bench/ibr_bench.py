@@ -76,12 +76,14 @@ class Simulation:
     def __init__(self, scene, view_size=(1024, 1024), out_size=(960, 540), fov_deg=90.0, fps=10.0,
                  bitrate_kbps=16000.0, extra_view="auto", proxies=None, ctx=None, depth_codec="h264",
                  edge_kbps=0.0, keep_distances=False, peel_marker=True, flow_coder=None, flow_frames=False,
-                 moving_truth=False, depth_streams=None):
-        """depth_streams: a callable (session, fps) -> an object with ``encode(produced)`` ->
-        [(kind, bytes)], ``decode(frame)`` -> {view: distance} and ``close()`` that carries depth
-        instead of the edge codec (``depth_codec="edge"``: no depth in the atlas), e.g. a
-        ``depth_codecs.ViewDepthStreams`` of a competing codec; flow_coder: the server's MOTION_FLOW coder (default its default); flow_frames: decode each
-        frame's motion flow and hand the textures a FlowFrame, for methods with ``motion="flow"``;
+                 moving_truth=False, depth_streams=None, keyint=None, preset=None, extra_scale=None):
+        """keyint, preset, extra_scale: the server's (None: its defaults); depth_streams: a callable
+        (session, fps) -> an object with ``encode(produced)`` -> [(kind, bytes)], ``decode(frame)``
+        -> {view: distance} and ``close()`` that carries depth instead of the edge codec
+        (``depth_codec="edge"``: no depth in the atlas), e.g. a ``depth_codecs.ViewDepthStreams``
+        of a competing codec; flow_coder: the server's MOTION_FLOW coder (default its default);
+        flow_frames: decode each frame's motion flow and hand the textures a FlowFrame, for
+        methods with ``motion="flow"``;
         moving_truth: the ground truth also says which moving object each pixel shows
         (:meth:`ground_truth_moving`)."""
         from pibr.client.frame_textures import FrameTextures
@@ -99,13 +101,15 @@ class Simulation:
         self.scene, self.fps = scene, fps
         cfg = ServerConfig(view_size=tuple(view_size), extra_view=extra_view, fps=fps, bitrate_kbps=bitrate_kbps,
                            depth_codec=depth_codec, edge=EdgeSettings(kbps=edge_kbps), peel_marker=peel_marker,
-                           **({} if flow_coder is None else {"flow_coder": flow_coder}))
+                           **{k: v for k, v in (("flow_coder", flow_coder), ("keyint", keyint), ("preset", preset),
+                                                ("extra_scale", extra_scale)) if v is not None})
         self.flow_coder = cfg.flow_coder
         info = {"objects": len(proxies)} if proxies else None
         self.session, spec = plan_session(cfg, scene, Hello(want_proxies=bool(proxies)), info)
         if keep_distances:   # the views' true distances, for geometric holes
             spec = dataclasses.replace(spec, keep_distance=True)
-        self.spec, self.bitrate_kbps, self.keyint = spec, bitrate_kbps, cfg.keyint
+        self.spec, self.bitrate_kbps, self.keyint, self.preset = spec, bitrate_kbps, cfg.keyint, cfg.preset
+        self.edge_settings = cfg.edge
         self.depth_encoder = self.depth_decoder = None
         if depth_streams is not None:
             if depth_codec != "edge":
@@ -119,7 +123,8 @@ class Simulation:
             self.depth_decoder = EdgeDepthDecoder(self.session)
         self.renderer = Renderer(self.ctx, scene, cfg.projection, max_edge_angle_deg=cfg.max_edge_deg)
         self.producer = FrameProducer(self.ctx, self.renderer, spec)
-        self.encoder = H264Encoder(spec.layout.width, spec.layout.height, fps, bitrate_kbps, cfg.keyint, deterministic=True)
+        self.encoder = H264Encoder(spec.layout.width, spec.layout.height, fps, bitrate_kbps, cfg.keyint, cfg.preset,
+                                   deterministic=True)
         self.decoder = H264Decoder(spec.layout.width, spec.layout.height)
         self.textures = FrameTextures(self.ctx, self.session)
         self.output = OutputConfig(out_size[0], out_size[1], fov_deg, 60.0)
@@ -134,6 +139,7 @@ class Simulation:
         self.depth_bytes = []  # depth bytes per frame (edge codec or depth_streams)
         self.pose_bytes = []   # OBJECT_POSES bytes per frame (scenes that move)
         self.flow_bytes = []   # MOTION_FLOW bytes per frame (scenes that move)
+        self.server_cpu_ms = []  # per frame: process CPU ms of render, pack and every encoder
         self.flow = None       # the newest frame's decoded (flow (h, w, 2), moving (h, w)), with flow_frames
         self.true_flow = None  # ... and the renderer's own (flow, moving) before coding
         self.motion_decoder = None
@@ -158,30 +164,61 @@ class Simulation:
         cache_key = (t_render, pose.as_array().tobytes())
         if self._last_render is not None and cache_key == self._last_render[0]:
             return self._last_render[1]
+        frame, distances = self.serve(t_render, pose)
+        self.receive(frame, distances)
+        self._last_render = (cache_key, frame)
+        return frame
+
+    def serve(self, t_render: float, pose):
+        """The server's half: render, pack and encode the frame rendered at ``t_render`` from
+        ``pose`` -> (Frame, its views' true distances {view: (h, w)} when kept). Frames must be
+        received (:meth:`receive`) in the order they were served."""
+        c0 = time.process_time()
         p = self.producer.produce(pose, t_render)
-        self.distances = p.distances
-        self._quadtrees = {}
         data, key = self.encoder.encode(p.yuv)
+        depth = self.depth_encoder.encode(p) if self.depth_encoder is not None else []
+        flow_payload = None
+        if p.motion is not None:
+            from pibr.server.motion_flow import motion_flow_payload
+
+            flow_payload = motion_flow_payload(p, self.flow_coder)
+        self.server_cpu_ms.append((time.process_time() - c0) * 1e3)
         self.bytes.append(len(data))
         payloads = [(PayloadKind.H264_ATLAS, data)]
         if self.depth_encoder is not None:
-            depth = self.depth_encoder.encode(p)
             self.depth_bytes.append(sum(len(d) for _, d in depth))
             payloads += depth
         if p.object_poses is not None:
             payloads.append((PayloadKind.OBJECT_POSES, p.object_poses))
             self.pose_bytes.append(len(p.object_poses))
-            self._receive_poses(t_render, p.object_poses)
-        if p.motion is not None:
-            from pibr.server.motion_flow import motion_flow_payload
-
-            flow_payload = motion_flow_payload(p, self.flow_coder)
+        if flow_payload is not None:
             payloads.append((PayloadKind.MOTION_FLOW, flow_payload))
             self.flow_bytes.append(len(flow_payload))
             self.true_flow = (p.motion, p.moving)
         us = int(round(t_render * 1e6))
         frame = Frame(len(self.bytes) - 1, us, us, 0, us, p.primary_pose, p.extra_pose, self.scene.near,
                       self.scene.far, payloads=tuple(payloads), keyframe=key)
+        return frame, p.distances
+
+    def frame_bits(self, index: int = -1) -> int:
+        """Bits of colour, depth and motion (poses, flow) of served frame ``index``."""
+        total = self.bytes[index]
+        for series in (self.depth_bytes, self.pose_bytes, self.flow_bytes):
+            if series:
+                total += series[index]
+        return 8 * total
+
+    def receive(self, frame, distances=None) -> None:
+        """The client's half: decode ``frame`` and upload it as the newest. ``distances``: the
+        frame's true distances (from :meth:`serve`), kept as ``self.distances`` for geometric holes."""
+        t_render = frame.render_t_us / 1e6
+        if distances is not None:
+            self.distances = distances
+            self._quadtrees = {}
+        poses = frame.payload(PayloadKind.OBJECT_POSES)
+        if poses is not None:
+            self._receive_poses(t_render, poses)
+        data = frame.payload(PayloadKind.H264_ATLAS)
         distances = self.depth_decoder.decode(frame) if self.depth_decoder is not None else None
         image = self.decoder.decode(data)
         flow_frame = None
@@ -195,8 +232,27 @@ class Simulation:
             self.flow_decode_ms.append((t1 - t0) * 1e3)
             self.flow_prepare_ms.append((time.perf_counter() - t1) * 1e3)
         self.textures.upload(image, frame.frame_id, distances, flow_frame)
-        self._last_render = (cache_key, frame)
-        return frame
+
+    def restart_stream(self) -> None:
+        """A new session's stream: fresh encoders and decoders (the next frame is a keyframe);
+        renderer, textures and methods are kept."""
+        from pibr.client.video import H264Decoder
+        from pibr.server.video import H264Encoder
+
+        enc = self.encoder
+        self.encoder = H264Encoder(enc.width, enc.height, self.fps, self.bitrate_kbps, self.keyint, self.preset,
+                                   deterministic=True)
+        enc.close()
+        self.decoder = H264Decoder(enc.width, enc.height)
+        if self.depth_encoder is not None:
+            from pibr.client.depth_stream import EdgeDepthDecoder
+            from pibr.server.depth_stream import EdgeDepthEncoder
+
+            self.depth_decoder.close()
+            self.depth_encoder = EdgeDepthEncoder(self.session, self.fps, self.edge_settings)
+            self.depth_decoder = EdgeDepthDecoder(self.session)
+        self._last_render = None
+        self.distances = {}
 
     def _receive_poses(self, t_render: float, payload: bytes) -> None:
         """Feed the pose history with the frames of the server's ticks up to ``t_render``: those the
@@ -301,12 +357,13 @@ class Simulation:
         self.gt.release()
 
 
-def load_proxies(scene, progress=False):
-    """The scene's proxies as a client receives them: (list of ProxyObject, the server's bundle)."""
+def load_proxies(scene, progress=False, settings=None):
+    """The scene's proxies as a client receives them: (list of ProxyObject, the server's bundle);
+    ``settings``: the server's ProxySettings (None: its defaults)."""
     from pibr.protocol.proxy import decode_bundle, decompress_bundle
-    from pibr.server.proxies import build_bundle
+    from pibr.server.proxies import ProxySettings, build_bundle
 
-    bundle = build_bundle(scene, progress=progress)
+    bundle = build_bundle(scene, settings or ProxySettings(), progress=progress)
     return decode_bundle(decompress_bundle(bundle.compressed, bundle.raw_bytes)), bundle
 
 

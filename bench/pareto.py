@@ -33,7 +33,7 @@ import numpy as np
 from .coverage import LatencyModel, camera_rays, display_samples, displayed_points, uncovered
 from .metrics import frame_metrics, nearly_uniform, pixels_per_degree
 from .results import write_result
-from .windows import EVALUATION_WINDOWS, windows_json
+from .windows import EVALUATION_WINDOWS, describe_windows, windows_json
 
 ORACLE = "oracle (zero latency)"
 
@@ -308,11 +308,8 @@ def run_pareto_bench(scenes=("room",), methods=None, windows=EVALUATION_WINDOWS,
 
 
 def print_pareto_table(r: dict) -> None:
-    w = r["windows"]
-    used = ", ".join("{trace}@{start_s:g}+{duration_s:g}".format(**x) for x in w["used"])
-    relation = "disjoint from" if w["disjoint_from_tuning"] else "OVERLAPPING"
-    print(f"pibr bench pareto: {r['latency_ms']:g} ms round trip, {r['depth_codec']} depth, windows {used} "
-          f"({relation} the tuning windows)")
+    print(f"pibr bench pareto: {r['latency_ms']:g} ms round trip, {r['depth_codec']} depth, "
+          f"{describe_windows(r['windows'])}")
     for scene, s in r["scenes"].items():
         sizes = list(next(iter(s["variants"].values()))["speed"])
         uniform, frames = sum(s["nearly_uniform_frames"].values()), sum(s["frames"].values())

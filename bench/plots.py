@@ -241,3 +241,51 @@ def plot_depth_rd(result: dict, path: str) -> None:
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
+
+
+def plot_trade(result: dict, knob: str, path: str) -> None:
+    """One knob of ``pibr bench trade``: DSSIM against the knob's value, against the total
+    Mbit/s sent, and against ms (the server's CPU ms per frame for stream knobs, the client's
+    display pass for client knobs), one curve per method, per scene."""
+    from .trade import KNOBS
+
+    plt = _pyplot()
+    scenes = list(result["scenes"])
+    fig, axes = plt.subplots(len(scenes), 3, figsize=(16, 4.6 * len(scenes)), squeeze=False)
+    client = KNOBS[knob].client
+    for row, scene in enumerate(scenes):
+        rows = result["scenes"][scene]["sweeps"][knob]
+        values = [r["value"] for r in rows]
+        categorical = any(isinstance(v, str) for v in values)
+        xs = list(range(len(values))) if categorical else values
+        for label in rows[0]["methods"]:
+            dssim = [r["methods"][label]["dssim"] for r in rows]
+            mbps = [r["stream"]["kbps"] / 1e3 for r in rows]
+            ms = [r["methods"][label]["client_cpu_ms"] if client else r["stream"]["server_cpu_ms"] for r in rows]
+            for ax, x in zip(axes[row], (xs, mbps, ms)):
+                ax.plot(x, dssim, "o-", label=label, ms=4)
+            if label == "proxy":   # which point is which value, on the panels not ordered by it
+                for ax, x in zip(axes[row][1:], (mbps, ms)):
+                    for xi, yi, v in zip(x, dssim, values):
+                        ax.annotate(f"{v:g}" if isinstance(v, float) else str(v), (xi, yi), fontsize=7,
+                                    xytext=(3, 3), textcoords="offset points")
+        for r, x, in zip(rows, xs):
+            if r["default"]:
+                axes[row][0].axvline(x, color="grey", ls=":", lw=1)
+        unit = KNOBS[knob].unit
+        axes[row][0].set_xlabel(f"{knob} ({unit})" if unit else knob)
+        if categorical:
+            axes[row][0].set_xticks(xs, [str(v) for v in values])
+        elif all(isinstance(v, (int, float)) and v > 0 for v in values) and max(values) / min(values) >= 8:
+            axes[row][0].set_xscale("log")
+        axes[row][1].set_xlabel("total Mbit/s sent (colour + depth + motion)")
+        axes[row][2].set_xlabel("client CPU ms per display pass (median)" if client
+                                else "server CPU ms per frame (render + encode, median)")
+        for ax in axes[row]:
+            ax.set_ylabel("DSSIM to ground truth (lower is better)")
+            ax.grid(alpha=0.3)
+        axes[row][0].set_title(f"{scene}: {knob} (dotted: the default)")
+        axes[row][0].legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)

@@ -67,6 +67,14 @@ def windows_json(windows, purpose: str) -> dict:
             "disjoint_from_tuning": not overlap}
 
 
+def describe_windows(recorded: dict) -> str:
+    """One line for a table's head from :func:`windows_json`'s record: the windows used and how
+    they stand to the tuning windows."""
+    used = ", ".join("{trace}@{start_s:g}+{duration_s:g}".format(**x) for x in recorded["used"])
+    relation = "disjoint from" if recorded["disjoint_from_tuning"] else "OVERLAPPING"
+    return f"windows {used} ({relation} the tuning windows)"
+
+
 def parse_windows(text: str) -> tuple[Window, ...]:
     """``evaluation``, ``tuning``, or ``TRACE@START+DURATION[,...]`` (seconds)."""
     text = text.strip()

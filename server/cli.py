@@ -89,6 +89,9 @@ def register(sub) -> None:
     p.add_argument("--extra-view", choices=("auto", "on", "off"), default="auto",
                    help="render the dual view's extra view: when it measurably adds coverage (auto, see "
                         "'pibr scenes --plan'), always, never")
+    p.add_argument("--extra-scale", type=float, default=0.5, metavar="S",
+                   help="the extra view's side over the primary view's, 0.125..1 (default 0.5; "
+                        "'pibr bench trade --knobs extra' measures it)")
     p.add_argument("--no-peel-marker", action="store_true",
                    help="the extra view leaves peeled pixels empty like sky instead of marking them (saves the "
                         "early depth test: about a quarter of the extra view's render time; clients then cannot "
@@ -185,6 +188,7 @@ def cmd_serve(args) -> int:
     config = ServerConfig(host=args.host, port=args.port, scene=with_up(args.scene, args.up), fps=args.fps,
                           view_size=None if args.view_size is None else tuple(args.view_size),
                           extra_view=args.extra_view, bandwidth_kbps=args.bandwidth_kbps,
+                          extra_scale=args.extra_scale,
                           peel_marker=not args.no_peel_marker,
                           extra_offset=args.extra_offset, bitrate_kbps=args.bitrate_kbps, keyint=args.keyint,
                           preset=args.preset, projection=args.projection, max_edge_deg=args.max_edge_deg,

@@ -35,6 +35,7 @@ class ServerConfig:
     fps: float = 10.0
     view_size: tuple | None = None      # primary view (the extra view is half of it); None: sized for the output
     extra_view: str = "auto"            # "auto" (on when it measurably buys coverage: scene_plan.py), "on", "off"
+    extra_scale: float = 0.5            # the extra view's side over the primary's (rounded to the atlas alignment)
     peel_marker: bool = True            # the extra view marks peeled pixels apart from sky
     extra_offset: tuple | None = None   # (forward m, up m, tilt deg); None: the scene's or the paper's
     bitrate_kbps: float = 16000.0
@@ -73,6 +74,8 @@ class ServerConfig:
                 raise ConfigError(str(exc)) from None
         if self.extra_view not in ("auto", "on", "off"):
             raise ConfigError(f"extra view must be auto, on or off, got {self.extra_view!r}")
+        if not (0.125 <= self.extra_scale <= 1.0):
+            raise ConfigError(f"extra view scale must be in 0.125..1 of the primary view, got {self.extra_scale}")
         if not (16 <= self.bitrate_kbps <= 1e6):
             raise ConfigError(f"bitrate must be in 16..1000000 kbit/s, got {self.bitrate_kbps}")
         if not (1 <= self.keyint <= 10000):

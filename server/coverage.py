@@ -207,20 +207,30 @@ def display_samples(scene, trace_spec: str, start_s: float, duration_s: float | 
     return trace_samples(scene, load_trace(trace_spec), start_s, duration_s, rate_hz, latency, stride, anchor)
 
 
-def trace_samples(scene, trace, start_s: float, duration_s: float | None, rate_hz: float,
-                  latency: LatencyModel, stride: int = 1, anchor: str = "start"):
-    """:func:`display_samples` of a loaded :class:`~pibr.protocol.trace.HeadTrace`."""
+def trace_ticks(scene, trace, start_s: float, duration_s: float | None, rate_hz: float, anchor: str = "start"):
+    """-> (tick us [n], pose_at): the display ticks of a window of a loaded
+    :class:`~pibr.protocol.trace.HeadTrace` and the viewer's pose at a client time (us from the
+    window's start; earlier times clamp to its start), placed in the scene as the client places
+    it (``protocol.trace.placement``)."""
     from pibr.protocol.trace import placement
 
     _, end = trace.window(start_s, duration_s)
     n = max(1, int(math.floor((end - start_s) * rate_hz + 1e-9)))
     tick_us = int(round(1e6 / rate_hz))
     origin = placement(trace, start_s, scene.viewer_origin, anchor)
+
+    def pose_at(t_us: int) -> Pose:
+        return origin.compose(trace.pose_at(start_s + max(t_us, 0) / 1e6))
+
+    return [i * tick_us for i in range(n)], pose_at
+
+
+def trace_samples(scene, trace, start_s: float, duration_s: float | None, rate_hz: float,
+                  latency: LatencyModel, stride: int = 1, anchor: str = "start"):
+    """:func:`display_samples` of a loaded :class:`~pibr.protocol.trace.HeadTrace`."""
+    ticks, pose_at = trace_ticks(scene, trace, start_s, duration_s, rate_hz, anchor)
     out = []
-    for i in range(0, n, stride):
-        t_us = i * tick_us
+    for t_us in ticks[::stride]:
         render_us, pose_us = latency.frame_for(t_us)
-        display = origin.compose(trace.pose_at(start_s + t_us / 1e6))
-        rendered = origin.compose(trace.pose_at(start_s + max(pose_us, 0) / 1e6))
-        out.append((t_us / 1e6, display, render_us / 1e6, rendered))
+        out.append((t_us / 1e6, pose_at(t_us), render_us / 1e6, pose_at(pose_us)))
     return out

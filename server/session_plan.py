@@ -2,7 +2,7 @@
 through the scene plan (scene_plan.py), which also travels in ``SessionConfig.options["plan"]``."""
 from __future__ import annotations
 
-from pibr.protocol.atlas import build_layout
+from pibr.protocol.atlas import ALIGN, build_layout
 from pibr.protocol.depth import h264_quantizer
 from pibr.protocol.errors import ConfigError
 from pibr.protocol.messages import Hello
@@ -22,6 +22,12 @@ def extra_offset_for(cfg: ServerConfig, scene):
     if scene.extra_view_offset is not None:
         return scene.extra_view_offset
     return extra_offset_pose(*PAPER_EXTRA_OFFSET)
+
+
+def extra_view_size(view_size: tuple, scale: float) -> tuple[int, int]:
+    """The extra view's (w, h): ``scale`` of the primary's, each side a multiple of the atlas
+    alignment (at least one)."""
+    return tuple(max(ALIGN, int(round(side * scale / ALIGN)) * ALIGN) for side in view_size)
 
 
 def bandwidth_for(cfg: ServerConfig, hello: Hello) -> float | None:
@@ -57,7 +63,7 @@ def plan_session(cfg: ServerConfig, scene, hello: Hello, proxies: dict | None = 
     video_kbps = float(plan.depth_codec.value["video_kbps"])
     use_extra = bool(plan.extra_view.value)
     pw, ph = plan.view_size.value
-    extra_size = (pw // 2, ph // 2) if use_extra else None
+    extra_size = extra_view_size((pw, ph), cfg.extra_scale) if use_extra else None
     offset = extra_offset_for(cfg, scene) if use_extra else None
     edge = depth_codec == "edge"
     layout = build_layout((pw, ph), extra_size, depth_in_atlas=not edge)

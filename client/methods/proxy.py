@@ -363,7 +363,9 @@ class ProxyIBR(Method):
     def __init__(self, ctx, output, config, proxies=None, tau: float = DEFAULT_TAU,
                  lod_target_px: float = DEFAULT_TARGET_PX, lod_level: str | None = None, extra_view: bool = True,
                  carve: bool = True, motion: str = DEFAULT_MOTION, poses: PoseHistory | None = None,
-                 oracle_pose=None, horizon_frames: float = DEFAULT_HORIZON_FRAMES):
+                 oracle_pose=None, horizon_frames: float = DEFAULT_HORIZON_FRAMES, slack_codes: float | None = None):
+        """slack_codes: depth codes of transport error forgiven before the tau test (None: the
+        depth codec's ``DEPTH_SLACK_CODES``)."""
         super().__init__(ctx, output, config)
         if not proxies:
             from pibr.protocol.errors import ConfigError
@@ -398,6 +400,8 @@ class ProxyIBR(Method):
             geometry, test = self.prog, self.resolve
         for p in (self.prog, self.resolve):
             bind_frame_uniforms(p, config)
+            if slack_codes is not None and "u_slack_codes" in p:
+                p["u_slack_codes"].value = float(slack_codes)
         self.refs.filter = (ctx.NEAREST, ctx.NEAREST)
         self.refs_depth = ctx.depth_renderbuffer((output.width, output.height))
         self.refs_fbo = ctx.framebuffer(color_attachments=[self.refs], depth_attachment=self.refs_depth)
