@@ -1,13 +1,9 @@
 """How much of each displayed view the transmitted views cover (Reinert et al., Fig. 4).
 
-For a displayed pose the ground-truth renderer gives, per output pixel, the surface point
-the viewer sees (or sky). A pixel is *covered* when some transmitted view shows that same
-point: its back-projection into the view lands on a texel (any of the four around it)
-whose stored distance matches the point's distance within a relative tolerance — the same
-test depth peeling uses. Sky is covered where a view shows sky in that direction; a peeled
-view vouches for sky only when it marks what it peeled away apart from sky (protocol/depth.py;
-the server's default).
-Everything else is a hole an ideal, depth-exact warp of the transmitted views could not fill.
+The coverage test itself (a displayed pixel is covered when some transmitted view shows the
+same surface point within a relative distance tolerance, or sky where the view shows sky) is
+:mod:`pibr.server.coverage`, which the server also uses to plan sessions. An uncovered pixel is
+a hole an ideal, depth-exact warp of the transmitted views could not fill.
 
 Variants (``VARIANTS``): the primary view alone; plus an extra view at zero offset with
 peeling (a second depth layer); at the offset without peeling; at the offset with peeling.

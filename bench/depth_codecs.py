@@ -20,7 +20,6 @@ a session so the in-process simulation (``ibr_bench.Simulation``) can carry any 
 """
 from __future__ import annotations
 
-import fractions
 import math
 import struct
 from dataclasses import dataclass
@@ -29,6 +28,7 @@ import numpy as np
 
 from pibr.protocol.depth import PEELED, DepthQuantizer
 from pibr.protocol.errors import CodecError
+from pibr.server.video import encode_packets, x264_context
 
 #: Codes below the surfaces of :class:`LogDepthQuantizer`: sky 0, peeled 1.
 LOG_SKY, LOG_PEELED, LOG_MIN_CODE = 0, 1, 2
@@ -331,17 +331,7 @@ class H264DepthEncoder:
             raise ValueError(f"H.264 depth needs a positive bitrate, got {kbps}")
         self.width, self.height, self.quantizer = width, height, quantizer
         self.pix_fmt = h264_pix_fmt(quantizer.bits)
-        ctx = av.CodecContext.create("libx264", "w")
-        ctx.width, ctx.height, ctx.pix_fmt = width, height, self.pix_fmt
-        rate = fractions.Fraction(fps).limit_denominator(1000)
-        ctx.time_base, ctx.framerate = 1 / rate, rate
-        ctx.bit_rate = int(kbps * 1000)
-        ctx.gop_size, ctx.max_b_frames, ctx.thread_count = keyint, 0, 1
-        ctx.color_range = 2
-        vbv = max(1, int(2 * kbps / fps))
-        ctx.options = {"preset": preset, "tune": "zerolatency",
-                       "x264-params": f"vbv-maxrate={max(1, int(kbps))}:vbv-bufsize={vbv}:keyint={keyint}:"
-                                      f"min-keyint={keyint}:scenecut=0:fullrange=on"}
+        ctx = x264_context(av, width, height, self.pix_fmt, fps, kbps, keyint, preset, threads=1)
         self._ctx, self._av, self.frames = ctx, av, 0
 
     def encode(self, distance) -> bytes:
@@ -353,12 +343,7 @@ class H264DepthEncoder:
                                                  format=self.pix_fmt)
         frame.pts = self.frames
         self.frames += 1
-        try:
-            packets = self._ctx.encode(frame)
-        except self._av.error.FFmpegError as exc:
-            raise CodecError(f"libx264 ({self.pix_fmt}) failed on depth frame {self.frames - 1}: {exc}") from exc
-        if not packets:
-            raise CodecError("libx264 returned no packet for a depth frame: is zero-latency mode on?")
+        packets = encode_packets(self._ctx, self._av, frame, f"depth frame {self.frames - 1} ({self.pix_fmt})")
         return b"".join(bytes(p) for p in packets)
 
 

@@ -30,24 +30,8 @@ class H264Encoder:
             raise ValueError(f"H.264 4:2:0 needs even sizes, got {width}x{height}")
         self.width, self.height = width, height
         self.frames = 0
-        ctx = av.CodecContext.create("libx264", "w")
-        ctx.width, ctx.height = width, height
-        ctx.pix_fmt = "yuv420p"
-        rate = fractions.Fraction(fps).limit_denominator(1000)
-        ctx.time_base = 1 / rate
-        ctx.framerate = rate
-        ctx.bit_rate = int(bitrate_kbps * 1000)
-        ctx.gop_size = keyint
-        ctx.max_b_frames = 0
-        ctx.thread_count = 1 if deterministic else 0
-        ctx.color_range = 2  # full range (JPEG): the packer writes 0..255 luma
-        vbv = max(1, int(2 * bitrate_kbps / fps))
-        ctx.options = {
-            "preset": preset,
-            "tune": "zerolatency",
-            "x264-params": f"vbv-maxrate={int(bitrate_kbps)}:vbv-bufsize={vbv}:keyint={keyint}:"
-                           f"min-keyint={keyint}:scenecut=0:fullrange=on",
-        }
+        ctx = x264_context(av, width, height, "yuv420p", fps, bitrate_kbps, keyint, preset,
+                           threads=1 if deterministic else 0)
         self._ctx = ctx
         self._av = av
 
@@ -60,13 +44,46 @@ class H264Encoder:
         if force_keyframe:
             frame.pict_type = self._av.video.frame.PictureType.I
         self.frames += 1
-        try:
-            packets = self._ctx.encode(frame)
-        except self._av.error.FFmpegError as exc:
-            raise CodecError(f"libx264 failed to encode frame {self.frames - 1}: {exc}") from exc
-        if not packets:
-            raise CodecError("libx264 returned no packet for a frame: is zero-latency mode on?")
+        packets = encode_packets(self._ctx, self._av, frame, f"frame {self.frames - 1}")
         return b"".join(bytes(p) for p in packets), any(p.is_keyframe for p in packets)
 
     def close(self) -> None:
         self._ctx = None
+
+
+def x264_context(av, width: int, height: int, pix_fmt: str, fps: float, kbps: float, keyint: int, preset: str,
+                 threads: int):
+    """A libx264 encoder context as pibr runs it: zero latency, no B-frames, full range, ``kbps``
+    held by a VBV of about two frames, a keyframe every ``keyint`` frames (no scene cuts);
+    ``threads`` 0 lets x264 choose (1: deterministic)."""
+    ctx = av.CodecContext.create("libx264", "w")
+    ctx.width, ctx.height = width, height
+    ctx.pix_fmt = pix_fmt
+    rate = fractions.Fraction(fps).limit_denominator(1000)
+    ctx.time_base = 1 / rate
+    ctx.framerate = rate
+    ctx.bit_rate = int(kbps * 1000)
+    ctx.gop_size = keyint
+    ctx.max_b_frames = 0
+    ctx.thread_count = threads
+    ctx.color_range = 2  # full range (JPEG): the packer writes 0..255 luma
+    vbv = max(1, int(2 * kbps / fps))
+    ctx.options = {
+        "preset": preset,
+        "tune": "zerolatency",
+        "x264-params": f"vbv-maxrate={max(1, int(kbps))}:vbv-bufsize={vbv}:keyint={keyint}:"
+                       f"min-keyint={keyint}:scenecut=0:fullrange=on",
+    }
+    return ctx
+
+
+def encode_packets(ctx, av, frame, what: str) -> list:
+    """Encode one ``av.VideoFrame`` in zero-latency mode -> its packets; libx264's failures as
+    CodecError naming ``what``."""
+    try:
+        packets = ctx.encode(frame)
+    except av.error.FFmpegError as exc:
+        raise CodecError(f"libx264 failed to encode {what}: {exc}") from exc
+    if not packets:
+        raise CodecError(f"libx264 returned no packet for {what}: is zero-latency mode on?")
+    return packets
