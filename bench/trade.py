@@ -63,12 +63,18 @@ class StreamPoint:
         return {k: list(v) if isinstance(v, tuple) else v for k, v in dataclasses.asdict(self).items()}
 
 
-def default_stream() -> StreamPoint:
-    """The server's own defaults (server/config.py), 128 ms round trip as pareto's."""
+def default_stream(out_size=(960, 540), fov_deg: float = 90.0) -> StreamPoint:
+    """The server's own defaults (server/config.py; the primary view as its plan sizes it for an
+    ``out_size`` output), 128 ms round trip as pareto's."""
     from pibr.server.config import ServerConfig
+    from pibr.server.scene_plan import view_side_for
 
     c = ServerConfig()
-    return StreamPoint(c.bitrate_kbps, c.preset, c.keyint, tuple(c.view_size), c.extra_scale, c.fps)
+    if c.view_size is not None:
+        view = tuple(c.view_size)
+    else:
+        view = (view_side_for(out_size[0], fov_deg),) * 2
+    return StreamPoint(c.bitrate_kbps, c.preset, c.keyint, view, c.extra_scale, c.fps)
 
 
 def default_client() -> dict:
@@ -331,7 +337,7 @@ def run_trade_bench(scenes=("room",), knobs=tuple(KNOBS), windows=EVALUATION_WIN
             raise ConfigError(f"unknown knob {name!r}; choose from {', '.join(KNOBS)}")
     if window_s is not None:
         windows = tuple(dataclasses.replace(w, duration_s=min(w.duration_s, window_s)) for w in windows)
-    base = stream or default_stream()
+    base = stream or default_stream(out_size)
     values_of = {name: knob.values for name, knob in KNOBS.items()} | dict(values or {})
     defaults = default_client()
     purpose = purpose or ("tuning" if overlapping_tuning(windows) else "reporting")

@@ -107,3 +107,15 @@ def test_tiny_trade_sweep(tmp_path):
     assert free["value"] == 0.0 and capped["value"] == 300.0
     assert capped["stream"]["age_ms_mean"] > free["stream"]["age_ms_mean"] + 50
     print_trade_tables(r)
+
+
+def test_the_default_stream_is_the_servers_with_the_view_its_plan_sizes_for_the_output():
+    from pibr.bench.trade import default_stream
+    from pibr.server.config import ServerConfig
+
+    c = ServerConfig()
+    s = default_stream((960, 540))
+    assert (s.bitrate_kbps, s.preset, s.keyint, s.extra_scale, s.fps) == (c.bitrate_kbps, c.preset, c.keyint,
+                                                                         c.extra_scale, c.fps)
+    assert s.view_size == (1088, 1088)           # 1.12 x the output's density (server/scene_plan.py)
+    assert default_stream((1280, 720)).view_size == (1440, 1440)
