@@ -247,7 +247,7 @@ def plot_trade(result: dict, knob: str, path: str) -> None:
     """One knob of ``pibr bench trade``: DSSIM against the knob's value, against the total
     Mbit/s sent, and against ms (the server's CPU ms per frame for stream knobs, the client's
     display pass for client knobs), one curve per method, per scene."""
-    from .trade import KNOBS
+    from .trade import KNOBS, sweep_labels
 
     plt = _pyplot()
     scenes = list(result["scenes"])
@@ -258,7 +258,7 @@ def plot_trade(result: dict, knob: str, path: str) -> None:
         values = [r["value"] for r in rows]
         categorical = any(isinstance(v, str) for v in values)
         xs = list(range(len(values))) if categorical else values
-        for label in rows[0]["methods"]:
+        for label in sweep_labels(rows):
             dssim = [r["methods"][label]["dssim"] for r in rows]
             mbps = [r["stream"]["kbps"] / 1e3 for r in rows]
             ms = [r["methods"][label]["client_cpu_ms"] if client else r["stream"]["server_cpu_ms"] for r in rows]

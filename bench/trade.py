@@ -438,13 +438,19 @@ def _sweep_json(name, sweep, measured, points) -> list[dict]:
     return out
 
 
+def sweep_labels(rows: list) -> list:
+    """The methods scored at every point of one knob's sweep (the default point also carries the
+    client knobs' proxy variants, which the other points lack), in their order."""
+    return [label for label in rows[0]["methods"] if all(label in row["methods"] for row in rows)]
+
+
 def print_trade_tables(r: dict) -> None:
     print(f"pibr bench trade: {describe_windows(r['windows'])}, every {r['stride']}th tick at "
           f"{r['rate_hz']:g} Hz, output {r['output'][0]}x{r['output'][1]}, {r['seconds']:.0f} s")
     for scene, s in r["scenes"].items():
         print(f"\n{scene}: {s['ticks_scored_per_point']} ticks scored per point")
         for name, rows in s["sweeps"].items():
-            labels = list(rows[0]["methods"])
+            labels = sweep_labels(rows)
             unit = KNOBS[name].unit
             print(f"\n  {name} ({unit})" if unit else f"\n  {name}")
             ref_label = labels[min(1, len(labels) - 1)]

@@ -71,13 +71,13 @@ def test_tiny_trade_sweep(tmp_path):
     from pibr.bench.windows import Window
 
     stream = StreamPoint(bitrate_kbps=2000.0, view_size=(128, 128))
-    r = run_trade_bench(knobs=("bitrate", "latency", "cap"), windows=(Window("pred6dof-1", 30.0, 0.8),),
+    r = run_trade_bench(knobs=("bitrate", "latency", "cap", "tau"), windows=(Window("pred6dof-1", 30.0, 0.8),),
                         stride=2, out_size=(160, 96), flip_every=2, stream=stream,
-                        values={"bitrate": (300.0,), "latency": (0.0, 256.0), "cap": (300.0,)},
+                        values={"bitrate": (300.0,), "latency": (0.0, 256.0), "cap": (300.0,), "tau": (0.4,)},
                         out_dir=str(tmp_path), progress=False, workers=0)
     with open(tmp_path / "trade.json") as f:
         assert json.load(f) == json.loads(json.dumps(r))
-    for name in ("bitrate", "latency", "cap"):
+    for name in ("bitrate", "latency", "cap", "tau"):
         assert os.path.getsize(tmp_path / f"trade_{name}.png") > 1000
     assert r["windows"]["disjoint_from_tuning"] and r["windows"]["used"][0]["duration_s"] == 0.8
     s = r["scenes"]["room"]
@@ -86,9 +86,15 @@ def test_tiny_trade_sweep(tmp_path):
     assert [row["value"] for row in sweeps["bitrate"]] == [300.0, 2000.0]
     assert [row["value"] for row in sweeps["latency"]] == [0.0, 128.0, 256.0]
     assert [row["default"] for row in sweeps["latency"]] == [False, True, False]
+    competitors = {"rotation", "proxy", "gridwarp", "coarse-meshwarp s=4"}
+    # the client knob's proxy variant is scored on the default stream, which every stream sweep's
+    # default point is: tables and plots show the methods of every point
+    assert [row["value"] for row in sweeps["tau"]] == [0.1, 0.4] and set(sweeps["tau"][1]["methods"]) == {"proxy"}
+    for name in ("bitrate", "latency", "cap"):
+        for row in sweeps[name]:
+            assert set(row["methods"]) == competitors | ({"proxy tau=0.4"} if row["default"] else set())
     for rows in sweeps.values():
         for row in rows:
-            assert set(row["methods"]) == {"rotation", "proxy", "gridwarp", "coarse-meshwarp s=4"}
             for m in row["methods"].values():
                 assert m["frames"] + row["stream"]["ticks_without_frame"] == 12
                 assert 0 < m["dssim"] < 0.5 and 5 < m["psnr"] < 60 and 0 < m["flip"] < 1
