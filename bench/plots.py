@@ -256,6 +256,8 @@ def plot_trade(result: dict, knob: str, path: str) -> None:
     for row, scene in enumerate(scenes):
         rows = result["scenes"][scene]["sweeps"][knob]
         values = [r["value"] for r in rows]
+        if knob == "cap":   # 0 is no cap: not the left end of the axis
+            values = ["none" if v == 0 else v for v in values]
         categorical = any(isinstance(v, str) for v in values)
         xs = list(range(len(values))) if categorical else values
         for label in sweep_labels(rows):

@@ -240,7 +240,8 @@ def measure_point(scene, point: StreamPoint, windows, methods, extra_variants, p
     ppd = pixels_per_degree(out_size[0], sim.output.fov_deg)
     rays = camera_rays(*out_size, sim.output.fov_deg)
     peeled_marked = bool(sim.session.options.get("peel_marker"))
-    stream = {"bits": [], "server_cpu_ms": [], "age_ms": [], "skipped": 0, "unserved_ticks": 0, "served": 0}
+    stream = {"bits": [], "server_cpu_ms": [], "age_ms": [], "skipped": 0, "unserved_ticks": 0, "served": 0,
+              "span_us": 0, "delivered_bits": 0}
     made = {}
     try:
         for v in methods:
@@ -259,16 +260,19 @@ def measure_point(scene, point: StreamPoint, windows, methods, extra_variants, p
             sim.restart_stream()
             in_flight = collections.deque()
             shown = shown_distances = None
+            first_render = None
             for i, t_us in enumerate(ticks):
                 while (due := schedule.next_due(t_us)) is not None:
                     render_us, pose_us = due
+                    first_render = render_us if first_render is None else first_render
                     frame, distances = sim.serve(render_us / 1e6, pose_at(pose_us))
                     bits = sim.frame_bits()
                     stream["bits"].append(bits)
                     stream["server_cpu_ms"].append(sim.server_cpu_ms[-1])
-                    in_flight.append((schedule.sent(render_us, bits // 8), frame, distances))
+                    in_flight.append((schedule.sent(render_us, bits // 8), frame, distances, bits))
                 while in_flight and in_flight[0][0] <= t_us:
-                    _, frame, distances = in_flight.popleft()
+                    _, frame, distances, bits = in_flight.popleft()
+                    stream["delivered_bits"] += bits
                     sim.receive(frame, distances)
                     shown, shown_distances = frame, distances
                 if i % stride:
@@ -293,6 +297,8 @@ def measure_point(scene, point: StreamPoint, windows, methods, extra_variants, p
                 if bar is not None:
                     bar.update(1)
             stream["skipped"] += schedule.skipped
+            # from the first frame served (the pre-roll's, before the window) to the window's end
+            stream["span_us"] += ticks[-1] + schedule.tick_us - (first_render if first_render is not None else 0)
         while pending:
             _settle(pending.pop(0), series, pool)
     finally:
@@ -303,7 +309,10 @@ def measure_point(scene, point: StreamPoint, windows, methods, extra_variants, p
     labels = [w.label for w in windows]
     figures = {label: series.summary(label, labels) for label in made}
     return {"stream": {"bits_per_frame": float(np.mean(stream["bits"])),
-                       "kbps": float(np.mean(stream["bits"]) * point.fps / 1e3),
+                       # what was sent (frames skipped under a cap or the in-flight limit send nothing)
+                       "kbps": float(np.sum(stream["bits"]) / max(stream["span_us"], 1) * 1e3),
+                       # ... and what reached the client by the window's end
+                       "delivered_kbps": float(stream["delivered_bits"] / max(stream["span_us"], 1) * 1e3),
                        "server_cpu_ms": float(np.median(stream["server_cpu_ms"])),
                        "age_ms_mean": float(np.mean(stream["age_ms"])) if stream["age_ms"] else None,
                        "frames_served": stream["served"], "frames_skipped": stream["skipped"],

@@ -112,6 +112,9 @@ def test_tiny_trade_sweep(tmp_path):
     free, capped = sweeps["cap"]
     assert free["value"] == 0.0 and capped["value"] == 300.0
     assert capped["stream"]["age_ms_mean"] > free["stream"]["age_ms_mean"] + 50
+    # the link delivers no more than its cap over the run; uncapped, about what the encoder made
+    assert capped["stream"]["delivered_kbps"] <= 300.0 < free["stream"]["delivered_kbps"]
+    assert capped["stream"]["frames_skipped"] > 0 == free["stream"]["frames_skipped"]
     print_trade_tables(r)
 
 
