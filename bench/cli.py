@@ -252,7 +252,7 @@ def register(sub) -> None:
     i.set_defaults(func=cmd_bench_ibr)
 
     cd = bs.add_parser("codec", help="depth codecs on rate-distortion curves at equal bitrate",
-                       description="Bits per frame against disparity PSNR and 1 %% outliers of the edge codec over its "
+                       description="Bits per frame against disparity PSNR and 1 % outliers of the edge codec over its "
                                    "thresholds, H.264 depth alone (8- and 10-bit) at the edge codec's rates, "
                                    "Koniaris-style log depth with temporal coding and zstd, lossless 12-bit zstd; proxy "
                                    "DSSIM at equal total bitrate; the quantisers' error from 1 cm to 10 km. Full run "
