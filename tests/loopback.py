@@ -12,16 +12,27 @@ from pibr.server.relay import Relay, RelayConfig
 
 
 @contextlib.asynccontextmanager
+async def running_server(config: ServerConfig):
+    """Start a server in this event loop and serve until the block ends -> (server, host, port)."""
+    srv = Server(config)
+    host, port = await srv.start()
+    task = asyncio.create_task(srv.serve_forever())
+    try:
+        yield srv, host, port
+    finally:
+        task.cancel()
+        await asyncio.gather(task, return_exceptions=True)
+        await srv.close()
+
+
+@contextlib.asynccontextmanager
 async def server_behind_relay(config: ServerConfig, up_ms: float = 64.0, down_ms: float = 64.0, jitter_ms: float = 0.0,
                               **relay_kw):
     """Start a server and a relay in front of it (``relay_kw``: more RelayConfig fields); yields
     the relay's (host, port)."""
-    srv = Server(config)
-    host, port = await srv.start()
-    stask = asyncio.create_task(srv.serve_forever())
-    relay = Relay(RelayConfig(("127.0.0.1", 0), (host, port), LinkParams(up_ms, jitter_ms), LinkParams(down_ms, jitter_ms),
-                              **relay_kw))
-    try:
+    async with running_server(config) as (_, host, port):
+        relay = Relay(RelayConfig(("127.0.0.1", 0), (host, port), LinkParams(up_ms, jitter_ms),
+                                  LinkParams(down_ms, jitter_ms), **relay_kw))
         rhost, rport = await relay.start()
         rtask = asyncio.create_task(relay.serve_forever())
         try:
@@ -30,10 +41,6 @@ async def server_behind_relay(config: ServerConfig, up_ms: float = 64.0, down_ms
             rtask.cancel()
             await asyncio.gather(rtask, return_exceptions=True)
             await relay.close()
-    finally:
-        stask.cancel()
-        await asyncio.gather(stask, return_exceptions=True)
-        await srv.close()
 
 
 async def exchange_virtual(conn, origin, pose_times_us, interval_us: int) -> list:

@@ -1,6 +1,5 @@
 """The client process with a scene that moves: the frames' object transforms reach ``proxy``'s
 extrapolation through the session's pose history; bad object poses close the session."""
-import asyncio
 import json
 
 import numpy as np
@@ -11,8 +10,9 @@ from pibr.protocol.errors import ConfigError, MalformedMessage
 from pibr.protocol.messages import Frame, PayloadKind
 from pibr.protocol.object_poses import ObjectPoses, encode_object_poses
 from pibr.protocol.pose import Pose
-from pibr.server.app import Server
 from pibr.server.config import ServerConfig
+
+from ..loopback import running_server
 
 pytestmark = pytest.mark.gl
 
@@ -26,13 +26,9 @@ def _frames(path):
 
 @pytest.fixture
 async def dynamic_server():
-    srv = Server(ServerConfig(port=0, scene="dynamic", view_size=(192, 192), bitrate_kbps=3000))
-    host, port = await srv.start()
-    task = asyncio.create_task(srv.serve_forever())
-    yield host, port
-    task.cancel()
-    await asyncio.gather(task, return_exceptions=True)
-    await srv.close()
+    config = ServerConfig(port=0, scene="dynamic", view_size=(192, 192), bitrate_kbps=3000)
+    async with running_server(config) as (_, host, port):
+        yield host, port
 
 
 def _cfg(host, port, out, methods=("proxy",), **kw):

@@ -3,15 +3,14 @@ maps the edge codec's tests share. Regenerate only when the bitstream changes on
 ``python -m tests.protocol.golden_edge`` (then review the diff)."""
 from __future__ import annotations
 
-import os
-
 import numpy as np
 
 from pibr.protocol.depth import DepthQuantizer
 from pibr.protocol.edgecodec.codec import EdgeEncoder, warp_samples
 from pibr.protocol.pose import Pose
 
-GOLDEN_DIR = os.path.join(os.path.dirname(__file__), "golden")
+from .golden_files import GOLDEN_DIR, write_goldens  # noqa: F401 (GOLDEN_DIR: the tests import it from here)
+
 QUANTIZER = DepthQuantizer(0.1, 1000.0, bits=12, min_code=1)
 WIDTH, HEIGHT = 64, 48
 
@@ -96,9 +95,4 @@ NAMES = ("edge_intra", "edge_raster", "edge_lossy", "edge_motion", "edge_tempora
 
 
 if __name__ == "__main__":
-    os.makedirs(GOLDEN_DIR, exist_ok=True)
-    for name in NAMES:
-        data = golden_payload(name)
-        with open(os.path.join(GOLDEN_DIR, f"{name}.bin"), "wb") as f:
-            f.write(data)
-        print("wrote", name, len(data), "bytes")
+    write_goldens(NAMES, golden_payload)

@@ -2,14 +2,13 @@
 changes on purpose: ``python -m tests.protocol.golden_messages`` (then review the diff)."""
 from __future__ import annotations
 
-import os
-
 from pibr.protocol.framing import encode_frame
 from pibr.protocol.messages import (Bye, Clock, Error, Frame, Hello, OutputConfig, PayloadKind, PoseMsg, ProxyChunk,
                                     Stats, Welcome)
 from pibr.protocol.pose import Pose
 
-GOLDEN_DIR = os.path.join(os.path.dirname(__file__), "golden")
+from .golden_files import GOLDEN_DIR, write_goldens  # noqa: F401 (GOLDEN_DIR: the tests import it from here)
+
 
 POSE = Pose.make((0.5, 1.6, -2.0), (0.9238795325112867, 0.0, 0.3826834323650898, 0.0))
 EXTRA = Pose.make((0.5, 3.4, -3.5), (0.9914448613738104, -0.13052619222005157, 0.0, 0.0))
@@ -39,8 +38,4 @@ def golden_bytes(name: str) -> bytes:
 
 
 if __name__ == "__main__":
-    os.makedirs(GOLDEN_DIR, exist_ok=True)
-    for name in MESSAGES:
-        with open(os.path.join(GOLDEN_DIR, f"{name}.bin"), "wb") as f:
-            f.write(golden_bytes(name))
-        print("wrote", name)
+    write_goldens(MESSAGES, golden_bytes)

@@ -3,13 +3,12 @@ flow fields the tests share. Regenerate only when the bitstream changes on purpo
 ``python -m tests.protocol.golden_motion_flow`` (then review the diff)."""
 from __future__ import annotations
 
-import os
-
 import numpy as np
 
 from pibr.protocol.motion_flow import encode_motion_flow
 
-GOLDEN_DIR = os.path.join(os.path.dirname(__file__), "golden")
+from .golden_files import GOLDEN_DIR, write_goldens  # noqa: F401 (GOLDEN_DIR: the tests import it from here)
+
 WIDTH, HEIGHT = 64, 48
 
 
@@ -43,9 +42,4 @@ NAMES = ("motion_flow_blocks", "motion_flow_edges", "motion_flow_still")
 
 
 if __name__ == "__main__":
-    os.makedirs(GOLDEN_DIR, exist_ok=True)
-    for name in NAMES:
-        data = golden_payload(name)
-        with open(os.path.join(GOLDEN_DIR, f"{name}.bin"), "wb") as f:
-            f.write(data)
-        print("wrote", name, len(data), "bytes")
+    write_goldens(NAMES, golden_payload)

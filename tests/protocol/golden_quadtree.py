@@ -4,13 +4,11 @@ vectorised one with. Regenerate only when the bitstream changes on purpose:
 ``python -m tests.protocol.golden_quadtree`` (then review the diff)."""
 from __future__ import annotations
 
-import os
-
 import numpy as np
 
 from pibr.protocol.quadtree import encode_quadtrees
 
-GOLDEN_DIR = os.path.join(os.path.dirname(__file__), "golden")
+from .golden_files import GOLDEN_DIR, write_goldens  # noqa: F401 (GOLDEN_DIR: the tests import it from here)
 
 
 def scene_distances(height: int, width: int, seed: int = 0) -> np.ndarray:
@@ -86,9 +84,4 @@ NAMES = ("quadtree_two_views", "quadtree_clipped")
 
 
 if __name__ == "__main__":
-    os.makedirs(GOLDEN_DIR, exist_ok=True)
-    for name in NAMES:
-        data = golden_payload(name)
-        with open(os.path.join(GOLDEN_DIR, f"{name}.bin"), "wb") as f:
-            f.write(data)
-        print("wrote", name, len(data), "bytes")
+    write_goldens(NAMES, golden_payload)

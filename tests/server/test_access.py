@@ -14,8 +14,9 @@ from pibr.protocol.errors import AccessDenied, ConfigError, TLSError
 from pibr.protocol.framing import encode_frame
 from pibr.protocol.messages import Error, Hello, OutputConfig
 from pibr.protocol.tls import ClientTLS, certificate_fingerprint, open_connection
-from pibr.server.app import Server
 from pibr.server.config import ServerConfig
+
+from ..loopback import running_server
 
 from ..tlsfiles import tls_files  # noqa: F401 (fixture)
 
@@ -26,14 +27,10 @@ HELLO = Hello(client="test", scene="sphere", clock="virtual", output=OutputConfi
 @pytest.fixture
 async def secured(tls_files):
     """A server on loopback that requires TOKEN and speaks only TLS -> (host, port, files)."""
-    srv = Server(ServerConfig(port=0, scene="sphere", view_size=(128, 128), bitrate_kbps=2000, token=TOKEN,
-                              tls_cert=tls_files.cert, tls_key=tls_files.key))
-    host, port = await srv.start()
-    task = asyncio.create_task(srv.serve_forever())
-    yield host, port, tls_files
-    task.cancel()
-    await asyncio.gather(task, return_exceptions=True)
-    await srv.close()
+    config = ServerConfig(port=0, scene="sphere", view_size=(128, 128), bitrate_kbps=2000, token=TOKEN,
+                          tls_cert=tls_files.cert, tls_key=tls_files.key)
+    async with running_server(config) as (_, host, port):
+        yield host, port, tls_files
 
 
 async def _handshake(host, port, tls, token):

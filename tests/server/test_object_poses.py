@@ -1,7 +1,6 @@
 """Moving objects on the wire: every frame of a scene that moves carries its objects' transforms
 (with either depth codec, with or without proxies); a static scene's frames carry no motion of
 any kind, and the session says so."""
-import asyncio
 
 import numpy as np
 import pytest
@@ -12,10 +11,9 @@ from pibr.protocol.messages import Hello, OutputConfig, PayloadKind, ProxyChunk
 from pibr.protocol.object_poses import decode_object_poses
 from pibr.protocol.proxy import BundleAssembler, BundleInfo, decode_bundle, decompress_bundle
 from pibr.scenes.registry import load_scene
-from pibr.server.app import Server
 from pibr.server.config import ServerConfig
 
-from ..loopback import exchange_virtual
+from ..loopback import exchange_virtual, running_server
 
 pytestmark = pytest.mark.gl
 
@@ -24,14 +22,10 @@ MOTION_KINDS = (PayloadKind.OBJECT_POSES, PayloadKind.EDGE_MOTION, PayloadKind.M
 
 @pytest.fixture
 async def server():
-    srv = Server(ServerConfig(port=0, scene="sphere", view_size=(128, 128), fps=10.0, server_delay_ms=20.0,
-                              bitrate_kbps=2000))
-    host, port = await srv.start()
-    task = asyncio.create_task(srv.serve_forever())
-    yield host, port
-    task.cancel()
-    await asyncio.gather(task, return_exceptions=True)
-    await srv.close()
+    config = ServerConfig(port=0, scene="sphere", view_size=(128, 128), fps=10.0, server_delay_ms=20.0,
+                          bitrate_kbps=2000)
+    async with running_server(config) as (_, host, port):
+        yield host, port
 
 
 async def _session(host, port, scene: str, depth_codec: str, want_proxies: bool = False, ticks: int = 8):

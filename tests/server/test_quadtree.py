@@ -14,11 +14,10 @@ from pibr.protocol.errors import MalformedMessage
 from pibr.protocol.framing import encode_frame
 from pibr.protocol.messages import Error, Hello, OutputConfig, PayloadKind
 from pibr.protocol.quadtree import decode_quadtrees
-from pibr.server.app import Server
 from pibr.server.config import ServerConfig
 from pibr.server.quadtree import ROOT_TILE, build_leaves, quadtree_payload
 
-from ..loopback import exchange_virtual
+from ..loopback import exchange_virtual, running_server
 from ..protocol.golden_quadtree import reference_leaves, scene_distances
 
 
@@ -113,14 +112,10 @@ HELLO = Hello(client="test", scene="sphere", clock="virtual", output=OutputConfi
 
 @pytest.fixture
 async def server():
-    srv = Server(ServerConfig(port=0, scene="sphere", view_size=(128, 128), fps=10.0, server_delay_ms=20.0,
-                              bitrate_kbps=2000, extra_view="on"))
-    host, port = await srv.start()
-    task = asyncio.create_task(srv.serve_forever())
-    yield host, port
-    task.cancel()
-    await asyncio.gather(task, return_exceptions=True)
-    await srv.close()
+    config = ServerConfig(port=0, scene="sphere", view_size=(128, 128), fps=10.0, server_delay_ms=20.0,
+                          bitrate_kbps=2000, extra_view="on")
+    async with running_server(config) as (_, host, port):
+        yield host, port
 
 
 async def _frames(host, port, hello, ticks=4):

@@ -171,22 +171,14 @@ def test_format_plan_names_every_aspect():
 
 @pytest.mark.gl
 async def test_plan_reaches_the_clients_session_json(tmp_path):
-    import asyncio
-
     from pibr.client.app import ClientConfig, run_client
-    from pibr.server.app import Server
 
-    srv = Server(ServerConfig(port=0, scene="sphere", bitrate_kbps=3000))
-    host, port = await srv.start()
-    task = asyncio.create_task(srv.serve_forever())
-    try:
+    from ..loopback import running_server
+
+    async with running_server(ServerConfig(port=0, scene="sphere", bitrate_kbps=3000)) as (_, host, port):
         await run_client(ClientConfig(host=host, port=port, trace="synth-look", duration_s=0.3, rate_hz=30.0,
                                       methods=("proxy",), out_dir=str(tmp_path), width=96, height=64,
                                       progress="none", bandwidth_kbps=2000, video=False))
-    finally:
-        task.cancel()
-        await asyncio.gather(task, return_exceptions=True)
-        await srv.close()
     session = json.load(open(tmp_path / "session.json"))["session"]
     plan = session["options"]["plan"]
     assert plan["scene"] == "sphere"

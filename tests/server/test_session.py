@@ -15,21 +15,17 @@ from pibr.protocol.pose import Pose
 from pibr.server.app import Server
 from pibr.server.config import ServerConfig
 
-from ..loopback import exchange_virtual
+from ..loopback import exchange_virtual, running_server
 
 pytestmark = pytest.mark.gl
 
 
 @pytest.fixture
 async def server():
-    srv = Server(ServerConfig(port=0, scene="sphere", view_size=(128, 128), fps=10.0, server_delay_ms=20.0,
-                              bitrate_kbps=2000, extra_view="on"))
-    host, port = await srv.start()
-    task = asyncio.create_task(srv.serve_forever())
-    yield srv, host, port
-    task.cancel()
-    await asyncio.gather(task, return_exceptions=True)
-    await srv.close()
+    config = ServerConfig(port=0, scene="sphere", view_size=(128, 128), fps=10.0, server_delay_ms=20.0,
+                          bitrate_kbps=2000, extra_view="on")
+    async with running_server(config) as (srv, host, port):
+        yield srv, host, port
 
 
 HELLO = Hello(client="test", scene="sphere", clock="virtual", output=OutputConfig(160, 96, 90.0, 30.0))
