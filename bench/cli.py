@@ -413,7 +413,10 @@ def register(sub) -> None:
     rt.add_argument("--latency-ms", type=_non_negative, default=128.0, help="round trip (default 128)")
     rt.add_argument("--server-fps", type=_positive, default=10.0, help="server frame rate asked for (default 10)")
     rt.add_argument("--view-size", type=_size, default=None, metavar="WxH",
-                    help="the server's primary view size (default: the server's, 1024x1024)")
+                    help="the server's primary view size (default: the server's, sized for the output: "
+                         "1088x1088 at 960x540)")
+    rt.add_argument("--extra-view", choices=("auto", "on", "off"), default=None,
+                    help="the server's extra view (default: the server's, auto)")
     rt.add_argument("--out", default="out/bench")
     rt.set_defaults(func=cmd_bench_realtime)
 
@@ -482,6 +485,12 @@ def register(sub) -> None:
     o.set_defaults(func=cmd_bench_offset)
 
 
+def realtime_server_args(view_size, extra_view) -> tuple:
+    """The server options ``pibr bench realtime`` passes on: only those the user set."""
+    out = () if view_size is None else ("--view-size", "%dx%d" % tuple(view_size))
+    return out + (() if extra_view is None else ("--extra-view", extra_view))
+
+
 def cmd_bench_realtime(args) -> int:
     from .demo import check_inputs
     from .realtime import print_realtime, run_realtime_bench
@@ -491,7 +500,7 @@ def cmd_bench_realtime(args) -> int:
                            clients=args.clients, duration_s=args.duration, scaling_duration_s=args.scaling_duration,
                            scene=args.scene, trace=args.trace, start_s=args.start, rate_hz=args.rate,
                            size=args.size, latency_ms=args.latency_ms, server_fps=args.server_fps,
-                           server_args=() if args.view_size is None else ("--view-size", "%dx%d" % args.view_size))
+                           server_args=realtime_server_args(args.view_size, args.extra_view))
     print_realtime(r)
     print(f"written: {args.out}/realtime.json")
     return 0

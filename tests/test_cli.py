@@ -215,3 +215,15 @@ def test_timeouts_and_limits_are_options(capsys):
                           (["--max-clock-lead-s", "-1"], "clock lead must be in (0, 86400] s")]:
         assert main(["serve", "--port", "0", *argv]) == 2
         assert message in capsys.readouterr().err
+
+
+def test_bench_realtime_passes_only_the_server_options_set():
+    from pibr.bench.cli import realtime_server_args
+
+    parse = build_parser().parse_args
+    a = parse(["bench", "realtime"])
+    assert realtime_server_args(a.view_size, a.extra_view) == ()
+    a = parse(["bench", "realtime", "--view-size", "512x512", "--extra-view", "off"])
+    assert realtime_server_args(a.view_size, a.extra_view) == ("--view-size", "512x512", "--extra-view", "off")
+    with pytest.raises(SystemExit):
+        parse(["bench", "realtime", "--extra-view", "sometimes"])
