@@ -1,14 +1,24 @@
-"""Pack rendered views into the atlas as planar YUV 4:2:0 on the GPU.
+"""Pack rendered views into the atlas as planar YUV 4:2:0 (``yuv420p``, what libx264 takes).
 
-Short passes write the Y plane and the half-size U and V planes; read back, they are laid
-out exactly as libx264 wants its ``yuv420p`` input (Y, then U, then V, row-major), so the
-encoder gets them with no colour conversion on the CPU. Colour is converted with full-range BT.601 (JPEG)
-coefficients; depth rectangles get the disparity code straight into luma and neutral
-chroma, so nothing but the video codec itself touches depth.
+The atlas is laid out exactly as libx264 wants its input (Y, then U, then V, row-major).
+Colour is converted with full-range BT.601 (JPEG) coefficients; depth rectangles get the
+disparity code straight into luma and neutral chroma, so nothing but the video codec itself
+touches depth. Two packers make the same bytes:
+
+:class:`CpuAtlasPacker` (the server's) converts the views' colour and distance after one
+readback, in numba. On llvmpipe that costs a third of the GL passes: a full-screen pass
+pays for rasterising, and the passes' planes must be read back anyway.
+
+:class:`AtlasPacker` does it in short GL passes; it defines the bytes. The CPU kernels
+repeat its float32 arithmetic operation for operation as Mesa's llvmpipe compiles it
+(constant factors folded into one constant, the rounding offset added to the first
+term), which tests/server/test_packer.py checks against the passes on every 8-bit
+colour, on every float32 distance from 0.04 to 3000 and on rendered frames.
 """
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
 from pibr.protocol.atlas import RECT_NAMES, AtlasLayout
 from pibr.protocol.depth import GLSL as DEPTH_GLSL
@@ -149,3 +159,132 @@ def yuv420_to_rgb(yuv: np.ndarray, width: int, height: int) -> np.ndarray:
     v = np.repeat(np.repeat(v, 2, 0), 2, 1)
     rgb = np.stack([y + 1.402 * v, y - 0.344136 * u - 0.714136 * v, y + 1.772 * u], axis=-1)
     return np.clip(rgb + 0.5, 0, 255).astype(np.uint8)
+
+
+# float32 constants of the shaders above, as llvmpipe folds them: a texel is x * (1 / 255)
+# rounded to float32; ``texel * 255.0 * k`` becomes ``texel * (255 k)``, and the chroma
+# pass's ``(sum of 4 texels) * (255 / 4) * k`` becomes ``sum * (63.75 k)``.
+_F = np.float32
+_INV255 = _F(1.0 / 255.0)
+_LUMA_K = tuple(_F(_F(k) * _F(255.0)) for k in (0.299, 0.587, 0.114))
+_U_K = tuple(_F(_F(k) * _F(255.0 / 4.0)) for k in (-0.168736, -0.331264, 0.5))
+_V_K = tuple(_F(_F(k) * _F(255.0 / 4.0)) for k in (0.5, -0.418688, -0.081312))
+
+
+@njit(cache=True, nogil=True)
+def _luma(r, g, b):
+    """Y of one pixel: the luma pass's float32 arithmetic (r, g, b are texels x * (1 / 255))."""
+    v = ((r * _F(_LUMA_K[0]) + _F(0.5)) + g * _F(_LUMA_K[1])) + b * _F(_LUMA_K[2])
+    return np.uint8(np.floor(v))
+
+
+@njit(cache=True, nogil=True)
+def _chroma(sr, sg, sb, k0, k1, k2):
+    """U or V of a 2x2 block from its texel sums: the chroma pass's float32 arithmetic."""
+    v = np.floor(((sr * k0 + _F(128.5)) + sg * k1) + sb * k2)
+    return np.uint8(min(max(v, _F(0.0)), _F(255.0)))
+
+
+@njit(cache=True, nogil=True)
+def _pack_color(rgba, y_plane, u_plane, v_plane, x0, y0):
+    """rgba (h, w, 4) uint8, h and w even -> Y at (y0, x0) and U, V at (y0 / 2, x0 / 2) of the planes."""
+    h, w = rgba.shape[0], rgba.shape[1]
+    ku0, ku1, ku2 = _F(_U_K[0]), _F(_U_K[1]), _F(_U_K[2])
+    kv0, kv1, kv2 = _F(_V_K[0]), _F(_V_K[1]), _F(_V_K[2])
+    for j in range(h // 2):
+        for i in range(w // 2):
+            sr = _F(0.0)
+            sg = _F(0.0)
+            sb = _F(0.0)
+            # the order the chroma pass adds its texels: (0, 0), (1, 0), (0, 1), (1, 1)
+            for dy in range(2):
+                for dx in range(2):
+                    p = rgba[2 * j + dy, 2 * i + dx]
+                    r = _F(p[0]) * _INV255
+                    g = _F(p[1]) * _INV255
+                    b = _F(p[2]) * _INV255
+                    y_plane[y0 + 2 * j + dy, x0 + 2 * i + dx] = _luma(r, g, b)
+                    if dx == 0 and dy == 0:
+                        sr, sg, sb = r, g, b
+                    else:
+                        sr += r
+                        sg += g
+                        sb += b
+            u_plane[y0 // 2 + j, x0 // 2 + i] = _chroma(sr, sg, sb, ku0, ku1, ku2)
+            v_plane[y0 // 2 + j, x0 // 2 + i] = _chroma(sr, sg, sb, kv0, kv1, kv2)
+
+
+@njit(cache=True, nogil=True)
+def _pack_depth(distance, y_plane, x0, y0, near, far, min_code, max_code):
+    """distance (h, w) float32 -> disparity codes into Y at (y0, x0): protocol/depth.py's
+    ``depth_quantize`` in float32, as the depth pass computes it (all arguments float32)."""
+    h, w = distance.shape
+    span = max_code - min_code
+    peeled = np.floor(_F(0.5) * min_code)
+    for j in range(h):
+        for i in range(w):
+            r = distance[j, i]
+            if abs(r) < _F(1.1754944e-38):   # llvmpipe flushes subnormals to zero
+                r = _F(0.0)
+            if r < _F(0.0):
+                code = peeled
+            elif r > far or r <= _F(0.0) or r != r:   # beyond far, sky, or NaN (never rendered)
+                code = _F(0.0)
+            else:
+                code = min_code + np.floor((near / max(r, near)) * span + _F(0.5))
+            y_plane[y0 + j, x0 + i] = np.uint8(code)
+
+
+class CpuAtlasPacker:
+    """Views read back from GL -> yuv420p bytes of the atlas, identical to :class:`AtlasPacker`'s.
+
+    Keeps one buffer; parts of the atlas no rectangle covers stay Y 0, U and V 128 as the GL
+    passes clear them. Thread-safe only per instance; the kernels release the GIL.
+    """
+
+    def __init__(self, layout: AtlasLayout, quantizer: DepthQuantizer | None):
+        if quantizer is not None and quantizer.bits > 8:
+            raise ValueError(f"the atlas carries 8-bit depth codes, got a {quantizer.bits}-bit quantizer")
+        for name in RECT_NAMES:
+            r = layout.rect(name)
+            if r is not None and not name.endswith(".depth") and any(v % 2 for v in r):
+                raise ValueError(f"atlas rectangle {name} {r} must have even corners and sizes for 4:2:0 chroma")
+        self.layout, self.quantizer = layout, quantizer
+        w, h = layout.width, layout.height
+        self._buf = np.empty((h * 3 // 2, w), np.uint8)
+        self._buf[:h] = 0
+        self._buf[h:] = 128
+        q = (w // 2) * (h // 2)
+        chroma = self._buf[h:].reshape(-1)
+        self._y = self._buf[:h]
+        self._u = chroma[:q].reshape(h // 2, w // 2)
+        self._v = chroma[q:].reshape(h // 2, w // 2)
+
+    def pack(self, colors: dict, distances: dict) -> np.ndarray:
+        """colors: rect name -> (h, w, 4) uint8 RGBA; distances: rect name -> (h, w) float32 radial
+        distance (0 sky, negative peeled). -> (1.5 H, W) uint8 yuv420p buffer (reused between calls)."""
+        for name in RECT_NAMES:
+            r = self.layout.rect(name)
+            if r is None:
+                continue
+            x, y, w, h = r
+            if name.endswith(".depth"):
+                if name not in distances:
+                    continue
+                if self.quantizer is None:
+                    raise ValueError(f"atlas rectangle {name} needs a depth quantizer")
+                src = distances[name]
+                _check_source(name, src, (h, w), np.float32)
+                q = self.quantizer
+                _pack_depth(src, self._y, x, y, _F(q.near), _F(q.far), _F(q.min_code), _F(q.max_code))
+            elif name in colors:
+                src = colors[name]
+                _check_source(name, src, (h, w, 4), np.uint8)
+                _pack_color(src, self._y, self._u, self._v, x, y)
+        return self._buf
+
+
+def _check_source(name: str, src: np.ndarray, shape: tuple, dtype) -> None:
+    if src.shape != shape or src.dtype != dtype:
+        raise ValueError(f"atlas rectangle {name} needs a {shape} {np.dtype(dtype).name} image, "
+                         f"got {src.shape} {src.dtype}")

@@ -481,6 +481,24 @@ class RenderTarget:
         data = self.fbo.read(components=1, attachment=1, dtype="f4", alignment=1)
         return np.frombuffer(data, np.float32).reshape(self.height, self.width)
 
+    def read_rgba_into(self, out: np.ndarray) -> np.ndarray:
+        """Colour into ``out``, (height, width, 4) uint8 C-contiguous, row 0 on top (alpha 255):
+        the texture's own format, so the read is a copy with no conversion."""
+        self._check_out(out, (self.height, self.width, 4), np.uint8)
+        self.fbo.read_into(out, components=4, attachment=0, alignment=1)
+        return out
+
+    def read_distance_into(self, out: np.ndarray) -> np.ndarray:
+        """:meth:`read_distance` into ``out``, (height, width) float32 C-contiguous."""
+        self._check_out(out, (self.height, self.width), np.float32)
+        self.fbo.read_into(out, components=1, attachment=1, dtype="f4", alignment=1)
+        return out
+
+    @staticmethod
+    def _check_out(out: np.ndarray, shape: tuple, dtype) -> None:
+        if out.shape != shape or out.dtype != dtype or not out.flags.c_contiguous:
+            raise ValueError(f"need a C-contiguous {shape} {np.dtype(dtype).name} array, got {out.shape} {out.dtype}")
+
     def read_motion(self) -> tuple[np.ndarray, np.ndarray]:
         """(motion (height, width, 2) float32 pixels, moving (height, width) bool)."""
         data = self.fbo.read(components=4, attachment=2, dtype="f2", alignment=1)
