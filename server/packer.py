@@ -227,7 +227,7 @@ def _pack_depth(distance, y_plane, x0, y0, near, far, min_code, max_code):
         dst = y_plane[y0 + j]
         for i in range(w):
             r = src[i]
-            r = r if abs(r) >= _F(1.1754944e-38) else _F(0.0)   # llvmpipe flushes subnormals to zero
+            r = r if abs(r) >= _F(1.1754944e-38) else _F(0.0)   # subnormals: sky, as llvmpipe mostly flushes them
             code = min_code + np.floor((near / max(r, near)) * span + _F(0.5))
             code = _F(0.0) if (r > far or r <= _F(0.0) or r != r) else code
             code = peeled if r < _F(0.0) else code

@@ -262,3 +262,42 @@ def test_wide_views_sample_the_nearest_mip_and_leave_perspective_views_trilinear
         gt.release()
     finally:
         ctx.release()
+
+
+@pytest.mark.gl
+def test_specialised_programs_change_no_pixel(gl_ctx):
+    """One program per object kind (textured, moving) against one program with uniform switches:
+    primary with motion, both peeled extra views, the tessellation path and a perspective view with
+    moving-object indices give identical bytes, and the room really uses several kinds."""
+    from pibr.server.renderer import RenderTarget, Renderer
+
+    scene = load_scene("room")
+    offset = extra_offset_pose(1.5, 1.8, 15.0)
+    out = {}
+    for specialise in (False, True):
+        renderer = Renderer(gl_ctx, scene, "vertex", specialise=specialise)
+        primary = RenderTarget(gl_ctx, 192, 192, motion=True)
+        extra = RenderTarget(gl_ctx, 96, 96)
+        images = []
+        for k, pose in enumerate(_poses(scene, 3, seed=5)):
+            t = 0.41 * k   # the fan and the pendulum move
+            renderer.render_wide(primary, pose, t, motion_dt=0.1)
+            images += [primary.read_color().copy(), primary.read_distance().copy(), primary.read_motion()[0].copy()]
+            for mark in (True, False):
+                renderer.render_wide(extra, pose.compose(offset), t, peel=(primary, pose, PEEL_TOLERANCE),
+                                     mark_peeled=mark)
+                images += [extra.read_color().copy(), extra.read_distance().copy()]
+            renderer.render_wide(extra, pose, t, "tess")
+            images += [extra.read_color().copy(), extra.read_distance().copy()]
+            renderer.render_perspective(primary, pose, t, 90.0)
+            images += [primary.read_color().copy(), primary.read_moving_index().copy()]
+        out[specialise] = images
+        kinds = {key[1:] for key in renderer.programs}
+        assert kinds == ({(None, None)} if not specialise else {(True, False), (False, False), (False, True)})
+        primary.release()
+        extra.release()
+        renderer.release()
+    assert len(out[True]) == len(out[False]) == 33
+    for a, b in zip(out[False], out[True]):
+        assert np.array_equal(a, b)
+    assert (out[True][2] != 0).any()   # motion of moving objects was drawn
