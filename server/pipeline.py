@@ -106,8 +106,7 @@ class FrameProducer:
         motion, moving = None, None
         if self.spec.motion_dt is not None:
             t2 = time.perf_counter()
-            m, moving = self.primary.read_motion()
-            motion = np.where(moving[:, :, None], m, 0.0).astype(np.float32)
+            motion, moving = self.primary.read_moving_motion()
             readback_ms += (time.perf_counter() - t2) * 1e3
         poses = object_poses_payload(self.renderer.scene, t) if self.spec.object_poses else None
         return ProducedFrame(yuv, pose, extra_pose, t, (t1 - t0) * 1e3, readback_ms, pack_ms, distances,

@@ -24,6 +24,7 @@ import logging
 from dataclasses import dataclass, field
 
 import numpy as np
+from numba import njit
 
 from pibr.protocol.pose import Pose
 from pibr.protocol.projection import GLSL as PROJECTION_GLSL
@@ -468,6 +469,28 @@ class _GPUObject:
 LOD_BANDS = (0.0, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0, 32.0)
 
 
+#: every float16 bit pattern -> its float32 value (numpy's exact conversion)
+_HALF_TO_FLOAT = np.arange(1 << 16, dtype=np.uint32).astype(np.uint16).view(np.float16).astype(np.float32)
+
+
+@njit(cache=True, nogil=True)
+def _moving_motion(raw, half_to_float, motion, moving):
+    """raw (h, w, 4) uint16 half floats (dx, dy, moving flag, index) -> motion (h, w, 2) float32,
+    0 where the flag is not above 0.5, and moving (h, w) bool."""
+    h, w = moving.shape
+    for j in range(h):
+        for i in range(w):
+            # flag > 0.5 on the bits: above 0x3800 (0.5), up to 0x7c00 (+inf; NaN and negatives above)
+            m = 0x3800 < raw[j, i, 2] <= 0x7C00
+            moving[j, i] = m
+            if m:
+                motion[j, i, 0] = half_to_float[raw[j, i, 0]]
+                motion[j, i, 1] = half_to_float[raw[j, i, 1]]
+            else:
+                motion[j, i, 0] = np.float32(0.0)
+                motion[j, i, 1] = np.float32(0.0)
+
+
 class RenderTarget:
     """Colour (RGBA8) + radial distance (R32F, 0 = sky) + depth buffer of ``width`` x ``height``;
     with ``motion``, also the motion of moving objects (RGBA16F: dx, dy pixels, moving flag)."""
@@ -517,6 +540,16 @@ class RenderTarget:
         data = self.fbo.read(components=4, attachment=2, dtype="f2", alignment=1)
         m = np.frombuffer(data, np.float16).reshape(self.height, self.width, 4).astype(np.float32)
         return np.ascontiguousarray(m[:, :, :2]), m[:, :, 2] > 0.5
+
+    def read_moving_motion(self) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`read_motion` with the motion zeroed where nothing moves: (motion (height, width, 2)
+        float32, moving (height, width) bool), new arrays. One pass over the raw half floats."""
+        data = self.fbo.read(components=4, attachment=2, dtype="f2", alignment=1)
+        raw = np.frombuffer(data, np.uint16).reshape(self.height, self.width, 4)
+        motion = np.empty((self.height, self.width, 2), np.float32)
+        moving = np.empty((self.height, self.width), np.bool_)
+        _moving_motion(raw, _HALF_TO_FLOAT, motion, moving)
+        return motion, moving
 
     def read_moving_index(self) -> np.ndarray:
         """(height, width) int32: the scene index of the moving object each pixel shows, -1 elsewhere."""

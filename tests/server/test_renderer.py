@@ -301,3 +301,29 @@ def test_specialised_programs_change_no_pixel(gl_ctx):
     for a, b in zip(out[False], out[True]):
         assert np.array_equal(a, b)
     assert (out[True][2] != 0).any()   # motion of moving objects was drawn
+
+
+@pytest.mark.gl
+def test_moving_motion_equals_read_motion_masked(gl_ctx):
+    """The one-pass readback equals read_motion with the motion zeroed where nothing moves, bit for
+    bit, for flags around 0.5, infinities, NaN, negative zero and subnormal half motions."""
+    from pibr.server.renderer import RenderTarget
+
+    target = RenderTarget(gl_ctx, 64, 32, motion=True)
+    rng = np.random.default_rng(9)
+    flags = np.array([0.0, -0.0, 0.5, np.nextafter(np.float16(0.5), np.float16(1)), 1.0, 7.0, np.inf, -np.inf,
+                      np.nan, -1.0, 0.4995], np.float16)
+    half = np.empty((32, 64, 4), np.float16)
+    half[..., 0] = rng.normal(0.0, 40.0, (32, 64))
+    half[..., 1] = rng.normal(0.0, 1e-5, (32, 64))          # many subnormal halves
+    half[::5, :, 0] = -0.0
+    half[..., 2] = np.resize(flags, (32, 64))
+    half[..., 3] = rng.integers(0, 60, (32, 64))
+    target.motion.write(half.tobytes())
+    m, moving = target.read_motion()
+    expected = np.where(moving[:, :, None], m, 0.0).astype(np.float32)
+    motion, got_moving = target.read_moving_motion()
+    assert np.array_equal(got_moving, moving) and 0 < moving.sum() < moving.size
+    assert motion.dtype == np.float32 and motion.shape == (32, 64, 2)
+    assert np.array_equal(motion.view(np.uint32), expected.view(np.uint32))
+    target.release()
