@@ -5,7 +5,7 @@ calls ``await gl.run(producer.produce, pose, t)`` and hands the returned yuv420p
 its encoder in a worker thread. Renderers are shared by every session showing the same
 scene; render targets belong to the producer. The atlas is packed on the CPU after one
 readback of each view's colour and distance (server/packer.py: the same bytes as the GL
-passes, ``gpu_pack``, at a third of their cost on llvmpipe).
+passes, ``gpu_pack``, at a quarter of their cost on llvmpipe).
 """
 from __future__ import annotations
 

@@ -636,8 +636,20 @@ class Renderer:
         self.wide = wide
         if wide:  # pre-tessellated copies for the vertex-projection path
             self.tessellated_triangles = self.prepare_edge_angle(max_edge_angle_deg)
+        if wide:  # compile now what the server's views draw, so a session's first frame does not wait
+            for key in self._program_keys(self.projection if self.projection != "cube" else "vertex"):
+                self._program(key)
         log.debug("renderer: %d objects, %d triangles (%d pre-tessellated)", len(self.objects),
                   scene.triangle_count, self.tessellated_triangles)
+
+    def _program_keys(self, projection: str) -> set:
+        """Program keys of a primary view with motion and a marked peeled view in ``projection``."""
+        if not self.specialise:
+            return {(projection, None, None), (projection + "_peel_mark", None, None)}
+        kinds = {g.texture is not None for g in self.objects}
+        moving = {g.texture is not None for g in self.objects if g.obj.is_dynamic}
+        return ({(projection, k, False) for k in kinds} | {(projection, k, True) for k in moving}
+                | {(projection + "_peel_mark", k, False) for k in kinds})
 
     def _tessellate(self, obj, angle_deg: float) -> list:
         """[(band distance, mesh)]: the object split for eyes anywhere in the viewing region (band 0),
