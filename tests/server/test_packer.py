@@ -9,6 +9,15 @@ from pibr.server.packer import AtlasPacker, CpuAtlasPacker
 
 
 
+@pytest.fixture
+def ctx(gl_ctx):
+    """The shared context, made current, with no error left pending by earlier tests' GL calls
+    (moderngl reports a stale error as its own failure)."""
+    with gl_ctx:
+        _ = gl_ctx.error
+        yield gl_ctx
+
+
 def _both(ctx, layout, quantizer, colors: dict, distances: dict):
     """(GL passes' yuv420p, CPU packer's yuv420p) of the same (h, w, 4) uint8 / (h, w) float32 views."""
     textures = {name: ctx.texture((v.shape[1], v.shape[0]), 4, v.tobytes()) for name, v in colors.items()}
@@ -70,7 +79,7 @@ def _chroma_tie_blocks(rng, count: int) -> np.ndarray:
 
 
 @pytest.mark.gl
-def test_luma_and_chroma_equal_the_passes_where_rounding_decides(gl_ctx):
+def test_luma_and_chroma_equal_the_passes_where_rounding_decides(ctx):
     rng = np.random.default_rng(7)
     ties = _luma_ties()
     assert 40_000 < len(ties) < 60_000
@@ -82,12 +91,12 @@ def test_luma_and_chroma_equal_the_passes_where_rounding_decides(gl_ctx):
     chroma = np.full((256, 256, 4), 255, np.uint8)
     chroma[:, :, :3] = blocks.reshape(128, 128, 2, 2, 3).transpose(0, 2, 1, 3, 4).reshape(256, 256, 3)
     layout = AtlasLayout(512, 256, {"primary.color": (0, 0, 256, 256), "extra.color": (256, 0, 256, 256)})
-    reference, packed = _both(gl_ctx, layout, None, {"primary.color": luma, "extra.color": chroma}, {})
+    reference, packed = _both(ctx, layout, None, {"primary.color": luma, "extra.color": chroma}, {})
     assert np.array_equal(packed, reference)
 
 
 @pytest.mark.gl
-def test_depth_codes_equal_the_pass_on_every_boundary_and_special_value(gl_ctx):
+def test_depth_codes_equal_the_pass_on_every_boundary_and_special_value(ctx):
     q = h264_quantizer(0.1, 1000.0)
     # the distances where each code starts, in float64, and 200 float32 steps either side of each
     span = q.max_code - q.min_code
@@ -105,13 +114,13 @@ def test_depth_codes_equal_the_pass_on_every_boundary_and_special_value(gl_ctx):
     side = int(np.ceil(np.sqrt(len(values)) / 16)) * 16
     distance = np.resize(values, side * side).reshape(side, side).astype(np.float32)
     layout = AtlasLayout(side, side, {"primary.depth": (0, 0, side, side)})
-    reference, packed = _both(gl_ctx, layout, q, {}, {"primary.depth": distance})
+    reference, packed = _both(ctx, layout, q, {}, {"primary.depth": distance})
     assert np.array_equal(packed, reference)
     assert set(np.unique(packed[:side])) == set(range(q.min_code, 256)) | {0, 8}   # every code and sky, peeled
 
 
 @pytest.mark.gl
-def test_rendered_room_frames_equal_through_the_producer(gl_ctx):
+def test_rendered_room_frames_equal_through_the_producer(ctx):
     """Dual view with depth in the atlas (and the distances, low colour and motion the producer
     hands out), then the edge-depth layout: identical with the GL passes and on the CPU."""
     from pibr.scenes.registry import load_scene
@@ -121,7 +130,7 @@ def test_rendered_room_frames_equal_through_the_producer(gl_ctx):
     from pibr.protocol.pose import Pose, quat_from_euler
 
     scene = load_scene("room")
-    renderer = Renderer(gl_ctx, scene, "vertex")
+    renderer = Renderer(ctx, scene, "vertex")
     q = h264_quantizer(scene.near, scene.far)
     offset = extra_offset_pose(1.5, 1.8, 15.0)
     specs = [ProducerSpec((256, 256), build_layout((256, 256), (128, 128), True), q, extra_size=(128, 128),
@@ -130,8 +139,8 @@ def test_rendered_room_frames_equal_through_the_producer(gl_ctx):
                           extra_offset=offset, keep_distance=True)]
     try:
         for spec in specs:
-            cpu = FrameProducer(gl_ctx, renderer, spec)
-            gpu = FrameProducer(gl_ctx, renderer, ProducerSpec(**{**spec.__dict__, "gpu_pack": True}))
+            cpu = FrameProducer(ctx, renderer, spec)
+            gpu = FrameProducer(ctx, renderer, ProducerSpec(**{**spec.__dict__, "gpu_pack": True}))
             assert isinstance(cpu.packer, CpuAtlasPacker) and isinstance(gpu.packer, AtlasPacker)
             for k, pose in enumerate(_poses(scene, Pose, quat_from_euler)):
                 a, b = cpu.produce(pose, 0.37 * k), gpu.produce(pose, 0.37 * k)

@@ -264,8 +264,18 @@ def test_wide_views_sample_the_nearest_mip_and_leave_perspective_views_trilinear
         ctx.release()
 
 
+@pytest.fixture
+def ctx():
+    """A context of the test's own, as the tests above make (no state shared with other tests)."""
+    from pibr.protocol.gl import create_context
+
+    ctx = create_context()
+    yield ctx
+    ctx.release()
+
+
 @pytest.mark.gl
-def test_specialised_programs_change_no_pixel(gl_ctx):
+def test_specialised_programs_change_no_pixel(ctx):
     """One program per object kind (textured, moving) against one program with uniform switches:
     primary with motion, both peeled extra views, the tessellation path and a perspective view with
     moving-object indices give identical bytes, and the room really uses several kinds."""
@@ -275,9 +285,9 @@ def test_specialised_programs_change_no_pixel(gl_ctx):
     offset = extra_offset_pose(1.5, 1.8, 15.0)
     out = {}
     for specialise in (False, True):
-        renderer = Renderer(gl_ctx, scene, "vertex", specialise=specialise)
-        primary = RenderTarget(gl_ctx, 192, 192, motion=True)
-        extra = RenderTarget(gl_ctx, 96, 96)
+        renderer = Renderer(ctx, scene, "vertex", specialise=specialise)
+        primary = RenderTarget(ctx, 192, 192, motion=True)
+        extra = RenderTarget(ctx, 96, 96)
         images = []
         for k, pose in enumerate(_poses(scene, 3, seed=5)):
             t = 0.41 * k   # the fan and the pendulum move
@@ -304,12 +314,12 @@ def test_specialised_programs_change_no_pixel(gl_ctx):
 
 
 @pytest.mark.gl
-def test_moving_motion_equals_read_motion_masked(gl_ctx):
+def test_moving_motion_equals_read_motion_masked(ctx):
     """The one-pass readback equals read_motion with the motion zeroed where nothing moves, bit for
     bit, for flags around 0.5, infinities, NaN, negative zero and subnormal half motions."""
     from pibr.server.renderer import RenderTarget
 
-    target = RenderTarget(gl_ctx, 64, 32, motion=True)
+    target = RenderTarget(ctx, 64, 32, motion=True)
     rng = np.random.default_rng(9)
     flags = np.array([0.0, -0.0, 0.5, np.nextafter(np.float16(0.5), np.float16(1)), 1.0, 7.0, np.inf, -np.inf,
                       np.nan, -1.0, 0.4995], np.float16)
