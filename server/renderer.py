@@ -24,6 +24,7 @@ import logging
 from dataclasses import dataclass, field
 
 import numpy as np
+from numba import njit
 
 from pibr.protocol.pose import Pose
 from pibr.protocol.projection import GLSL as PROJECTION_GLSL
@@ -82,7 +83,7 @@ vec3 shade(vec3 world_pos, vec3 normal, vec2 uv, vec4 vcolor) {
     vec3 n = normalize(normal);
     if (dot(n, u_eye - world_pos) < 0.0) n = -n;   // two-sided: light the side we see
     vec4 albedo = u_base_color * vcolor;
-    if (u_has_texture) {
+    if (TEXTURED) {
         vec3 t = texture(u_texture, uv).rgb;
         albedo.rgb *= t * t;                          // sRGB -> linear (gamma 2)
     }
@@ -92,6 +93,13 @@ vec3 shade(vec3 world_pos, vec3 normal, vec2 uv, vec4 vcolor) {
 }
 """ % "\n".join(terms)
 
+
+#: The fragment shader's per-object switches (TEXTURED, MOVING) are compiled in as constants, one
+#: program per combination an object needs: llvmpipe runs the body of a branch on a uniform for
+#: every fragment (masked), so untextured objects paid for a texture lookup and static ones for
+#: two projections. ``Renderer(specialise=False)`` keeps one program with uniform switches.
+_SPECIALISED = "#define TEXTURED %s\n#define MOVING %s\n"
+_UNIFORM_SWITCHES = "#define TEXTURED u_has_texture\n#define MOVING u_moving\n"
 
 _FRAGMENT = """
 #version 410
@@ -152,7 +160,7 @@ void main() {
     // Motion the camera does not explain: where this surface point was one server frame ago,
     // seen from the current camera. Rows grow downwards, t'_y upwards.
     f_motion = vec4(0.0);
-    if (u_moving)
+    if (MOVING)
         f_motion = vec4((wa_project(v_cam).xy - wa_project(v_prev_cam).xy) * vec2(1.0, -1.0) * u_half_px, 1.0,
                         u_object_index);
 }
@@ -416,16 +424,22 @@ def visible_runs(corners: np.ndarray, model_view: np.ndarray, chunk: int, faces:
 
 
 class _GPUMesh:
-    def __init__(self, ctx, mesh, programs: dict):
+    def __init__(self, ctx, mesh):
+        self.ctx = ctx
         self.vbo = ctx.buffer(_interleave(mesh).tobytes())
         self.ibo = ctx.buffer(mesh.faces.astype(np.uint32).tobytes())
         self.count = mesh.faces.size
         self.faces = len(mesh.faces)
         self.chunk_corners = chunk_boxes(mesh)
-        self.vaos = {name: ctx.vertex_array(prog, [(self.vbo, _VERTEX_FORMAT, *_VERTEX_ATTRS)],
-                                            index_buffer=self.ibo, index_element_size=4,
-                                            skip_errors=True)
-                     for name, prog in programs.items()}
+        self.vaos: dict = {}   # program key -> vertex array, made when first drawn
+
+    def vao(self, key, prog):
+        vao = self.vaos.get(key)
+        if vao is None:
+            vao = self.vaos[key] = self.ctx.vertex_array(prog, [(self.vbo, _VERTEX_FORMAT, *_VERTEX_ATTRS)],
+                                                         index_buffer=self.ibo, index_element_size=4,
+                                                         skip_errors=True)
+        return vao
 
     def release(self):
         for v in self.vaos.values():
@@ -455,6 +469,28 @@ class _GPUObject:
 LOD_BANDS = (0.0, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0, 32.0)
 
 
+#: every float16 bit pattern -> its float32 value (numpy's exact conversion)
+_HALF_TO_FLOAT = np.arange(1 << 16, dtype=np.uint32).astype(np.uint16).view(np.float16).astype(np.float32)
+
+
+@njit(cache=True, nogil=True)
+def _moving_motion(raw, half_to_float, motion, moving):
+    """raw (h, w, 4) uint16 half floats (dx, dy, moving flag, index) -> motion (h, w, 2) float32,
+    0 where the flag is not above 0.5, and moving (h, w) bool."""
+    h, w = moving.shape
+    for j in range(h):
+        for i in range(w):
+            # flag > 0.5 on the bits: above 0x3800 (0.5), up to 0x7c00 (+inf; NaN and negatives above)
+            m = 0x3800 < raw[j, i, 2] <= 0x7C00
+            moving[j, i] = m
+            if m:
+                motion[j, i, 0] = half_to_float[raw[j, i, 0]]
+                motion[j, i, 1] = half_to_float[raw[j, i, 1]]
+            else:
+                motion[j, i, 0] = np.float32(0.0)
+                motion[j, i, 1] = np.float32(0.0)
+
+
 class RenderTarget:
     """Colour (RGBA8) + radial distance (R32F, 0 = sky) + depth buffer of ``width`` x ``height``;
     with ``motion``, also the motion of moving objects (RGBA16F: dx, dy pixels, moving flag)."""
@@ -481,11 +517,39 @@ class RenderTarget:
         data = self.fbo.read(components=1, attachment=1, dtype="f4", alignment=1)
         return np.frombuffer(data, np.float32).reshape(self.height, self.width)
 
+    def read_rgba_into(self, out: np.ndarray) -> np.ndarray:
+        """Colour into ``out``, (height, width, 4) uint8 C-contiguous, row 0 on top (alpha 255):
+        the texture's own format, so the read is a copy with no conversion."""
+        self._check_out(out, (self.height, self.width, 4), np.uint8)
+        self.fbo.read_into(out, components=4, attachment=0, alignment=1)
+        return out
+
+    def read_distance_into(self, out: np.ndarray) -> np.ndarray:
+        """:meth:`read_distance` into ``out``, (height, width) float32 C-contiguous."""
+        self._check_out(out, (self.height, self.width), np.float32)
+        self.fbo.read_into(out, components=1, attachment=1, dtype="f4", alignment=1)
+        return out
+
+    @staticmethod
+    def _check_out(out: np.ndarray, shape: tuple, dtype) -> None:
+        if out.shape != shape or out.dtype != dtype or not out.flags.c_contiguous:
+            raise ValueError(f"need a C-contiguous {shape} {np.dtype(dtype).name} array, got {out.shape} {out.dtype}")
+
     def read_motion(self) -> tuple[np.ndarray, np.ndarray]:
         """(motion (height, width, 2) float32 pixels, moving (height, width) bool)."""
         data = self.fbo.read(components=4, attachment=2, dtype="f2", alignment=1)
         m = np.frombuffer(data, np.float16).reshape(self.height, self.width, 4).astype(np.float32)
         return np.ascontiguousarray(m[:, :, :2]), m[:, :, 2] > 0.5
+
+    def read_moving_motion(self) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`read_motion` with the motion zeroed where nothing moves: (motion (height, width, 2)
+        float32, moving (height, width) bool), new arrays. One pass over the raw half floats."""
+        data = self.fbo.read(components=4, attachment=2, dtype="f2", alignment=1)
+        raw = np.frombuffer(data, np.uint16).reshape(self.height, self.width, 4)
+        motion = np.empty((self.height, self.width, 2), np.float32)
+        moving = np.empty((self.height, self.width), np.bool_)
+        _moving_motion(raw, _HALF_TO_FLOAT, motion, moving)
+        return motion, moving
 
     def read_moving_index(self) -> np.ndarray:
         """(height, width) int32: the scene index of the moving object each pixel shows, -1 elsewhere."""
@@ -505,7 +569,8 @@ class Renderer:
     def __init__(self, ctx, scene: Scene, projection: str = DEFAULT_PROJECTION,
                  max_edge_angle_deg: float = MAX_EDGE_ANGLE_DEG, tess_max_level: int = 64,
                  tess_max_screen_edge: float = 48.0, wide: bool = True, cull: bool = True,
-                 lod: bool = True, cube_scale: float = 0.75, wide_trilinear: bool = False):
+                 lod: bool = True, cube_scale: float = 0.75, wide_trilinear: bool = False,
+                 specialise: bool = True):
         if projection not in PROJECTIONS:
             raise ValueError(f"projection must be one of {', '.join(PROJECTIONS)}, got {projection!r}")
         self.ctx, self.scene, self.projection = ctx, scene, projection
@@ -518,34 +583,32 @@ class Renderer:
         self.max_edge_angle = np.radians(max_edge_angle_deg)
         self.max_edge_angle_deg = float(max_edge_angle_deg)
         self.tess_max_level = tess_max_level
+        #: one program per pass and object kind (textured, moving): see _SPECIALISED
+        self.specialise = specialise
+        self.tess_max_screen_edge = tess_max_screen_edge
         shading = shading_glsl(scene.lights)
-        fragment = _FRAGMENT % {"shading": shading, "defines": "", "projection": PROJECTION_GLSL}
-        peeling = _FRAGMENT % {"shading": shading, "defines": "#define PEEL", "projection": PROJECTION_GLSL}
-        marking = _FRAGMENT % {"shading": shading, "defines": "#define PEEL\n#define PEEL_MARK",
-                               "projection": PROJECTION_GLSL}
-        self.programs = {
-            "perspective": ctx.program(vertex_shader=_PERSPECTIVE_VS, fragment_shader=fragment),
-            "vertex": ctx.program(vertex_shader=_WIDE_VERTEX_VS, fragment_shader=fragment),
-            "vertex_peel": ctx.program(vertex_shader=_WIDE_VERTEX_VS, fragment_shader=peeling),
-            "vertex_peel_mark": ctx.program(vertex_shader=_WIDE_VERTEX_VS, fragment_shader=marking),
-        }
-        for name, fs in (("tess", fragment), ("tess_peel", peeling), ("tess_peel_mark", marking)):
-            prog = ctx.program(vertex_shader=_TESS_VS, tess_control_shader=_TESS_TCS,
-                               tess_evaluation_shader=_TESS_TES, fragment_shader=fs)
-            prog["u_max_angle"].value = float(self.max_edge_angle)
-            prog["u_max_level"].value = float(tess_max_level)
-            prog["u_max_screen_edge"].value = float(tess_max_screen_edge)
-            self.programs[name] = prog
-        for name in ("vertex_peel", "vertex_peel_mark", "tess_peel", "tess_peel_mark"):
-            self.programs[name]["u_peel_dist"].value = 1
-        self.programs["cube"] = ctx.program(vertex_shader=cube_faces.CUBE_VS % {"uniforms": _COMMON_VS_UNIFORMS},
-                                            fragment_shader=fragment)
+        self._fragment = {name: _FRAGMENT % {"shading": shading, "defines": defines + "@SWITCHES@",
+                                             "projection": PROJECTION_GLSL}
+                          for name, defines in (("plain", ""), ("peel", "#define PEEL\n"),
+                                                ("mark", "#define PEEL\n#define PEEL_MARK\n"))}
+        #: pass name -> (vertex, tess control, tess evaluation shader, fragment variant); compiled when
+        #: first drawn, per (pass, textured, moving) key (see :meth:`_program`)
+        cube_vs = cube_faces.CUBE_VS % {"uniforms": _COMMON_VS_UNIFORMS}
+        self._passes = {"perspective": (_PERSPECTIVE_VS, None, None, "plain"),
+                        "vertex": (_WIDE_VERTEX_VS, None, None, "plain"),
+                        "vertex_peel": (_WIDE_VERTEX_VS, None, None, "peel"),
+                        "vertex_peel_mark": (_WIDE_VERTEX_VS, None, None, "mark"),
+                        "tess": (_TESS_VS, _TESS_TCS, _TESS_TES, "plain"),
+                        "tess_peel": (_TESS_VS, _TESS_TCS, _TESS_TES, "peel"),
+                        "tess_peel_mark": (_TESS_VS, _TESS_TCS, _TESS_TES, "mark"),
+                        "cube": (cube_vs, None, None, "plain")}
+        self.programs: dict = {}   # (pass, textured, moving) -> program; (pass, None, None) unspecialised
         resample = ctx.program(vertex_shader=cube_faces.RESAMPLE_VS,
                                fragment_shader=cube_faces.RESAMPLE_FS % {"projection": PROJECTION_GLSL})
         for unit, name in enumerate(("u_cube_color", "u_cube_dist", "u_cube_motion")):
             if name in resample:
                 resample[name].value = unit
-        self.programs["cube_resample"] = resample
+        self._resample = resample
         self._quad = ctx.buffer(np.array([-1, -1, 1, -1, -1, 1, 1, 1], dtype="f4").tobytes())
         self._resample_vao = ctx.vertex_array(resample, [(self._quad, "2f", "in_pos")])
         #: projection "cube": face size as a fraction of the wide view's width (see cube_faces.py)
@@ -561,8 +624,7 @@ class Renderer:
         for index, obj in enumerate(scene.objects):
             if obj.mesh.triangle_count == 0:
                 continue
-            original = _GPUMesh(ctx, obj.mesh, {k: self.programs[k] for k in ("perspective", "tess", "tess_peel",
-                                                                              "tess_peel_mark", "cube")})
+            original = _GPUMesh(ctx, obj.mesh)
             tex = None
             if obj.material.texture is not None:
                 img = np.ascontiguousarray(obj.material.texture[::-1])  # UV v = 0 is the bottom row
@@ -574,8 +636,20 @@ class Renderer:
         self.wide = wide
         if wide:  # pre-tessellated copies for the vertex-projection path
             self.tessellated_triangles = self.prepare_edge_angle(max_edge_angle_deg)
+        if wide:  # compile now what the server's views draw, so a session's first frame does not wait
+            for key in self._program_keys(self.projection if self.projection != "cube" else "vertex"):
+                self._program(key)
         log.debug("renderer: %d objects, %d triangles (%d pre-tessellated)", len(self.objects),
                   scene.triangle_count, self.tessellated_triangles)
+
+    def _program_keys(self, projection: str) -> set:
+        """Program keys of a primary view with motion and a marked peeled view in ``projection``."""
+        if not self.specialise:
+            return {(projection, None, None), (projection + "_peel_mark", None, None)}
+        kinds = {g.texture is not None for g in self.objects}
+        moving = {g.texture is not None for g in self.objects if g.obj.is_dynamic}
+        return ({(projection, k, False) for k in kinds} | {(projection, k, True) for k in moving}
+                | {(projection + "_peel_mark", k, False) for k in kinds})
 
     def _tessellate(self, obj, angle_deg: float) -> list:
         """[(band distance, mesh)]: the object split for eyes anywhere in the viewing region (band 0),
@@ -589,8 +663,7 @@ class Renderer:
                 continue
             previous = levels
             fine = subdivide(obj.mesh, levels) if levels.max() > 1 else obj.mesh
-            bands.append((d, _GPUMesh(self.ctx, fine, {k: self.programs[k] for k in
-                                                       ("vertex", "vertex_peel", "vertex_peel_mark")})))
+            bands.append((d, _GPUMesh(self.ctx, fine)))
         return bands
 
     def prepare_edge_angle(self, angle_deg: float) -> int:
@@ -621,9 +694,32 @@ class Renderer:
                 mesh = m
         return mesh
 
-    def _render_mesh(self, mesh: _GPUMesh, prog_name: str, mode, model_view: np.ndarray, cull: bool,
+    def _program(self, key: tuple):
+        """The program of ``key`` = (pass, textured, moving), or (pass, None, None) for the one
+        with uniform switches; compiled on first use."""
+        prog = self.programs.get(key)
+        if prog is not None:
+            return prog
+        name, textured, moving = key
+        vs, tcs, tes, variant = self._passes[name]
+        if textured is None:
+            defines = _UNIFORM_SWITCHES
+        else:
+            defines = _SPECIALISED % ("true" if textured else "false", "true" if moving else "false")
+        prog = self.ctx.program(vertex_shader=vs, tess_control_shader=tcs, tess_evaluation_shader=tes,
+                                fragment_shader=self._fragment[variant].replace("@SWITCHES@", defines))
+        if tcs is not None:
+            prog["u_max_angle"].value = float(self.max_edge_angle)
+            prog["u_max_level"].value = float(self.tess_max_level)
+            prog["u_max_screen_edge"].value = float(self.tess_max_screen_edge)
+        if "u_peel_dist" in prog:
+            prog["u_peel_dist"].value = 1
+        self.programs[key] = prog
+        return prog
+
+    def _render_mesh(self, mesh: _GPUMesh, key: tuple, prog, mode, model_view: np.ndarray, cull: bool,
                      planes: np.ndarray = HEMISPHERE) -> None:
-        vao = mesh.vaos[prog_name]
+        vao = mesh.vao(key, prog)
         if not cull:
             vao.render(mode)
             self.drawn_triangles += mesh.faces
@@ -635,22 +731,26 @@ class Renderer:
     def _draw(self, prog_name: str, view: np.ndarray, eye: np.ndarray, t: float, extra_uniforms: dict,
               motion_dt: float | None = None, cull: bool = False, edge_deg: float | None = None,
               planes: np.ndarray = HEMISPHERE):
-        prog = self.programs[prog_name]
-        if "u_eye" in prog:
-            prog["u_eye"].value = tuple(float(x) for x in eye)
-        for name, value in extra_uniforms.items():
-            if name in prog:
-                prog[name].write(np.ascontiguousarray(value, dtype=np.float32).tobytes()) \
-                    if isinstance(value, np.ndarray) else setattr(prog[name], "value", value)
-        members = set(prog)  # the compiler drops uniforms a shader does not use
+        uniforms = {"u_eye": tuple(float(x) for x in eye), **extra_uniforms}
+        ready: dict = {}   # key -> (program, its uniform names) with this draw's uniforms set
         layer = 0
         for g in self.objects:
+            moving = motion_dt is not None and g.obj.is_dynamic
+            key = (prog_name, g.texture is not None, moving) if self.specialise else (prog_name, None, None)
+            if key not in ready:
+                prog = self._program(key)
+                members = set(prog)  # the compiler drops uniforms a shader does not use
+                for name, value in uniforms.items():
+                    if name in members:
+                        prog[name].write(np.ascontiguousarray(value, dtype=np.float32).tobytes()) \
+                            if isinstance(value, np.ndarray) else setattr(prog[name], "value", value)
+                ready[key] = (prog, members)
+            prog, members = ready[key]
             if g.obj.layer != layer:   # decals: in front of the coplanar surfaces they lie on
                 layer = g.obj.layer
                 self.ctx.polygon_offset = (0.0, -DECAL_OFFSET_UNITS * layer)
             model = g.obj.world_matrix(t)
             mv = view @ model
-            moving = motion_dt is not None and g.obj.is_dynamic
             prev_mv = view @ g.obj.world_matrix(t - motion_dt) if moving else mv
             values = {
                 "u_model": model.T.astype(np.float32),
@@ -671,13 +771,13 @@ class Renderer:
             if moving and "u_object_index" in members:
                 prog["u_object_index"].value = float(g.index)
             if prog_name.startswith("vertex"):
-                self._render_mesh(self._tessellated(g, edge_deg, eye, t), prog_name, self.ctx.TRIANGLES, mv, cull)
+                self._render_mesh(self._tessellated(g, edge_deg, eye, t), key, prog, self.ctx.TRIANGLES, mv, cull)
             elif prog_name.startswith("tess"):
-                self._render_mesh(g.original, prog_name, self.ctx.PATCHES, mv, cull)
+                self._render_mesh(g.original, key, prog, self.ctx.PATCHES, mv, cull)
             elif prog_name == "cube":
-                self._render_mesh(g.original, prog_name, self.ctx.TRIANGLES, mv, True, planes)
+                self._render_mesh(g.original, key, prog, self.ctx.TRIANGLES, mv, True, planes)
             else:
-                g.original.vaos["perspective"].render(self.ctx.TRIANGLES)
+                g.original.vao(key, prog).render(self.ctx.TRIANGLES)
         if layer:
             self.ctx.polygon_offset = (0.0, 0.0)
 
@@ -732,9 +832,8 @@ class Renderer:
                              "u_sky_color": tuple(float(c) for c in self.scene.sky_color[:3])})
         if projection == "tess":
             self.ctx.patch_vertices = 3
-            self.programs[name]["u_half_size"].value = (target.width / 2.0, target.height / 2.0)
             angle = self.max_edge_angle if max_edge_deg is None else np.radians(max_edge_deg)
-            self.programs[name]["u_max_angle"].value = float(angle)
+            uniforms.update({"u_half_size": (target.width / 2.0, target.height / 2.0), "u_max_angle": float(angle)})
         if not self.wide_trilinear:
             self._mip_nearest.use(0)
         try:
@@ -771,7 +870,7 @@ class Renderer:
         cube.distance.use(1)
         if cube.motion is not None:
             cube.motion.use(2)
-        prog = self.programs["cube_resample"]
+        prog = self._resample
         prog["u_n"].value = float(n)
         prog["u_size"].value = (float(target.width), float(target.height))
         self._resample_vao.render(ctx.TRIANGLE_STRIP)
@@ -799,3 +898,4 @@ class Renderer:
         self._mip_nearest.release()
         for p in self.programs.values():
             p.release()
+        self._resample.release()

@@ -262,3 +262,78 @@ def test_wide_views_sample_the_nearest_mip_and_leave_perspective_views_trilinear
         gt.release()
     finally:
         ctx.release()
+
+
+@pytest.fixture
+def ctx():
+    """A context of the test's own, as the tests above make (no state shared with other tests)."""
+    from pibr.protocol.gl import create_context
+
+    ctx = create_context()
+    yield ctx
+    ctx.release()
+
+
+@pytest.mark.gl
+def test_specialised_programs_change_no_pixel(ctx):
+    """One program per object kind (textured, moving) against one program with uniform switches:
+    primary with motion, both peeled extra views, the tessellation path and a perspective view with
+    moving-object indices give identical bytes, and the room really uses several kinds."""
+    from pibr.server.renderer import RenderTarget, Renderer
+
+    scene = load_scene("room")
+    offset = extra_offset_pose(1.5, 1.8, 15.0)
+    out = {}
+    for specialise in (False, True):
+        renderer = Renderer(ctx, scene, "vertex", specialise=specialise)
+        primary = RenderTarget(ctx, 192, 192, motion=True)
+        extra = RenderTarget(ctx, 96, 96)
+        images = []
+        for k, pose in enumerate(_poses(scene, 3, seed=5)):
+            t = 0.41 * k   # the fan and the pendulum move
+            renderer.render_wide(primary, pose, t, motion_dt=0.1)
+            images += [primary.read_color().copy(), primary.read_distance().copy(), primary.read_motion()[0].copy()]
+            for mark in (True, False):
+                renderer.render_wide(extra, pose.compose(offset), t, peel=(primary, pose, PEEL_TOLERANCE),
+                                     mark_peeled=mark)
+                images += [extra.read_color().copy(), extra.read_distance().copy()]
+            renderer.render_wide(extra, pose, t, "tess")
+            images += [extra.read_color().copy(), extra.read_distance().copy()]
+            renderer.render_perspective(primary, pose, t, 90.0)
+            images += [primary.read_color().copy(), primary.read_moving_index().copy()]
+        out[specialise] = images
+        kinds = {key[1:] for key in renderer.programs}
+        assert kinds == ({(None, None)} if not specialise else {(True, False), (False, False), (False, True)})
+        primary.release()
+        extra.release()
+        renderer.release()
+    assert len(out[True]) == len(out[False]) == 33
+    for a, b in zip(out[False], out[True]):
+        assert np.array_equal(a, b)
+    assert (out[True][2] != 0).any()   # motion of moving objects was drawn
+
+
+@pytest.mark.gl
+def test_moving_motion_equals_read_motion_masked(ctx):
+    """The one-pass readback equals read_motion with the motion zeroed where nothing moves, bit for
+    bit, for flags around 0.5, infinities, NaN, negative zero and subnormal half motions."""
+    from pibr.server.renderer import RenderTarget
+
+    target = RenderTarget(ctx, 64, 32, motion=True)
+    rng = np.random.default_rng(9)
+    flags = np.array([0.0, -0.0, 0.5, np.nextafter(np.float16(0.5), np.float16(1)), 1.0, 7.0, np.inf, -np.inf,
+                      np.nan, -1.0, 0.4995], np.float16)
+    half = np.empty((32, 64, 4), np.float16)
+    half[..., 0] = rng.normal(0.0, 40.0, (32, 64))
+    half[..., 1] = rng.normal(0.0, 1e-5, (32, 64))          # many subnormal halves
+    half[::5, :, 0] = -0.0
+    half[..., 2] = np.resize(flags, (32, 64))
+    half[..., 3] = rng.integers(0, 60, (32, 64))
+    target.motion.write(half.tobytes())
+    m, moving = target.read_motion()
+    expected = np.where(moving[:, :, None], m, 0.0).astype(np.float32)
+    motion, got_moving = target.read_moving_motion()
+    assert np.array_equal(got_moving, moving) and 0 < moving.sum() < moving.size
+    assert motion.dtype == np.float32 and motion.shape == (32, 64, 2)
+    assert np.array_equal(motion.view(np.uint32), expected.view(np.uint32))
+    target.release()
