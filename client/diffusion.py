@@ -523,11 +523,67 @@ def _label_regions(edges, labels):
 
 
 @njit(cache=True, nogil=True)
-def _diffuse_regions(codes, valid, edges, labels, n, boxes, max_work, iterations, out, done, fws, uws):
+def _region_runs(labels, n, runs, run_start):
+    """The row runs of every region, grouped by region: runs (>= number of runs, 3) int32 as y, first
+    and last column, region c's at runs[run_start[c]:run_start[c + 1]]; run_start (n + 2,) int64.
+    Returns the number of runs."""
+    h, w = labels.shape
+    counts = run_start  # counts per region first, then turned into offsets in place
+    counts[:] = 0
+    n_runs = 0
+    for y in range(h):  # raster order into the tail of runs, counted per region
+        x = 0
+        while x < w:
+            c = labels[y, x]
+            if c == 0:
+                x += 1
+                continue
+            a = x
+            while x + 1 < w and labels[y, x + 1] == c:
+                x += 1
+            runs[n_runs, 0], runs[n_runs, 1], runs[n_runs, 2] = y, a, x
+            n_runs += 1
+            counts[c + 1] += 1
+            x += 1
+    for c in range(1, n + 2):
+        counts[c] += counts[c - 1]
+    # a stable counting sort by region, through a second copy of the runs below the first
+    fill = run_start[:n + 1].copy()
+    for i in range(n_runs):
+        c = labels[runs[i, 0], runs[i, 1]]
+        j = n_runs + fill[c]
+        fill[c] += 1
+        runs[j, 0], runs[j, 1], runs[j, 2] = runs[i, 0], runs[i, 1], runs[i, 2]
+    for i in range(n_runs):
+        runs[i, 0], runs[i, 1], runs[i, 2] = runs[n_runs + i, 0], runs[n_runs + i, 1], runs[n_runs + i, 2]
+    return n_runs
+
+
+#: How far (pixels, in rows and columns) the finest level's push and pull reach beyond a region:
+#: its sweeps read the region and its 4-neighbours, whose pulled values read quincunx values
+#: within 2 of the region, and a coarse sample exists only within 3 of it (see _diffuse_regions).
+_REACH = 3
+
+
+@njit(cache=True, nogil=True)
+def _diffuse_regions(codes, valid, edges, labels, n, boxes, max_work, iterations, out, done, fws, uws, iws):
     """Push-pull every region from its own samples into ``out`` (h, w) (which also gets the samples),
     marking the pixels set in ``done``; regions without samples or beyond the work budget are left
-    alone. Returns how many pixels are set (samples included). fws (float64) / uws (uint8): flat
-    memory of at least :func:`_workspace_sizes` (h, w) elements, reused by every region."""
+    alone. Returns how many pixels are set (samples included). fws (float64) / uws (uint8) / iws
+    (int32): flat memory of at least :func:`_workspace_sizes` (h, w) elements, reused by every region.
+
+    Each region's result is exactly that of :func:`_push_pull_pooled` over its bounding box (one
+    pixel of margin) with its own samples and the rest of the box fixed at the finest level's
+    sweeps, but the finest level is only computed where it can matter, on row spans reaching
+    ``_REACH`` pixels beyond the region: the sweeps update the region and read its 4-neighbours;
+    their pulled values read the quincunx values within 2 pixels; and the push, which only sees
+    the region's samples (the region and its 4-neighbours), leaves every quincunx value farther
+    than 2 pixels and every coarse sample farther than 3 pixels from the region empty, so the
+    coarse level is the box's, computed in full by :func:`_push_pull_pooled`. The same sums are
+    formed in the same order as there, so the result is the same to the bit. Sample and quincunx
+    membership are marked with the region's number in two frame-sized stamp arrays (no clearing
+    between regions).
+    """
     h, w = codes.shape
     budget = max_work * h * w
     used = 0
@@ -537,61 +593,194 @@ def _diffuse_regions(codes, valid, edges, labels, n, boxes, max_work, iterations
             out[y, x] = codes[y, x]
             if valid[y, x]:
                 n_done += 1
-    # memory reused by every region (see _push_pull_pooled), sized for the whole image, which
-    # covers any box's pyramid (each level fits inside the image's)
-    nf, nu = _pool_sizes(h, w)
-    ns = 2 * h * ((w + 1) // 2)
+    ch_max, cw_max = (h + 1) // 2, (w + 1) // 2
+    nf, nu = _pool_sizes(ch_max, cw_max)
+    ns = 2 * ch_max * ((cw_max + 1) // 2)
+    nc = ch_max * cw_max
     fpool = fws[:nf]
     sf = fws[nf:nf + ns]
-    lv_pool = fws[nf + ns:nf + ns + h * w]
+    cv_pool = fws[nf + ns:nf + ns + nc]
+    qv = fws[nf + ns + nc:nf + ns + nc + h * w].reshape((h, w))  # quincunx values, then pulled in place
+    u = fws[nf + ns + nc + h * w:nf + ns + nc + 2 * h * w].reshape((h, w))  # the finest level's result
     upool = uws[:nu]
     su = uws[nu:nu + ns]
-    lm_pool = uws[nu + ns:nu + ns + h * w]
-    lf_pool = uws[nu + ns + h * w:nu + ns + 2 * h * w]
+    cm_pool = uws[nu + ns:nu + ns + nc]
+    own = iws[:h * w].reshape((h, w))  # == c: a sample of region c
+    qm = iws[h * w:2 * h * w].reshape((h, w))  # == c: a quincunx value of region c
+    max_runs = h * ((w + 1) // 2)
+    runs = iws[2 * h * w:2 * h * w + 6 * max_runs].reshape((2 * max_runs, 3))
+    run_start = np.empty(n + 2, dtype=np.int64)
+    span_a = np.empty(h, dtype=np.int64)
+    span_b = np.empty(h, dtype=np.int64)
+    row_a = np.empty(h, dtype=np.int64)
+    row_b = np.empty(h, dtype=np.int64)
+    own[:, :] = 0
+    qm[:, :] = 0
+    _region_runs(labels, n, runs, run_start)
+    c_it = min(2 * iterations, _MAX_ITERATIONS)
     for c in range(1, n + 1):
         # one pixel of margin: the region's boundary edge samples
-        y0, y1 = max(boxes[c, 0] - 1, 0), min(boxes[c, 1] + 1, h - 1)
+        ry0, ry1 = boxes[c, 0], boxes[c, 1]
+        y0, y1 = max(ry0 - 1, 0), min(ry1 + 1, h - 1)
         x0, x1 = max(boxes[c, 2] - 1, 0), min(boxes[c, 3] + 1, w - 1)
         bh, bw = y1 - y0 + 1, x1 - x0 + 1
         if used + bh * bw > budget:
             continue
         used += bh * bw
-        lv = lv_pool[:bh * bw].reshape((bh, bw))
-        lm = lm_pool[:bh * bw].reshape((bh, bw))
-        # The finest level's sweeps need only the region's own pixels: they read nothing but
-        # their 4-neighbours, which are the region's pixels or its samples, so the rest of the
-        # box is held fixed there (the same result for the region, ~half the sweeps' work).
-        lf = lf_pool[:bh * bw].reshape((bh, bw))
+        r0, r1 = run_start[c], run_start[c + 1]
+        # the region's samples: its own valid pixels and the valid edge pixels 4-adjacent to it
         n_samples = 0
         n_unknown = 0
-        for y in range(y0, y1 + 1):
-            for x in range(x0, x1 + 1):
-                own = False
-                lf[y - y0, x - x0] = 1
-                if labels[y, x] == c:
-                    if valid[y, x]:
-                        own = True
-                    else:
-                        n_unknown += 1
-                        lf[y - y0, x - x0] = 0
-                elif edges[y, x] and valid[y, x]:
-                    if (y > 0 and labels[y - 1, x] == c) or (y + 1 < h and labels[y + 1, x] == c) or \
-                            (x > 0 and labels[y, x - 1] == c) or (x + 1 < w and labels[y, x + 1] == c):
-                        own = True
-                if own:
-                    lv[y - y0, x - x0] = codes[y, x]
-                    lm[y - y0, x - x0] = 1
+        for y in range(ry0, ry1 + 1):
+            row_a[y] = w
+            row_b[y] = -1
+        for r in range(r0, r1):
+            y, a, b = runs[r, 0], runs[r, 1], runs[r, 2]
+            row_a[y] = min(row_a[y], a)
+            row_b[y] = max(row_b[y], b)
+            for x in range(a, b + 1):
+                if valid[y, x]:
+                    own[y, x] = c
                     n_samples += 1
                 else:
-                    lv[y - y0, x - x0] = 0.0
-                    lm[y - y0, x - x0] = 0
+                    n_unknown += 1
+                for yy in (y - 1, y + 1):
+                    if 0 <= yy < h and edges[yy, x] and valid[yy, x]:
+                        own[yy, x] = c
+                        n_samples += 1
+            for xx in (a - 1, b + 1):
+                if 0 <= xx < w and edges[y, xx] and valid[y, xx]:
+                    own[y, xx] = c
+                    n_samples += 1
         if n_samples == 0 or n_unknown == 0:
             continue
-        filled = _push_pull_pooled(lv, lm, iterations, lf, fpool, upool, sf, su)
+        # row spans reaching _REACH beyond the region, inside the box
         for y in range(y0, y1 + 1):
-            for x in range(x0, x1 + 1):
-                if labels[y, x] == c and not valid[y, x]:
-                    out[y, x] = filled[y - y0, x - x0]
+            a, b = w, -1
+            for yy in range(max(y - _REACH, ry0), min(y + _REACH, ry1) + 1):
+                a = min(a, row_a[yy])
+                b = max(b, row_b[yy])
+            span_a[y] = max(a - _REACH, x0)
+            span_b[y] = min(b + _REACH, x1)
+        # push, step 1: the quincunx lattice (box parity) gathers its axial neighbours
+        for y in range(y0, y1 + 1):
+            for x in range(span_a[y] + ((span_a[y] - x0 + y - y0) & 1), span_b[y] + 1, 2):
+                num = 0.0
+                den = 0.0
+                if own[y, x] == c:
+                    num += _C_SELF * codes[y, x]
+                    den += _C_SELF
+                if y > y0 and own[y - 1, x] == c:
+                    num += _C_NEIGHBOUR * codes[y - 1, x]
+                    den += _C_NEIGHBOUR
+                if y < y1 and own[y + 1, x] == c:
+                    num += _C_NEIGHBOUR * codes[y + 1, x]
+                    den += _C_NEIGHBOUR
+                if x > x0 and own[y, x - 1] == c:
+                    num += _C_NEIGHBOUR * codes[y, x - 1]
+                    den += _C_NEIGHBOUR
+                if x < x1 and own[y, x + 1] == c:
+                    num += _C_NEIGHBOUR * codes[y, x + 1]
+                    den += _C_NEIGHBOUR
+                if den > 0:
+                    qv[y, x] = num / den
+                    qm[y, x] = c
+        # push, step 2: the even lattice gathers its diagonal neighbours into the coarse level,
+        # empty away from the region
+        ch, cw = (bh + 1) // 2, (bw + 1) // 2
+        cv = cv_pool[:ch * cw].reshape((ch, cw))
+        cm = cm_pool[:ch * cw].reshape((ch, cw))
+        cv[:, :] = 0.0
+        cm[:, :] = 0
+        for y in range(y0, y1 + 1, 2):
+            for x in range(span_a[y] + ((span_a[y] - x0) & 1), span_b[y] + 1, 2):
+                num = 0.0
+                den = 0.0
+                if qm[y, x] == c:
+                    num += _C_SELF * qv[y, x]
+                    den += _C_SELF
+                for dy in (-1, 1):
+                    for dx in (-1, 1):
+                        yy, xx = y + dy, x + dx
+                        if y0 <= yy <= y1 and x0 <= xx <= x1 and qm[yy, xx] == c:
+                            num += _C_NEIGHBOUR * qv[yy, xx]
+                            den += _C_NEIGHBOUR
+                if den > 0:
+                    cv[(y - y0) // 2, (x - x0) // 2] = num / den
+                    cm[(y - y0) // 2, (x - x0) // 2] = 1
+        coarse = _push_pull_pooled(cv, cm, c_it, cm, fpool, upool, sf, su)
+        # pull: even pixels from the coarse level, odd-odd ones from their diagonals, the rest from
+        # their axial neighbours
+        for y in range(y0, y1 + 1, 2):
+            for x in range(span_a[y] + ((span_a[y] - x0) & 1), span_b[y] + 1, 2):
+                if qm[y, x] != c:
+                    qv[y, x] = coarse[(y - y0) // 2, (x - x0) // 2]
+        for y in range(y0 + 1, y1 + 1, 2):
+            for x in range(span_a[y] + ((span_a[y] - x0 + 1) & 1), span_b[y] + 1, 2):
+                if qm[y, x] != c:
+                    s = 0.0
+                    k = 0
+                    for dy in (-1, 1):
+                        for dx in (-1, 1):
+                            yy, xx = y + dy, x + dx
+                            if y0 <= yy <= y1 and x0 <= xx <= x1:
+                                s += qv[yy, xx]
+                                k += 1
+                    qv[y, x] = s / k
+        for y in range(y0, y1 + 1):
+            border_row = y == y0 or y == y1
+            for x in range(span_a[y], span_b[y] + 1):
+                if own[y, x] == c:
+                    u[y, x] = codes[y, x]
+                elif (y - y0 + x - x0) % 2 == 0:
+                    u[y, x] = qv[y, x]
+                elif not border_row and x0 < x < x1:
+                    u[y, x] = (((0.0 + qv[y - 1, x]) + qv[y + 1, x]) + qv[y, x - 1] + qv[y, x + 1]) / 4
+                else:
+                    s = 0.0
+                    k = 0
+                    if y > y0:
+                        s += qv[y - 1, x]
+                        k += 1
+                    if y < y1:
+                        s += qv[y + 1, x]
+                        k += 1
+                    if x > x0:
+                        s += qv[y, x - 1]
+                        k += 1
+                    if x < x1:
+                        s += qv[y, x + 1]
+                        k += 1
+                    u[y, x] = s / k
+        # the finest level's red-black sweeps, on the region's unknown pixels only
+        for _ in range(iterations):
+            for colour in range(2):
+                for r in range(r0, r1):
+                    y, a, b = runs[r, 0], runs[r, 1], runs[r, 2]
+                    first = a + ((a - x0 + y - y0 + colour) & 1)
+                    if y0 < y < y1 and a > x0 and b < x1:  # interior of the box
+                        for x in range(first, b + 1, 2):
+                            if not valid[y, x]:
+                                u[y, x] = 0.25 * (u[y - 1, x] + u[y + 1, x] + u[y, x - 1] + u[y, x + 1])
+                        continue
+                    for x in range(first, b + 1, 2):
+                        if valid[y, x]:
+                            continue
+                        row_edge = y == y0 or y == y1
+                        col_edge = x == x0 or x == x1
+                        if not row_edge and not col_edge:
+                            u[y, x] = 0.25 * (u[y - 1, x] + u[y + 1, x] + u[y, x - 1] + u[y, x + 1])
+                        elif row_edge and not col_edge:
+                            if bw > 2:
+                                u[y, x] = 0.5 * (u[y, x - 1] + u[y, x + 1])
+                        elif col_edge and not row_edge:
+                            if bh > 2:
+                                u[y, x] = 0.5 * (u[y - 1, x] + u[y + 1, x])
+        for r in range(r0, r1):
+            y, a, b = runs[r, 0], runs[r, 1], runs[r, 2]
+            for x in range(a, b + 1):
+                if not valid[y, x]:
+                    out[y, x] = u[y, x]
                     done[y, x] = 1
                     n_done += 1
     return n_done
@@ -608,11 +797,12 @@ def diffuse_plain(samples: DecodedSamples, iterations: int = DEFAULT_ITERATIONS)
     return push_pull_fast(samples.codes, samples.valid, iterations).astype(np.float32)
 
 
-def _workspace_sizes(h: int, w: int) -> tuple[int, int]:
-    """(float64, uint8) elements of memory :func:`_diffuse_regions` needs for an (h, w) frame."""
-    nf, nu = _pool_sizes(h, w)
-    ns = 2 * h * ((w + 1) // 2)
-    return nf + ns + h * w, nu + ns + 2 * h * w
+def _workspace_sizes(h: int, w: int) -> tuple[int, int, int]:
+    """(float64, uint8, int32) elements of memory :func:`_diffuse_regions` needs for an (h, w) frame."""
+    ch, cw = (h + 1) // 2, (w + 1) // 2
+    nf, nu = _pool_sizes(ch, cw)
+    ns = 2 * ch * ((cw + 1) // 2)
+    return nf + ns + ch * cw + 2 * h * w, nu + ns + ch * cw, 2 * h * w + 6 * h * ((w + 1) // 2)
 
 
 class DiffusionWorkspace:
@@ -621,21 +811,23 @@ class DiffusionWorkspace:
     1024^2; :func:`diffuse` makes a temporary one when given none."""
 
     def __init__(self):
-        self._f = np.empty(0)
-        self._u = np.empty(0, dtype=np.uint8)
+        self.release()
 
-    def arrays(self, height: int, width: int) -> tuple[np.ndarray, np.ndarray]:
-        """(float64, uint8) flat arrays large enough for a (height, width) frame (grown when needed)."""
-        nf, nu = _workspace_sizes(height, width)
+    def arrays(self, height: int, width: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(float64, uint8, int32) flat arrays large enough for a (height, width) frame (grown when needed)."""
+        nf, nu, ni = _workspace_sizes(height, width)
         if len(self._f) < nf:
             self._f = np.empty(nf)
         if len(self._u) < nu:
             self._u = np.empty(nu, dtype=np.uint8)
-        return self._f, self._u
+        if len(self._i) < ni:
+            self._i = np.empty(ni, dtype=np.int32)
+        return self._f, self._u, self._i
 
     def release(self) -> None:
         self._f = np.empty(0)
         self._u = np.empty(0, dtype=np.uint8)
+        self._i = np.empty(0, dtype=np.int32)
 
 
 def diffuse(samples: DecodedSamples, max_work: float = 16.0, iterations: int = DEFAULT_ITERATIONS,
@@ -653,9 +845,9 @@ def diffuse(samples: DecodedSamples, max_work: float = 16.0, iterations: int = D
     n, boxes, _ = _label_regions(edges, labels)
     out = np.empty(edges.shape, dtype=np.float32)
     done = np.zeros(edges.shape, dtype=np.uint8)
-    fws, uws = (workspace or DiffusionWorkspace()).arrays(*edges.shape)
+    fws, uws, iws = (workspace or DiffusionWorkspace()).arrays(*edges.shape)
     n_done = _diffuse_regions(codes, valid, edges, labels, n, boxes, float(max_work), int(iterations), out, done,
-                              fws, uws)
+                              fws, uws, iws)
     if n_done < out.size:  # regions without samples or over the work budget
         missing = ~(done.view(bool) | samples.valid)
         out[missing] = push_pull_fast(samples.codes, samples.valid, iterations)[missing]
