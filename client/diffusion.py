@@ -602,11 +602,14 @@ _REACH = 3
 
 
 @njit(cache=True, nogil=True)
-def _diffuse_regions(codes, valid, edges, labels, n, boxes, max_work, iterations, out, done, fws, uws, iws):
+def _diffuse_regions(codes, valid, edges, labels, n, boxes, max_work, iterations, out, done, fws, uws, iws,
+                     stamp_base):
     """Push-pull every region from its own samples into ``out`` (h, w) (which also gets the samples),
     marking the pixels set in ``done``; regions without samples or beyond the work budget are left
     alone. Returns how many pixels are set (samples included). fws (float64) / uws (uint8) / iws
-    (int32): flat memory of at least :func:`_workspace_sizes` (h, w) elements, reused by every region.
+    (int32): flat memory of at least :func:`_workspace_sizes` (h, w) elements, reused by every region;
+    the first 2 h w elements of iws hold no number above stamp_base (see
+    :meth:`DiffusionWorkspace.stamp_base`).
 
     Each region's result is exactly that of :func:`_push_pull_pooled` over its bounding box (one
     pixel of margin) with its own samples and the rest of the box fixed at the finest level's
@@ -617,18 +620,13 @@ def _diffuse_regions(codes, valid, edges, labels, n, boxes, max_work, iterations
     than 2 pixels and every coarse sample farther than 3 pixels from the region empty, so the
     coarse level is the box's, computed in full by :func:`_push_pull_pooled`. The same sums are
     formed in the same order as there, so the result is the same to the bit. Sample and quincunx
-    membership are marked with the region's number in two frame-sized stamp arrays (no clearing
-    between regions).
+    membership are marked with stamp_base + the region's number in two frame-sized int32 arrays
+    (nothing to clear between regions or frames).
     """
     h, w = codes.shape
     budget = max_work * h * w
     used = 0
     n_done = 0
-    for y in range(h):
-        for x in range(w):
-            out[y, x] = codes[y, x]
-            if valid[y, x]:
-                n_done += 1
     ch_max, cw_max = (h + 1) // 2, (w + 1) // 2
     nf, nu = _pool_sizes(ch_max, cw_max)
     ns = 2 * ch_max * ((cw_max + 1) // 2)
@@ -649,12 +647,15 @@ def _diffuse_regions(codes, valid, edges, labels, n, boxes, max_work, iterations
     vo = uws[nu + ns + nc + h * wh:nu + ns + nc + 2 * h * wh].reshape((h, wh))
     for y in range(h):
         for x in range(w):
-            if (x + y) & 1 == 0:
-                ve[y, x >> 1] = valid[y, x]
-            else:
-                vo[y, x >> 1] = valid[y, x]
-    own = iws[:h * w].reshape((h, w))  # == c: a sample of region c
-    qm = iws[h * w:2 * h * w].reshape((h, w))  # == c: a quincunx value of region c
+            out[y, x] = codes[y, x]
+            if valid[y, x]:
+                n_done += 1
+        for x in range(y & 1, w, 2):
+            ve[y, x >> 1] = valid[y, x]
+        for x in range(1 - (y & 1), w, 2):
+            vo[y, x >> 1] = valid[y, x]
+    own = iws[:h * w].reshape((h, w))  # == sc: a sample of region c
+    qm = iws[h * w:2 * h * w].reshape((h, w))  # == sc: a quincunx value of region c
     max_runs = h * ((w + 1) // 2)
     runs = iws[2 * h * w:2 * h * w + 6 * max_runs].reshape((2 * max_runs, 3))
     run_start = np.empty(n + 2, dtype=np.int64)
@@ -662,8 +663,6 @@ def _diffuse_regions(codes, valid, edges, labels, n, boxes, max_work, iterations
     span_b = np.empty(h, dtype=np.int64)
     row_a = np.empty(h, dtype=np.int64)
     row_b = np.empty(h, dtype=np.int64)
-    own[:, :] = 0
-    qm[:, :] = 0
     _region_runs(labels, n, runs, run_start)
     c_it = min(2 * iterations, _MAX_ITERATIONS)
     one, two = np.uint64(1), np.uint64(2)
@@ -677,6 +676,7 @@ def _diffuse_regions(codes, valid, edges, labels, n, boxes, max_work, iterations
             continue
         used += bh * bw
         r0, r1 = run_start[c], run_start[c + 1]
+        sc = stamp_base + c
         # the region's samples: its own valid pixels and the valid edge pixels 4-adjacent to it
         n_samples = 0
         n_unknown = 0
@@ -689,17 +689,17 @@ def _diffuse_regions(codes, valid, edges, labels, n, boxes, max_work, iterations
             row_b[y] = max(row_b[y], b)
             for x in range(a, b + 1):
                 if valid[y, x]:
-                    own[y, x] = c
+                    own[y, x] = sc
                     n_samples += 1
                 else:
                     n_unknown += 1
                 for yy in (y - 1, y + 1):
                     if 0 <= yy < h and edges[yy, x] and valid[yy, x]:
-                        own[yy, x] = c
+                        own[yy, x] = sc
                         n_samples += 1
             for xx in (a - 1, b + 1):
                 if 0 <= xx < w and edges[y, xx] and valid[y, xx]:
-                    own[y, xx] = c
+                    own[y, xx] = sc
                     n_samples += 1
         if n_samples == 0 or n_unknown == 0:
             continue
@@ -721,24 +721,24 @@ def _diffuse_regions(codes, valid, edges, labels, n, boxes, max_work, iterations
             for x in range(sa + ((sa - ux0 + y - uy0) & one), np.uint64(span_b[y]) + one, two):
                 num = 0.0
                 den = 0.0
-                if own[y, x] == c:
+                if own[y, x] == sc:
                     num += _C_SELF * codes[y, x]
                     den += _C_SELF
-                if y > uy0 and own[y - one, x] == c:
+                if y > uy0 and own[y - one, x] == sc:
                     num += _C_NEIGHBOUR * codes[y - one, x]
                     den += _C_NEIGHBOUR
-                if y < uy1 and own[y + one, x] == c:
+                if y < uy1 and own[y + one, x] == sc:
                     num += _C_NEIGHBOUR * codes[y + one, x]
                     den += _C_NEIGHBOUR
-                if x > ux0 and own[y, x - one] == c:
+                if x > ux0 and own[y, x - one] == sc:
                     num += _C_NEIGHBOUR * codes[y, x - one]
                     den += _C_NEIGHBOUR
-                if x < ux1 and own[y, x + one] == c:
+                if x < ux1 and own[y, x + one] == sc:
                     num += _C_NEIGHBOUR * codes[y, x + one]
                     den += _C_NEIGHBOUR
                 if den > 0:
                     qv[y, x] = num / den
-                    qm[y, x] = c
+                    qm[y, x] = sc
         # push, step 2: the even lattice gathers its diagonal neighbours into the coarse level,
         # empty away from the region
         ch, cw = (bh + 1) // 2, (bw + 1) // 2
@@ -751,21 +751,21 @@ def _diffuse_regions(codes, valid, edges, labels, n, boxes, max_work, iterations
             for x in range(sa + ((sa - ux0) & one), np.uint64(span_b[y]) + one, two):
                 num = 0.0
                 den = 0.0
-                if qm[y, x] == c:
+                if qm[y, x] == sc:
                     num += _C_SELF * qv[y, x]
                     den += _C_SELF
                 up, down = y > uy0, y < uy1
                 left, right = x > ux0, x < ux1
-                if up and left and qm[y - one, x - one] == c:
+                if up and left and qm[y - one, x - one] == sc:
                     num += _C_NEIGHBOUR * qv[y - one, x - one]
                     den += _C_NEIGHBOUR
-                if up and right and qm[y - one, x + one] == c:
+                if up and right and qm[y - one, x + one] == sc:
                     num += _C_NEIGHBOUR * qv[y - one, x + one]
                     den += _C_NEIGHBOUR
-                if down and left and qm[y + one, x - one] == c:
+                if down and left and qm[y + one, x - one] == sc:
                     num += _C_NEIGHBOUR * qv[y + one, x - one]
                     den += _C_NEIGHBOUR
-                if down and right and qm[y + one, x + one] == c:
+                if down and right and qm[y + one, x + one] == sc:
                     num += _C_NEIGHBOUR * qv[y + one, x + one]
                     den += _C_NEIGHBOUR
                 if den > 0:
@@ -777,13 +777,13 @@ def _diffuse_regions(codes, valid, edges, labels, n, boxes, max_work, iterations
         for y in range(uy0, uy1 + one, two):
             sa = np.uint64(span_a[y])
             for x in range(sa + ((sa - ux0) & one), np.uint64(span_b[y]) + one, two):
-                if qm[y, x] != c:
+                if qm[y, x] != sc:
                     qv[y, x] = coarse[(y - uy0) >> one, (x - ux0) >> one]
         for y in range(uy0 + one, uy1 + one, two):
             sa = np.uint64(span_a[y])
             down = y < uy1
             for x in range(sa + ((sa - ux0 + one) & one), np.uint64(span_b[y]) + one, two):
-                if qm[y, x] != c:
+                if qm[y, x] != sc:
                     left, right = x > ux0, x < ux1
                     s = 0.0
                     k = 0
@@ -800,17 +800,21 @@ def _diffuse_regions(codes, valid, edges, labels, n, boxes, max_work, iterations
                         s += qv[y + one, x + one]
                         k += 1
                     qv[y, x] = s / k
+        qp = (y0 + x0) & 1  # quincunx pixels (box parity) have (x + y) & 1 == qp
         for y in range(uy0, uy1 + one):
-            border_row = y == uy0 or y == uy1
-            for x in range(np.uint64(span_a[y]), np.uint64(span_b[y]) + one):
-                u = ue if (x + y) & one == 0 else uo
-                xh = x >> one
-                if own[y, x] == c:
-                    u[y, xh] = codes[y, x]
-                elif (y - uy0 + x - ux0) & one == 0:
-                    u[y, xh] = qv[y, x]
-                elif not border_row and ux0 < x < ux1:
-                    u[y, xh] = (((0.0 + qv[y - one, x]) + qv[y + one, x]) + qv[y, x - one] + qv[y, x + one]) / 4
+            sa, sb = np.uint64(span_a[y]), np.uint64(span_b[y])
+            inner = uy0 < y < uy1
+            # the quincunx pixels: their pulled values
+            u = ue if qp == 0 else uo
+            for x in range(sa + ((sa + y + np.uint64(qp)) & one), sb + one, two):
+                u[y, x >> one] = codes[y, x] if own[y, x] == sc else qv[y, x]
+            # the others: the mean of their axial (quincunx) neighbours
+            u = uo if qp == 0 else ue
+            for x in range(sa + ((sa + y + np.uint64(qp) + one) & one), sb + one, two):
+                if own[y, x] == sc:
+                    u[y, x >> one] = codes[y, x]
+                elif inner and ux0 < x < ux1:
+                    u[y, x >> one] = (((0.0 + qv[y - one, x]) + qv[y + one, x]) + qv[y, x - one] + qv[y, x + one]) / 4
                 else:
                     s = 0.0
                     k = 0
@@ -826,7 +830,7 @@ def _diffuse_regions(codes, valid, edges, labels, n, boxes, max_work, iterations
                     if x < ux1:
                         s += qv[y, x + one]
                         k += 1
-                    u[y, xh] = s / k
+                    u[y, x >> one] = s / k
         # the finest level's red-black sweeps, on the region's unknown pixels only, in the
         # frame-wide colour-compacted layout (contiguous reads: see _smooth_nb)
         for _ in range(iterations):
@@ -838,11 +842,15 @@ def _diffuse_regions(codes, valid, edges, labels, n, boxes, max_work, iterations
                 _half_sweep_runs(ue, uo, ve, runs, r0, r1, 0, y0, y1, x0, x1)
         for r in range(r0, r1):
             y, a, b = np.uint64(runs[r, 0]), np.uint64(runs[r, 1]), np.uint64(runs[r, 2])
-            for x in range(a, b + one):
+            for x in range(a + ((a + y) & one), b + one, two):  # x + y even
                 if not valid[y, x]:
-                    out[y, x] = ue[y, x >> one] if (x + y) & one == 0 else uo[y, x >> one]
+                    out[y, x] = ue[y, x >> one]
                     done[y, x] = 1
-                    n_done += 1
+            for x in range(a + ((a + y + one) & one), b + one, two):
+                if not valid[y, x]:
+                    out[y, x] = uo[y, x >> one]
+                    done[y, x] = 1
+        n_done += n_unknown
     return n_done
 
 
@@ -874,6 +882,16 @@ class DiffusionWorkspace:
     def __init__(self):
         self.release()
 
+    def stamp_base(self, n_regions: int) -> int:
+        """A number above every stamp in the int32 array's first 2 h w elements, for a frame with
+        ``n_regions`` regions to add to their numbers (advanced past them; zeroed on wrapping)."""
+        if self._next_stamp + n_regions >= 2 ** 31 - 1:
+            self._i[:] = 0
+            self._next_stamp = 0
+        base = self._next_stamp
+        self._next_stamp += n_regions
+        return base
+
     def arrays(self, height: int, width: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(float64, uint8, int32) flat arrays large enough for a (height, width) frame (grown when needed)."""
         nf, nu, ni = _workspace_sizes(height, width)
@@ -882,13 +900,15 @@ class DiffusionWorkspace:
         if len(self._u) < nu:
             self._u = np.empty(nu, dtype=np.uint8)
         if len(self._i) < ni:
-            self._i = np.empty(ni, dtype=np.int32)
+            self._i = np.zeros(ni, dtype=np.int32)
+            self._next_stamp = 0
         return self._f, self._u, self._i
 
     def release(self) -> None:
         self._f = np.empty(0)
         self._u = np.empty(0, dtype=np.uint8)
         self._i = np.empty(0, dtype=np.int32)
+        self._next_stamp = 0
 
 
 def diffuse(samples: DecodedSamples, max_work: float = 16.0, iterations: int = DEFAULT_ITERATIONS,
@@ -906,9 +926,10 @@ def diffuse(samples: DecodedSamples, max_work: float = 16.0, iterations: int = D
     n, boxes, _ = _label_regions(edges, labels)
     out = np.empty(edges.shape, dtype=np.float32)
     done = np.zeros(edges.shape, dtype=np.uint8)
-    fws, uws, iws = (workspace or DiffusionWorkspace()).arrays(*edges.shape)
+    workspace = workspace or DiffusionWorkspace()
+    fws, uws, iws = workspace.arrays(*edges.shape)
     n_done = _diffuse_regions(codes, valid, edges, labels, n, boxes, float(max_work), int(iterations), out, done,
-                              fws, uws, iws)
+                              fws, uws, iws, workspace.stamp_base(n))
     if n_done < out.size:  # regions without samples or over the work budget
         missing = ~(done.view(bool) | samples.valid)
         out[missing] = push_pull_fast(samples.codes, samples.valid, iterations)[missing]
