@@ -273,6 +273,96 @@ def _pool_sizes(h, w):
         h, w = ch, cw
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _gather_axial_at(vv, mm, qv, qm, y, x, h, w):
+    """Push step 1 at quincunx pixel (y, x) of an (h, w) level: self (1/2) and axial neighbours (1/8)."""
+    num = 0.0
+    den = 0.0
+    if mm[y, x]:
+        num += _C_SELF * vv[y, x]
+        den += _C_SELF
+    if y > 0 and mm[y - 1, x]:
+        num += _C_NEIGHBOUR * vv[y - 1, x]
+        den += _C_NEIGHBOUR
+    if y + 1 < h and mm[y + 1, x]:
+        num += _C_NEIGHBOUR * vv[y + 1, x]
+        den += _C_NEIGHBOUR
+    if x > 0 and mm[y, x - 1]:
+        num += _C_NEIGHBOUR * vv[y, x - 1]
+        den += _C_NEIGHBOUR
+    if x + 1 < w and mm[y, x + 1]:
+        num += _C_NEIGHBOUR * vv[y, x + 1]
+        den += _C_NEIGHBOUR
+    if den > 0:
+        qv[y, x] = num / den
+        qm[y, x] = 1
+    else:
+        qv[y, x] = 0.0
+        qm[y, x] = 0
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _gather_diagonal_at(qv, qm, cv, cm, i, j, h, w):
+    """Push step 2 into coarse pixel (i, j) from even pixel (2 i, 2 j) (1/2) and its diagonals (1/8)."""
+    y, x = 2 * i, 2 * j
+    num = 0.0
+    den = 0.0
+    if qm[y, x]:
+        num += _C_SELF * qv[y, x]
+        den += _C_SELF
+    for dy in (-1, 1):
+        for dx in (-1, 1):
+            yy, xx = y + dy, x + dx
+            if 0 <= yy < h and 0 <= xx < w and qm[yy, xx]:
+                num += _C_NEIGHBOUR * qv[yy, xx]
+                den += _C_NEIGHBOUR
+    if den > 0:
+        cv[i, j] = num / den
+        cm[i, j] = 1
+    else:
+        cv[i, j] = 0.0
+        cm[i, j] = 0
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _pull_diagonal_at(q, y, x, h, w):
+    """Pull at odd-odd pixel (y, x): the mean of its diagonal neighbours inside the level."""
+    s = 0.0
+    n = 0
+    for dy in (-1, 1):
+        for dx in (-1, 1):
+            yy, xx = y + dy, x + dx
+            if 0 <= yy < h and 0 <= xx < w:
+                s += q[yy, xx]
+                n += 1
+    q[y, x] = s / n
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _pull_axial_at(vv, mm, q, out, y, x, h, w):
+    """The pulled value at (y, x): its sample, its quincunx value, or the mean of its axial neighbours."""
+    if mm[y, x]:
+        out[y, x] = vv[y, x]
+    elif (y + x) % 2 == 0:
+        out[y, x] = q[y, x]
+    else:
+        s = 0.0
+        n = 0
+        if y > 0:
+            s += q[y - 1, x]
+            n += 1
+        if y + 1 < h:
+            s += q[y + 1, x]
+            n += 1
+        if x > 0:
+            s += q[y, x - 1]
+            n += 1
+        if x + 1 < w:
+            s += q[y, x + 1]
+            n += 1
+        out[y, x] = s / n
+
+
 @njit(cache=True, nogil=True)
 def _push_pull_pooled(v, m, iterations, fixed, fpool, upool, sf, su):
     """(h, w) float64 values and uint8 validity -> filled (h, w) float64.
@@ -289,6 +379,7 @@ def _push_pull_pooled(v, m, iterations, fixed, fpool, upool, sf, su):
     """
     # level l: size (lh, lw), values / validity (the input at level 0, else the parent's cv / cm),
     # arrays out, qv at fpool[fo:], then cv; qm at upool[uo:], then cm
+    one, two = np.uint64(1), np.uint64(2)
     max_levels = 64
     lh = np.empty(max_levels, dtype=np.int64)
     lw = np.empty(max_levels, dtype=np.int64)
@@ -321,53 +412,55 @@ def _push_pull_pooled(v, m, iterations, fixed, fpool, upool, sf, su):
             break
         qv = fpool[fo + hw:fo + 2 * hw].reshape((h, w))
         qm = upool[uo:uo + hw].reshape((h, w))
+        # The interior runs branch-free on unsigned indices (a missing term adds +0.0, which changes
+        # no sum: the results are those of _gather_axial_at, bit for bit).
         for y in range(h):
-            for x in range((y & 1), w, 2):
-                num = 0.0
-                den = 0.0
-                if mm[y, x]:
-                    num += _C_SELF * vv[y, x]
-                    den += _C_SELF
-                if y > 0 and mm[y - 1, x]:
-                    num += _C_NEIGHBOUR * vv[y - 1, x]
-                    den += _C_NEIGHBOUR
-                if y + 1 < h and mm[y + 1, x]:
-                    num += _C_NEIGHBOUR * vv[y + 1, x]
-                    den += _C_NEIGHBOUR
-                if x > 0 and mm[y, x - 1]:
-                    num += _C_NEIGHBOUR * vv[y, x - 1]
-                    den += _C_NEIGHBOUR
-                if x + 1 < w and mm[y, x + 1]:
-                    num += _C_NEIGHBOUR * vv[y, x + 1]
-                    den += _C_NEIGHBOUR
-                if den > 0:
-                    qv[y, x] = num / den
-                    qm[y, x] = 1
-                else:
-                    qv[y, x] = 0.0
-                    qm[y, x] = 0
+            if y == 0 or y == h - 1 or w < 3:
+                for x in range(y & 1, w, 2):
+                    _gather_axial_at(vv, mm, qv, qm, y, x, h, w)
+                continue
+            if y & 1 == 0:
+                _gather_axial_at(vv, mm, qv, qm, y, 0, h, w)
+            uy = np.uint64(y)
+            for x in range(np.uint64(2 - (y & 1)), np.uint64(w - 1), two):
+                num = (((0.0 + (_C_SELF * vv[uy, x] if mm[uy, x] else 0.0))
+                        + (_C_NEIGHBOUR * vv[uy - one, x] if mm[uy - one, x] else 0.0))
+                       + (_C_NEIGHBOUR * vv[uy + one, x] if mm[uy + one, x] else 0.0)) \
+                    + (_C_NEIGHBOUR * vv[uy, x - one] if mm[uy, x - one] else 0.0)
+                num = num + (_C_NEIGHBOUR * vv[uy, x + one] if mm[uy, x + one] else 0.0)
+                den = (((0.0 + (_C_SELF if mm[uy, x] else 0.0)) + (_C_NEIGHBOUR if mm[uy - one, x] else 0.0))
+                       + (_C_NEIGHBOUR if mm[uy + one, x] else 0.0)) + (_C_NEIGHBOUR if mm[uy, x - one] else 0.0)
+                den = den + (_C_NEIGHBOUR if mm[uy, x + one] else 0.0)
+                qv[uy, x] = num / (den if den > 0 else 1.0)  # 0.0 where nothing contributed
+                qm[uy, x] = 1 if den > 0 else 0
+            if (w - 1 - (y & 1)) & 1 == 0:
+                _gather_axial_at(vv, mm, qv, qm, y, w - 1, h, w)
         cv = fpool[fo + 2 * hw:fo + 2 * hw + ch * cw].reshape((ch, cw))
         cm = upool[uo + hw:uo + hw + ch * cw].reshape((ch, cw))
         for i in range(ch):
-            for j in range(cw):
-                y, x = 2 * i, 2 * j
-                num = 0.0
-                den = 0.0
-                if qm[y, x]:
-                    num += _C_SELF * qv[y, x]
-                    den += _C_SELF
-                for dy in (-1, 1):
-                    for dx in (-1, 1):
-                        yy, xx = y + dy, x + dx
-                        if 0 <= yy < h and 0 <= xx < w and qm[yy, xx]:
-                            num += _C_NEIGHBOUR * qv[yy, xx]
-                            den += _C_NEIGHBOUR
-                if den > 0:
-                    cv[i, j] = num / den
-                    cm[i, j] = 1
-                else:
-                    cv[i, j] = 0.0
-                    cm[i, j] = 0
+            y = 2 * i
+            if y == 0 or y + 1 >= h or w < 3:
+                for j in range(cw):
+                    _gather_diagonal_at(qv, qm, cv, cm, i, j, h, w)
+                continue
+            _gather_diagonal_at(qv, qm, cv, cm, i, 0, h, w)
+            j_last = (w - 2) // 2  # the last j with x + 1 inside
+            uy, ui = np.uint64(y), np.uint64(i)
+            for j in range(one, np.uint64(j_last) + one):
+                x = j + j
+                num = (((0.0 + (_C_SELF * qv[uy, x] if qm[uy, x] else 0.0))
+                        + (_C_NEIGHBOUR * qv[uy - one, x - one] if qm[uy - one, x - one] else 0.0))
+                       + (_C_NEIGHBOUR * qv[uy - one, x + one] if qm[uy - one, x + one] else 0.0)) \
+                    + (_C_NEIGHBOUR * qv[uy + one, x - one] if qm[uy + one, x - one] else 0.0)
+                num = num + (_C_NEIGHBOUR * qv[uy + one, x + one] if qm[uy + one, x + one] else 0.0)
+                den = (((0.0 + (_C_SELF if qm[uy, x] else 0.0)) + (_C_NEIGHBOUR if qm[uy - one, x - one] else 0.0))
+                       + (_C_NEIGHBOUR if qm[uy - one, x + one] else 0.0)) \
+                    + (_C_NEIGHBOUR if qm[uy + one, x - one] else 0.0)
+                den = den + (_C_NEIGHBOUR if qm[uy + one, x + one] else 0.0)
+                cv[ui, j] = num / (den if den > 0 else 1.0)
+                cm[ui, j] = 1 if den > 0 else 0
+            for j in range(j_last + 1, cw):
+                _gather_diagonal_at(qv, qm, cv, cm, i, j, h, w)
         vv, mm = cv, cm
         fo += 2 * hw + ch * cw
         uo += hw + ch * cw
@@ -393,42 +486,32 @@ def _push_pull_pooled(v, m, iterations, fixed, fpool, upool, sf, su):
                 if not qm[y, x]:
                     q[y, x] = coarse[y // 2, x // 2]
         for y in range(1, h, 2):
-            for x in range(1, w, 2):
-                if not qm[y, x]:
-                    s = 0.0
-                    n = 0
-                    for dy in (-1, 1):
-                        for dx in (-1, 1):
-                            yy, xx = y + dy, x + dx
-                            if 0 <= yy < h and 0 <= xx < w:
-                                s += q[yy, xx]
-                                n += 1
-                    q[y, x] = s / n
+            if y + 1 >= h:
+                for x in range(1, w, 2):
+                    if not qm[y, x]:
+                        _pull_diagonal_at(q, y, x, h, w)
+                continue
+            uy = np.uint64(y)
+            for x in range(one, np.uint64(w - 1), two):  # x + 1 inside
+                q[uy, x] = q[uy, x] if qm[uy, x] else \
+                    ((((0.0 + q[uy - one, x - one]) + q[uy - one, x + one]) + q[uy + one, x - one])
+                     + q[uy + one, x + one]) / 4
+            if w % 2 == 0 and not qm[y, w - 1]:
+                _pull_diagonal_at(q, y, w - 1, h, w)
         for y in range(h):
-            border_row = y == 0 or y == h - 1
-            for x in range(w):
-                if mm[y, x]:
-                    out[y, x] = vv[y, x]
-                elif (y + x) % 2 == 0:
-                    out[y, x] = q[y, x]
-                elif not border_row and 0 < x < w - 1:  # the same sums as below, without the bounds tests
-                    out[y, x] = (((0.0 + q[y - 1, x]) + q[y + 1, x]) + q[y, x - 1] + q[y, x + 1]) / 4
-                else:
-                    s = 0.0
-                    n = 0
-                    if y > 0:
-                        s += q[y - 1, x]
-                        n += 1
-                    if y + 1 < h:
-                        s += q[y + 1, x]
-                        n += 1
-                    if x > 0:
-                        s += q[y, x - 1]
-                        n += 1
-                    if x + 1 < w:
-                        s += q[y, x + 1]
-                        n += 1
-                    out[y, x] = s / n
+            if y == 0 or y == h - 1 or w < 3:
+                for x in range(w):
+                    _pull_axial_at(vv, mm, q, out, y, x, h, w)
+                continue
+            _pull_axial_at(vv, mm, q, out, y, 0, h, w)
+            uy = np.uint64(y)
+            p = np.uint64(y & 1)
+            for x in range(two - p, np.uint64(w - 1), two):  # x + y even: the quincunx values
+                out[uy, x] = vv[uy, x] if mm[uy, x] else q[uy, x]
+            for x in range(one + p, np.uint64(w - 1), two):  # the others: the mean of their axial neighbours
+                out[uy, x] = vv[uy, x] if mm[uy, x] else \
+                    (((0.0 + q[uy - one, x]) + q[uy + one, x]) + q[uy, x - one] + q[uy, x + one]) / 4
+            _pull_axial_at(vv, mm, q, out, y, w - 1, h, w)
         _smooth_nb(out, fx, lit[l], sf, su)
     return fpool[:v.shape[0] * v.shape[1]].reshape(v.shape)
 

@@ -379,3 +379,16 @@ def reference_diffuse(samples, max_work: float = 16.0, iterations: int = 4) -> n
         missing = ~(done.view(bool) | samples.valid)
         out[missing] = push_pull_fast(samples.codes, samples.valid, iterations)[missing]
     return out
+
+
+def reference_push_pull(values, valid, iterations: int = 4) -> np.ndarray:
+    """The old ``push_pull_fast``: (h, w) float64 values, (h, w) bool valid -> filled (h, w) float64."""
+    v = np.ascontiguousarray(values, dtype=np.float64)
+    m = np.ascontiguousarray(valid, dtype=np.uint8)
+    if not m.any():
+        return np.zeros_like(v)
+    h, w = v.shape
+    nf, nu = _pool_sizes(h, w)
+    wh = (w + 1) // 2
+    return _push_pull_pooled(v, m, int(iterations), m, np.empty(nf), np.empty(nu, dtype=np.uint8),
+                             np.empty(2 * h * wh), np.empty(2 * h * wh, dtype=np.uint8)).copy()

@@ -1,15 +1,16 @@
 """The edge-aware diffusion equals, bit for bit, the box-by-box diffusion it replaced
-(tests/client/diffusion_reference.py): on rendered room frames and on random edge maps."""
+(tests/client/diffusion_reference.py): on rendered room frames and on random edge maps; so does
+the plain push-pull."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from pibr.client.diffusion import DiffusionWorkspace, _label_regions, diffuse
+from pibr.client.diffusion import DiffusionWorkspace, _label_regions, diffuse, push_pull_fast
 from pibr.protocol.edgecodec.codec import DecodedSamples, EdgeDecoder, EdgeEncoder
 
 from ..protocol.golden_edge import QUANTIZER, cluttered_codes, piecewise_planar_codes
-from .diffusion_reference import reference_diffuse
+from .diffusion_reference import reference_diffuse, reference_push_pull
 
 
 def _decoded(edges, valid, codes):
@@ -38,6 +39,20 @@ def test_random_edge_maps_diffuse_as_the_reference(shape):
                 expected = reference_diffuse(s, iterations=iterations)
                 np.testing.assert_array_equal(diffuse(s, iterations=iterations, workspace=ws), expected)
                 np.testing.assert_array_equal(diffuse(s, iterations=iterations), expected)
+
+
+@pytest.mark.parametrize("shape", [(1, 1), (1, 9), (9, 1), (2, 2), (2, 3), (3, 3), (4, 7), (7, 5), (33, 17), (64, 48),
+                                   (65, 130)])
+def test_plain_push_pull_equals_the_reference(shape):
+    """Every level's interior and border, odd and even sizes; values that are not samples are NaN
+    (never read)."""
+    rng = np.random.default_rng(shape[0] * 1000 + shape[1])
+    for density in (0.02, 0.3, 0.9, 1.0):
+        m = rng.random(shape) < density
+        m.flat[rng.integers(m.size)] = True
+        v = np.where(m, rng.random(shape) * 4000, np.nan)
+        for iterations in (0, 1, 4):
+            np.testing.assert_array_equal(push_pull_fast(v, m, iterations), reference_push_pull(v, m, iterations))
 
 
 def test_the_work_budget_falls_back_as_the_reference():
