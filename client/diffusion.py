@@ -606,40 +606,93 @@ def _label_regions(edges, labels):
 
 
 @njit(cache=True, nogil=True)
-def _region_runs(labels, n, runs, run_start):
-    """The row runs of every region, grouped by region: runs (>= number of runs, 3) int32 as y, first
-    and last column, region c's at runs[run_start[c]:run_start[c + 1]]; run_start (n + 2,) int64.
-    Returns the number of runs."""
-    h, w = labels.shape
-    counts = run_start  # counts per region first, then turned into offsets in place
-    counts[:] = 0
+def _find_root(parent, r):
+    while parent[r] != r:
+        parent[r] = parent[parent[r]]  # path halving
+        r = parent[r]
+    return r
+
+
+@njit(cache=True, nogil=True)
+def _label_runs(edges, runs, parent):
+    """The regions of :func:`_label_regions` (same numbers, boxes and sizes), as row runs instead of a
+    label image: union-find over the runs of non-edge pixels, each joined to the runs it overlaps in
+    the row above, a region numbered by its first run in raster order (its first pixel).
+
+    runs : (>= 2 h ceil(w / 2), 3) int32 scratch; parent : (>= h ceil(w / 2),) int32 scratch.
+    Returns (n, boxes (n + 1, 4) int64 as in _label_regions, sizes (n + 1,), run_start (n + 2,)):
+    region c's runs (y, first, last column) are runs[run_start[c]:run_start[c + 1]], in raster order.
+    """
+    h, w = edges.shape
     n_runs = 0
-    for y in range(h):  # raster order into the tail of runs, counted per region
+    prev = 0  # the previous row's first run
+    for y in range(h):
+        row = n_runs
         x = 0
         while x < w:
-            c = labels[y, x]
-            if c == 0:
+            if edges[y, x]:
                 x += 1
                 continue
             a = x
-            while x + 1 < w and labels[y, x + 1] == c:
+            while x + 1 < w and not edges[y, x + 1]:
                 x += 1
             runs[n_runs, 0], runs[n_runs, 1], runs[n_runs, 2] = y, a, x
+            parent[n_runs] = n_runs
             n_runs += 1
-            counts[c + 1] += 1
             x += 1
+        i, j = prev, row
+        while i < row and j < n_runs:  # overlapping runs of two rows are 4-connected
+            if runs[i, 2] < runs[j, 1]:
+                i += 1
+            elif runs[j, 2] < runs[i, 1]:
+                j += 1
+            else:
+                ri, rj = _find_root(parent, i), _find_root(parent, j)
+                if ri < rj:  # the root is a region's first run
+                    parent[rj] = ri
+                elif rj < ri:
+                    parent[ri] = rj
+                if runs[i, 2] < runs[j, 2]:
+                    i += 1
+                else:
+                    j += 1
+        prev = row
+    # number the regions by their first runs (a root precedes the rest of its region)
+    region = np.empty(n_runs, dtype=np.int64)
+    n = 0
+    for r in range(n_runs):
+        root = _find_root(parent, r)
+        if root == r:
+            n += 1
+            region[r] = n
+        else:
+            region[r] = region[root]
+    boxes = np.empty((n + 1, 4), dtype=np.int64)
+    sizes = np.zeros(n + 1, dtype=np.int64)
+    run_start = np.zeros(n + 2, dtype=np.int64)
+    boxes[0, :] = 0
+    for c in range(1, n + 1):
+        boxes[c, 0], boxes[c, 1], boxes[c, 2], boxes[c, 3] = h, -1, w, -1
+    for r in range(n_runs):
+        c = region[r]
+        y, a, b = runs[r, 0], runs[r, 1], runs[r, 2]
+        boxes[c, 0] = min(boxes[c, 0], y)
+        boxes[c, 1] = max(boxes[c, 1], y)
+        boxes[c, 2] = min(boxes[c, 2], a)
+        boxes[c, 3] = max(boxes[c, 3], b)
+        sizes[c] += b - a + 1
+        run_start[c + 1] += 1
     for c in range(1, n + 2):
-        counts[c] += counts[c - 1]
-    # a stable counting sort by region, through a second copy of the runs below the first
+        run_start[c] += run_start[c - 1]
+    # grouped by region (stable: raster order within each), through the second half of runs
     fill = run_start[:n + 1].copy()
-    for i in range(n_runs):
-        c = labels[runs[i, 0], runs[i, 1]]
-        j = n_runs + fill[c]
+    for r in range(n_runs):
+        c = region[r]
+        k = n_runs + fill[c]
         fill[c] += 1
-        runs[j, 0], runs[j, 1], runs[j, 2] = runs[i, 0], runs[i, 1], runs[i, 2]
-    for i in range(n_runs):
-        runs[i, 0], runs[i, 1], runs[i, 2] = runs[n_runs + i, 0], runs[n_runs + i, 1], runs[n_runs + i, 2]
-    return n_runs
+        runs[k, 0], runs[k, 1], runs[k, 2] = runs[r, 0], runs[r, 1], runs[r, 2]
+    runs[:n_runs, :] = runs[n_runs:2 * n_runs, :]
+    return n, boxes, sizes, run_start
 
 
 @njit(cache=True, nogil=True)
@@ -685,14 +738,14 @@ _REACH = 3
 
 
 @njit(cache=True, nogil=True)
-def _diffuse_regions(codes, valid, edges, labels, n, boxes, max_work, iterations, out, done, fws, uws, iws,
-                     stamp_base):
-    """Push-pull every region from its own samples into ``out`` (h, w) (which also gets the samples),
+def _diffuse_regions(codes, valid, edges, n, boxes, runs, run_start, max_work, iterations, out, done, fws, uws,
+                     stamps, stamp_base):
+    """Push-pull every region (n, boxes, runs, run_start: see :func:`_label_runs`) from its own samples
+    into ``out`` (h, w) (which also gets the samples),
     marking the pixels set in ``done``; regions without samples or beyond the work budget are left
-    alone. Returns how many pixels are set (samples included). fws (float64) / uws (uint8) / iws
-    (int32): flat memory of at least :func:`_workspace_sizes` (h, w) elements, reused by every region;
-    the first 2 h w elements of iws hold no number above stamp_base (see
-    :meth:`DiffusionWorkspace.stamp_base`).
+    alone. Returns how many pixels are set (samples included). fws (float64) / uws (uint8): flat
+    memory of at least :func:`_workspace_sizes` (h, w) elements, reused by every region; stamps:
+    flat int32, 2 h w elements, none above stamp_base (see :meth:`DiffusionWorkspace.stamps`).
 
     Each region's result is exactly that of :func:`_push_pull_pooled` over its bounding box (one
     pixel of margin) with its own samples and the rest of the box fixed at the finest level's
@@ -737,16 +790,12 @@ def _diffuse_regions(codes, valid, edges, labels, n, boxes, max_work, iterations
             ve[y, x >> 1] = valid[y, x]
         for x in range(1 - (y & 1), w, 2):
             vo[y, x >> 1] = valid[y, x]
-    own = iws[:h * w].reshape((h, w))  # == sc: a sample of region c
-    qm = iws[h * w:2 * h * w].reshape((h, w))  # == sc: a quincunx value of region c
-    max_runs = h * ((w + 1) // 2)
-    runs = iws[2 * h * w:2 * h * w + 6 * max_runs].reshape((2 * max_runs, 3))
-    run_start = np.empty(n + 2, dtype=np.int64)
+    own = stamps[:h * w].reshape((h, w))  # == sc: a sample of region c
+    qm = stamps[h * w:2 * h * w].reshape((h, w))  # == sc: a quincunx value of region c
     span_a = np.empty(h, dtype=np.int64)
     span_b = np.empty(h, dtype=np.int64)
     row_a = np.empty(h, dtype=np.int64)
     row_b = np.empty(h, dtype=np.int64)
-    _region_runs(labels, n, runs, run_start)
     c_it = min(2 * iterations, _MAX_ITERATIONS)
     one, two = np.uint64(1), np.uint64(2)
     for c in range(1, n + 1):
@@ -954,7 +1003,7 @@ def _workspace_sizes(h: int, w: int) -> tuple[int, int, int]:
     nf, nu = _pool_sizes(ch, cw)
     ns = 2 * ch * ((cw + 1) // 2)
     wh = (w + 1) // 2
-    return nf + ns + ch * cw + h * w + 2 * h * wh, nu + ns + ch * cw + 2 * h * wh, 2 * h * w + 6 * h * wh
+    return nf + ns + ch * cw + h * w + 2 * h * wh, nu + ns + ch * cw + 2 * h * wh, 7 * h * wh
 
 
 class DiffusionWorkspace:
@@ -965,15 +1014,16 @@ class DiffusionWorkspace:
     def __init__(self):
         self.release()
 
-    def stamp_base(self, n_regions: int) -> int:
-        """A number above every stamp in the int32 array's first 2 h w elements, for a frame with
-        ``n_regions`` regions to add to their numbers (advanced past them; zeroed on wrapping)."""
-        if self._next_stamp + n_regions >= 2 ** 31 - 1:
-            self._i[:] = 0
+    def stamps(self, height: int, width: int, n_regions: int) -> tuple[np.ndarray, int]:
+        """(flat int32 array of 2 height width elements, base): :func:`_diffuse_regions`' stamps,
+        none above base, for a frame with ``n_regions`` regions to add to their numbers. Kept
+        from frame to frame (base advances past this frame's), so never cleared but on wrapping."""
+        if len(self._stamps) < 2 * height * width or self._next_stamp + n_regions >= 2 ** 31 - 1:
+            self._stamps = np.zeros(max(2 * height * width, len(self._stamps)), dtype=np.int32)
             self._next_stamp = 0
         base = self._next_stamp
         self._next_stamp += n_regions
-        return base
+        return self._stamps, base
 
     def arrays(self, height: int, width: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(float64, uint8, int32) flat arrays large enough for a (height, width) frame (grown when needed)."""
@@ -983,14 +1033,14 @@ class DiffusionWorkspace:
         if len(self._u) < nu:
             self._u = np.empty(nu, dtype=np.uint8)
         if len(self._i) < ni:
-            self._i = np.zeros(ni, dtype=np.int32)
-            self._next_stamp = 0
+            self._i = np.empty(ni, dtype=np.int32)
         return self._f, self._u, self._i
 
     def release(self) -> None:
         self._f = np.empty(0)
         self._u = np.empty(0, dtype=np.uint8)
         self._i = np.empty(0, dtype=np.int32)
+        self._stamps = np.empty(0, dtype=np.int32)
         self._next_stamp = 0
 
 
@@ -1005,14 +1055,16 @@ def diffuse(samples: DecodedSamples, max_work: float = 16.0, iterations: int = D
     codes = np.ascontiguousarray(samples.codes)
     valid = np.ascontiguousarray(samples.valid, dtype=bool).view(np.uint8)
     edges = np.ascontiguousarray(samples.edges, dtype=bool).view(np.uint8)
-    labels = np.zeros(edges.shape, dtype=np.int32)
-    n, boxes, _ = _label_regions(edges, labels)
+    h, w = edges.shape
+    workspace = workspace or DiffusionWorkspace()
+    fws, uws, iws = workspace.arrays(h, w)
+    max_runs = h * ((w + 1) // 2)  # runs are separated by edge pixels
+    runs = iws[:6 * max_runs].reshape((2 * max_runs, 3))
+    n, boxes, _, run_start = _label_runs(edges, runs, iws[6 * max_runs:7 * max_runs])
     out = np.empty(edges.shape, dtype=np.float32)
     done = np.zeros(edges.shape, dtype=np.uint8)
-    workspace = workspace or DiffusionWorkspace()
-    fws, uws, iws = workspace.arrays(*edges.shape)
-    n_done = _diffuse_regions(codes, valid, edges, labels, n, boxes, float(max_work), int(iterations), out, done,
-                              fws, uws, iws, workspace.stamp_base(n))
+    n_done = _diffuse_regions(codes, valid, edges, n, boxes, runs, run_start, float(max_work), int(iterations), out,
+                              done, fws, uws, *workspace.stamps(h, w, n))
     if n_done < out.size:  # regions without samples or over the work budget
         missing = ~(done.view(bool) | samples.valid)
         out[missing] = push_pull_fast(samples.codes, samples.valid, iterations)[missing]

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pibr.client.diffusion import DiffusionWorkspace, _label_regions, diffuse, push_pull_fast
+from pibr.client.diffusion import DiffusionWorkspace, _label_regions, _label_runs, diffuse, push_pull_fast
 from pibr.protocol.edgecodec.codec import DecodedSamples, EdgeDecoder, EdgeEncoder
 
 from ..protocol.golden_edge import QUANTIZER, cluttered_codes, piecewise_planar_codes
@@ -24,6 +24,31 @@ def _random_samples(rng, shape, edge_density, edge_valid, regular_density):
     valid = (edges & (rng.random(shape) < edge_valid)) | (rng.random(shape) < regular_density)
     codes = np.where(valid, rng.integers(1, 4096, shape), 0)
     return _decoded(edges, valid, codes)
+
+
+@pytest.mark.parametrize("density", [0.0, 0.2, 0.4, 0.55, 0.7, 1.0])
+def test_region_runs_are_the_labelled_regions(density):
+    """_label_runs finds _label_regions' regions: the same numbers, boxes and sizes, and its runs
+    (grouped by region, in raster order) paint the label image exactly."""
+    rng = np.random.default_rng(int(density * 100) + 1)
+    for shape in [(1, 1), (1, 13), (11, 1), (37, 53), (64, 64), (40, 200)]:
+        edges = (rng.random(shape) < density).view(np.uint8)
+        labels = np.zeros(shape, np.int32)
+        n, boxes, sizes = _label_regions(edges, labels)
+        max_runs = shape[0] * ((shape[1] + 1) // 2)
+        runs = np.full((2 * max_runs, 3), -7, np.int32)
+        n_runs, boxes_runs, sizes_runs, run_start = _label_runs(edges, runs, np.full(max_runs, -7, np.int32))
+        assert n_runs == n
+        np.testing.assert_array_equal(boxes_runs[1:], boxes[1:n + 1])
+        np.testing.assert_array_equal(sizes_runs[1:], sizes[1:n + 1])
+        painted = np.zeros(shape, np.int32)
+        for c in range(1, n + 1):
+            group = runs[run_start[c]:run_start[c + 1]]
+            assert len(group) and np.all(np.diff(group[:, 0] * shape[1] + group[:, 1]) > 0)
+            for y, a, b in group:
+                assert np.all(painted[y, a:b + 1] == 0)
+                painted[y, a:b + 1] = c
+        np.testing.assert_array_equal(painted, labels)
 
 
 @pytest.mark.parametrize("shape", [(1, 1), (1, 9), (9, 1), (2, 2), (3, 50), (50, 3), (37, 53), (64, 64), (97, 130)])
@@ -53,6 +78,15 @@ def test_plain_push_pull_equals_the_reference(shape):
         v = np.where(m, rng.random(shape) * 4000, np.nan)
         for iterations in (0, 1, 4):
             np.testing.assert_array_equal(push_pull_fast(v, m, iterations), reference_push_pull(v, m, iterations))
+
+
+def test_a_workspace_reused_across_frame_sizes_gives_the_reference():
+    """Stamps and scratch left by a larger or a smaller frame never leak into the next one."""
+    rng = np.random.default_rng(11)
+    ws = DiffusionWorkspace()
+    for shape in [(90, 120), (20, 30), (60, 80), (90, 121), (5, 7), (60, 80)]:
+        s = _random_samples(rng, shape, 0.25, 0.9, 0.03)
+        np.testing.assert_array_equal(diffuse(s, workspace=ws), reference_diffuse(s))
 
 
 def test_the_work_budget_falls_back_as_the_reference():
