@@ -731,6 +731,60 @@ def _half_sweep_runs(t, o, f, runs, r0, r1, p, y0, y1, x0, x1):
                     t[y, k] = 0.5 * (o[y - one, k] + o[y + one, k])
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _gather_own_at(codes, own, sc, qv, qm, y, x, y0, y1, x0, x1):
+    """Push step 1 at quincunx pixel (y, x) of box y0..y1, x0..x1 from the samples stamped sc."""
+    one = np.uint64(1)
+    num = 0.0
+    den = 0.0
+    if own[y, x] == sc:
+        num += _C_SELF * codes[y, x]
+        den += _C_SELF
+    if y > y0 and own[y - one, x] == sc:
+        num += _C_NEIGHBOUR * codes[y - one, x]
+        den += _C_NEIGHBOUR
+    if y < y1 and own[y + one, x] == sc:
+        num += _C_NEIGHBOUR * codes[y + one, x]
+        den += _C_NEIGHBOUR
+    if x > x0 and own[y, x - one] == sc:
+        num += _C_NEIGHBOUR * codes[y, x - one]
+        den += _C_NEIGHBOUR
+    if x < x1 and own[y, x + one] == sc:
+        num += _C_NEIGHBOUR * codes[y, x + one]
+        den += _C_NEIGHBOUR
+    if den > 0:
+        qv[y, x] = num / den
+        qm[y, x] = sc
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _gather_own_diagonal_at(qv, qm, sc, cv, cm, y, x, y0, y1, x0, x1):
+    """Push step 2 into the coarse pixel of even pixel (y, x) of box y0..y1, x0..x1 (quincunx values stamped sc)."""
+    one = np.uint64(1)
+    num = 0.0
+    den = 0.0
+    if qm[y, x] == sc:
+        num += _C_SELF * qv[y, x]
+        den += _C_SELF
+    up, down = y > y0, y < y1
+    left, right = x > x0, x < x1
+    if up and left and qm[y - one, x - one] == sc:
+        num += _C_NEIGHBOUR * qv[y - one, x - one]
+        den += _C_NEIGHBOUR
+    if up and right and qm[y - one, x + one] == sc:
+        num += _C_NEIGHBOUR * qv[y - one, x + one]
+        den += _C_NEIGHBOUR
+    if down and left and qm[y + one, x - one] == sc:
+        num += _C_NEIGHBOUR * qv[y + one, x - one]
+        den += _C_NEIGHBOUR
+    if down and right and qm[y + one, x + one] == sc:
+        num += _C_NEIGHBOUR * qv[y + one, x + one]
+        den += _C_NEIGHBOUR
+    if den > 0:
+        cv[(y - y0) >> one, (x - x0) >> one] = num / den
+        cm[(y - y0) >> one, (x - x0) >> one] = 1
+
+
 #: How far (pixels, in rows and columns) the finest level's push and pull reach beyond a region:
 #: its sweeps read the region and its 4-neighbours, whose pulled values read quincunx values
 #: within 2 of the region, and a coarse sample exists only within 3 of it (see _diffuse_regions).
@@ -847,30 +901,35 @@ def _diffuse_regions(codes, valid, edges, n, boxes, runs, run_start, max_work, i
         # indices around, and that test in every access keeps loops with bounds known only at run
         # time from being vectorised (measured: ~6x slower sweeps).
         uy0, uy1, ux0, ux1 = np.uint64(y0), np.uint64(y1), np.uint64(x0), np.uint64(x1)
-        # push, step 1: the quincunx lattice (box parity) gathers its axial neighbours
+        # push, step 1: the quincunx lattice (box parity) gathers its axial neighbours. Neighbours
+        # outside the box carry no stamp of this region, so away from the frame's border the
+        # loop needs no bounds tests and runs branch-free (an absent term adds +0.0: the same sums).
         for y in range(uy0, uy1 + one):
-            sa = np.uint64(span_a[y])
-            for x in range(sa + ((sa - ux0 + y - uy0) & one), np.uint64(span_b[y]) + one, two):
-                num = 0.0
-                den = 0.0
-                if own[y, x] == sc:
-                    num += _C_SELF * codes[y, x]
-                    den += _C_SELF
-                if y > uy0 and own[y - one, x] == sc:
-                    num += _C_NEIGHBOUR * codes[y - one, x]
-                    den += _C_NEIGHBOUR
-                if y < uy1 and own[y + one, x] == sc:
-                    num += _C_NEIGHBOUR * codes[y + one, x]
-                    den += _C_NEIGHBOUR
-                if x > ux0 and own[y, x - one] == sc:
-                    num += _C_NEIGHBOUR * codes[y, x - one]
-                    den += _C_NEIGHBOUR
-                if x < ux1 and own[y, x + one] == sc:
-                    num += _C_NEIGHBOUR * codes[y, x + one]
-                    den += _C_NEIGHBOUR
-                if den > 0:
-                    qv[y, x] = num / den
-                    qm[y, x] = sc
+            sa, sb = np.uint64(span_a[y]), np.uint64(span_b[y])
+            first = sa + ((sa - ux0 + y - uy0) & one)
+            if y == 0 or y == h - 1 or w < 3:
+                for x in range(first, sb + one, two):
+                    _gather_own_at(codes, own, sc, qv, qm, y, x, uy0, uy1, ux0, ux1)
+                continue
+            lo = first
+            if first == 0:
+                _gather_own_at(codes, own, sc, qv, qm, y, first, uy0, uy1, ux0, ux1)
+                lo = two
+            hi = sb if sb < w - 1 else np.uint64(w - 2)
+            for x in range(lo, hi + one, two):
+                num = (((0.0 + (_C_SELF * codes[y, x] if own[y, x] == sc else 0.0))
+                        + (_C_NEIGHBOUR * codes[y - one, x] if own[y - one, x] == sc else 0.0))
+                       + (_C_NEIGHBOUR * codes[y + one, x] if own[y + one, x] == sc else 0.0)) \
+                    + (_C_NEIGHBOUR * codes[y, x - one] if own[y, x - one] == sc else 0.0)
+                num = num + (_C_NEIGHBOUR * codes[y, x + one] if own[y, x + one] == sc else 0.0)
+                den = (((0.0 + (_C_SELF if own[y, x] == sc else 0.0)) + (_C_NEIGHBOUR if own[y - one, x] == sc else 0.0))
+                       + (_C_NEIGHBOUR if own[y + one, x] == sc else 0.0)) \
+                    + (_C_NEIGHBOUR if own[y, x - one] == sc else 0.0)
+                den = den + (_C_NEIGHBOUR if own[y, x + one] == sc else 0.0)
+                qv[y, x] = num / (den if den > 0 else 1.0)  # read only where stamped
+                qm[y, x] = sc if den > 0 else qm[y, x]
+            if sb == w - 1 and ((sb - first) & one) == 0:
+                _gather_own_at(codes, own, sc, qv, qm, y, sb, uy0, uy1, ux0, ux1)
         # push, step 2: the even lattice gathers its diagonal neighbours into the coarse level,
         # empty away from the region
         ch, cw = (bh + 1) // 2, (bw + 1) // 2
@@ -879,30 +938,34 @@ def _diffuse_regions(codes, valid, edges, n, boxes, runs, run_start, max_work, i
         cv[:, :] = 0.0
         cm[:, :] = 0
         for y in range(uy0, uy1 + one, two):
-            sa = np.uint64(span_a[y])
-            for x in range(sa + ((sa - ux0) & one), np.uint64(span_b[y]) + one, two):
-                num = 0.0
-                den = 0.0
-                if qm[y, x] == sc:
-                    num += _C_SELF * qv[y, x]
-                    den += _C_SELF
-                up, down = y > uy0, y < uy1
-                left, right = x > ux0, x < ux1
-                if up and left and qm[y - one, x - one] == sc:
-                    num += _C_NEIGHBOUR * qv[y - one, x - one]
-                    den += _C_NEIGHBOUR
-                if up and right and qm[y - one, x + one] == sc:
-                    num += _C_NEIGHBOUR * qv[y - one, x + one]
-                    den += _C_NEIGHBOUR
-                if down and left and qm[y + one, x - one] == sc:
-                    num += _C_NEIGHBOUR * qv[y + one, x - one]
-                    den += _C_NEIGHBOUR
-                if down and right and qm[y + one, x + one] == sc:
-                    num += _C_NEIGHBOUR * qv[y + one, x + one]
-                    den += _C_NEIGHBOUR
-                if den > 0:
-                    cv[(y - uy0) >> one, (x - ux0) >> one] = num / den
-                    cm[(y - uy0) >> one, (x - ux0) >> one] = 1
+            sa, sb = np.uint64(span_a[y]), np.uint64(span_b[y])
+            first = sa + ((sa - ux0) & one)
+            if y == 0 or y == h - 1 or w < 3:
+                for x in range(first, sb + one, two):
+                    _gather_own_diagonal_at(qv, qm, sc, cv, cm, y, x, uy0, uy1, ux0, ux1)
+                continue
+            lo = first
+            if first == 0:
+                _gather_own_diagonal_at(qv, qm, sc, cv, cm, y, first, uy0, uy1, ux0, ux1)
+                lo = two
+            hi = sb if sb < w - 1 else np.uint64(w - 2)
+            ci = (y - uy0) >> one
+            for x in range(lo, hi + one, two):
+                num = (((0.0 + (_C_SELF * qv[y, x] if qm[y, x] == sc else 0.0))
+                        + (_C_NEIGHBOUR * qv[y - one, x - one] if qm[y - one, x - one] == sc else 0.0))
+                       + (_C_NEIGHBOUR * qv[y - one, x + one] if qm[y - one, x + one] == sc else 0.0)) \
+                    + (_C_NEIGHBOUR * qv[y + one, x - one] if qm[y + one, x - one] == sc else 0.0)
+                num = num + (_C_NEIGHBOUR * qv[y + one, x + one] if qm[y + one, x + one] == sc else 0.0)
+                den = (((0.0 + (_C_SELF if qm[y, x] == sc else 0.0))
+                        + (_C_NEIGHBOUR if qm[y - one, x - one] == sc else 0.0))
+                       + (_C_NEIGHBOUR if qm[y - one, x + one] == sc else 0.0)) \
+                    + (_C_NEIGHBOUR if qm[y + one, x - one] == sc else 0.0)
+                den = den + (_C_NEIGHBOUR if qm[y + one, x + one] == sc else 0.0)
+                cj = (x - ux0) >> one
+                cv[ci, cj] = num / (den if den > 0 else 1.0)
+                cm[ci, cj] = 1 if den > 0 else 0
+            if sb == w - 1 and ((sb - first) & one) == 0:
+                _gather_own_diagonal_at(qv, qm, sc, cv, cm, y, sb, uy0, uy1, ux0, ux1)
         coarse = _push_pull_pooled(cv, cm, c_it, cm, fpool, upool, sf, su)
         # pull: even pixels from the coarse level, odd-odd ones from their diagonals, the rest from
         # their axial neighbours
