@@ -31,16 +31,22 @@ plain push-pull value. The total work is bounded: regions whose bounding boxes w
 ``max_work`` times the image area also fall back to plain push-pull.
 
 Measured on a 1024^2 room frame (threshold 3.5, 4.1 % edge samples): edge-aware 62.1 dB PSNR
-of the 12-bit codes, max error 37 codes, 60 ms; plain push-pull 54.1 dB, max 276 codes, 24 ms.
-The cost is the push-pull over the boxes (summing to ~1.9 images on room frames, 1.5 of them
-the three largest regions'), so it is about the box area times a plain push-pull. Tried and not
+of the 12-bit codes, max error 37 codes; plain push-pull 54.1 dB, max 276 codes. The boxes sum
+to ~1.8 images on room frames (the largest region's box is the whole image), the regions to
+~0.96. So only the coarse levels are computed over each box; the finest level (push, pull and
+sweeps: about two thirds of a push-pull's work) only on row spans reaching 3 pixels beyond the
+region, which is exact (see :func:`_diffuse_regions`), and the regions are found as row runs
+(:func:`_label_runs`). That costs about 1.5 plain push-pulls (`pibr bench codec-speed`), with
+the same output, bit for bit, as push-pulling every whole box (kept in
+tests/client/diffusion_reference.py and compared there). Tried and not
 kept (issue 12): one pyramid shared by all regions, whose cells hold one entry per region
 present (sum and weight of that region's samples, pushed with bilinear weights, pulled
 bilinearly, swept among same-region cells): about as costly as a plain push-pull, but
 0.55-0.8 dB below this per-region diffusion in disparity PSNR on room frames; with all pixels
 one region it was 2.7 dB below the quincunx push-pull below, so its bilinear pyramid, not the
 region bookkeeping, lost the quality. A shared pyramid with this module's quincunx steps per
-region entry is the next thing to try.
+region entry is the next thing to try; it would change the result (a coarse level no longer
+bounded by each region's box).
 
 Codes are diffused (disparity is linear on planes, so diffusion between edge samples
 reconstructs planes); :func:`codes_to_distance` turns them into distance, with 0 (sky) where
@@ -794,12 +800,12 @@ _REACH = 3
 @njit(cache=True, nogil=True)
 def _diffuse_regions(codes, valid, edges, n, boxes, runs, run_start, max_work, iterations, out, done, fws, uws,
                      stamps, stamp_base):
-    """Push-pull every region (n, boxes, runs, run_start: see :func:`_label_runs`) from its own samples
-    into ``out`` (h, w) (which also gets the samples),
-    marking the pixels set in ``done``; regions without samples or beyond the work budget are left
-    alone. Returns how many pixels are set (samples included). fws (float64) / uws (uint8): flat
-    memory of at least :func:`_workspace_sizes` (h, w) elements, reused by every region; stamps:
-    flat int32, 2 h w elements, none above stamp_base (see :meth:`DiffusionWorkspace.stamps`).
+    """Push-pull every region (n, boxes, runs, run_start: see :func:`_label_runs`) from its own
+    samples into ``out`` (h, w) (which also gets the samples), marking the pixels set in ``done``;
+    regions without samples or beyond the work budget are left alone. Returns how many pixels are
+    set (samples included). fws (float64) / uws (uint8): flat memory of at least
+    :func:`_workspace_sizes` (h, w) elements, reused by every region; stamps: flat int32, 2 h w
+    elements, none above stamp_base (see :meth:`DiffusionWorkspace.stamps`).
 
     Each region's result is exactly that of :func:`_push_pull_pooled` over its bounding box (one
     pixel of margin) with its own samples and the rest of the box fixed at the finest level's
@@ -922,7 +928,8 @@ def _diffuse_regions(codes, valid, edges, n, boxes, runs, run_start, max_work, i
                        + (_C_NEIGHBOUR * codes[y + one, x] if own[y + one, x] == sc else 0.0)) \
                     + (_C_NEIGHBOUR * codes[y, x - one] if own[y, x - one] == sc else 0.0)
                 num = num + (_C_NEIGHBOUR * codes[y, x + one] if own[y, x + one] == sc else 0.0)
-                den = (((0.0 + (_C_SELF if own[y, x] == sc else 0.0)) + (_C_NEIGHBOUR if own[y - one, x] == sc else 0.0))
+                den = (((0.0 + (_C_SELF if own[y, x] == sc else 0.0))
+                        + (_C_NEIGHBOUR if own[y - one, x] == sc else 0.0))
                        + (_C_NEIGHBOUR if own[y + one, x] == sc else 0.0)) \
                     + (_C_NEIGHBOUR if own[y, x - one] == sc else 0.0)
                 den = den + (_C_NEIGHBOUR if own[y, x + one] == sc else 0.0)
