@@ -38,7 +38,8 @@ INNER = {
                                       "encode_regular", "encode_values", "decode_edge_image", "decode_regular",
                                       "decode_values", "temporal_context", "temporal_values", "_assemble"),
     "pibr.server.edge_extract": ("quantize_codes", "significance", "select_edges"),
-    "pibr.client.diffusion": ("_label_regions", "_diffuse_regions", "push_pull_fast", "codes_to_distance"),
+    "pibr.client.diffusion": ("_label_regions", "_label_runs", "_diffuse_regions", "push_pull_fast",
+                              "codes_to_distance"),
 }
 
 
