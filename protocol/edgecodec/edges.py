@@ -44,7 +44,7 @@ import numpy as np
 from numba import njit
 
 from .arith import (RATE_SHIFT, as_data, dec_raw, dec_start, decoder_ok, enc_finish, enc_raw, enc_start,
-                    encoder_bytes, model_p1, model_update, new_model)
+                    encoder_bytes, model_p1, model_update, new_model, unmanaged)
 
 #: Padding around the working image so neighbour reads need no bounds checks.
 PAD = 4
@@ -172,6 +172,8 @@ def _block_ctx(occ, tc, by, bx, h, w, block_log2, occ_off):
 
 @njit(cache=True, nogil=True)
 def _encode_kernel(img, tc, h, w, four_passes, big, buf, m, rate, block_log2, occ_off):
+    # views without reference counting for the calls into the coder (see arith.unmanaged)
+    img, tc, buf, m, rate = unmanaged(img), unmanaged(tc), unmanaged(buf), unmanaged(m), unmanaged(rate)
     es = enc_start()
     occ = block_occupancy(img, h, w, block_log2)
     bh, bw = occ.shape
@@ -213,6 +215,8 @@ def _encode_kernel(img, tc, h, w, four_passes, big, buf, m, rate, block_log2, oc
 
 @njit(cache=True, nogil=True)
 def _decode_kernel(data, tc, h, w, four_passes, big, m, rate, img, block_log2, occ_off):
+    # views without reference counting for the calls into the coder (see arith.unmanaged)
+    data, tc, m, rate, img = unmanaged(data), unmanaged(tc), unmanaged(m), unmanaged(rate), unmanaged(img)
     ds = dec_start(data)
     bs = 1 << block_log2
     occ = np.zeros(((h + bs - 1) >> block_log2, (w + bs - 1) >> block_log2), dtype=np.uint8)

@@ -44,7 +44,7 @@ import numpy as np
 from numba import njit
 
 from .arith import (INT_SLOT, RATE_SHIFT, as_data, dec_raw, dec_sint, dec_start, decoder_ok, enc_finish, enc_raw,
-                    enc_sint, enc_start, encoder_bytes, model_p1, model_update, new_model)
+                    enc_sint, enc_start, encoder_bytes, model_p1, model_update, new_model, unmanaged)
 
 PAD = 3
 N_PREDICTORS = 16
@@ -119,6 +119,8 @@ def _code_values(decode, data, buf, E, codes, signs, TV, RG, ri, ci, h, w, q, ma
     the arrays cost numba reference-count updates (atomic instructions) per call, which perf
     measured at ~40 % of the coder's time; only scalar helpers and the integer coders remain.
     """
+    # views without reference counting for the calls into the coder (see arith.unmanaged)
+    data, buf, m, rate = unmanaged(data), unmanaged(buf), unmanaged(m), unmanaged(rate)
     es = enc_start()
     ds = dec_start(data)
     scores = np.empty((256, N_PREDICTORS), dtype=np.int32)
