@@ -36,6 +36,7 @@ from . import bitstream
 from .bitstream import FrameHeader, grid_shape
 from .edges import decode_edge_image, encode_edge_image, temporal_context
 from .motion import decode_motion, encode_motion
+from .arith import unmanaged
 from .quantize import code_of, quantize_codes
 from .regular import decode_regular, encode_regular, nearest_index, sample_positions
 from .values import decode_values, encode_values, temporal_values
@@ -83,19 +84,27 @@ def _beyond(c0, c1, c2, linear_ok):
     return c0
 
 
+@njit(cache=True, nogil=True, inline='always')
+def _laplacian_at(c, y, x):
+    """:func:`laplacian` of codes c (h, w) at pixel (y, x) (pass c through ``unmanaged``)."""
+    h, w = c.shape
+    v = int(c[y, x])
+    up = int(c[y - 1, x]) if y > 0 else _beyond(v, int(c[min(1, h - 1), x]), int(c[min(2, h - 1), x]), h >= 3)
+    down = int(c[y + 1, x]) if y + 1 < h else \
+        _beyond(v, int(c[max(h - 2, 0), x]), int(c[max(h - 3, 0), x]), h >= 3)
+    left = int(c[y, x - 1]) if x > 0 else _beyond(v, int(c[y, min(1, w - 1)]), int(c[y, min(2, w - 1)]), w >= 3)
+    right = int(c[y, x + 1]) if x + 1 < w else \
+        _beyond(v, int(c[y, max(w - 2, 0)]), int(c[y, max(w - 3, 0)]), w >= 3)
+    return up + down + left + right - 4 * v
+
+
 @njit(cache=True, nogil=True)
 def _laplacian_kernel(c, out):
+    c, out = unmanaged(c), unmanaged(out)
     h, w = c.shape
     for y in range(h):
         for x in range(w):
-            v = int(c[y, x])
-            up = int(c[y - 1, x]) if y > 0 else _beyond(v, int(c[min(1, h - 1), x]), int(c[min(2, h - 1), x]), h >= 3)
-            down = int(c[y + 1, x]) if y + 1 < h else \
-                _beyond(v, int(c[max(h - 2, 0), x]), int(c[max(h - 3, 0), x]), h >= 3)
-            left = int(c[y, x - 1]) if x > 0 else _beyond(v, int(c[y, min(1, w - 1)]), int(c[y, min(2, w - 1)]), w >= 3)
-            right = int(c[y, x + 1]) if x + 1 < w else \
-                _beyond(v, int(c[y, max(w - 2, 0)]), int(c[y, max(w - 3, 0)]), w >= 3)
-            out[y, x] = up + down + left + right - 4 * v
+            out[y, x] = _laplacian_at(c, y, x)
 
 
 def laplacian(codes) -> np.ndarray:
@@ -122,33 +131,94 @@ def _signs_kernel(edges, lap, signs):
             signs[y, x] = 0 if not edges[y, x] else (1 if lap[y, x] > 0 else -1)
 
 
+@njit(cache=True, nogil=True, inline='always')
+def _select_at(c, significance, threshold, edges, y, x):
+    """The edge selection of :func:`select_edges` at pixel (y, x) of codes c (h, w), whose
+    significance is ``significance``: sets edges (h, w) there and at neighbours (pass the
+    arrays through ``unmanaged``)."""
+    h, w = c.shape
+    v = int(c[y, x])
+    if significance > threshold:
+        edges[y, x] = True
+        # the neighbour across the largest jump (first of up, down, left, right on ties)
+        best, by, bx = -1, 0, 0
+        if y > 0 and abs(v - int(c[y - 1, x])) > best:
+            best, by, bx = abs(v - int(c[y - 1, x])), y - 1, x
+        if y + 1 < h and abs(v - int(c[y + 1, x])) > best:
+            best, by, bx = abs(v - int(c[y + 1, x])), y + 1, x
+        if x > 0 and abs(v - int(c[y, x - 1])) > best:
+            best, by, bx = abs(v - int(c[y, x - 1])), y, x - 1
+        if x + 1 < w and abs(v - int(c[y, x + 1])) > best:
+            best, by, bx = abs(v - int(c[y, x + 1])), y, x + 1
+        if best > threshold:
+            edges[by, bx] = True
+    # both pixels of every sky / surface boundary
+    if y + 1 < h and (v == 0) != (int(c[y + 1, x]) == 0):
+        edges[y, x] = True
+        edges[y + 1, x] = True
+    if x + 1 < w and (v == 0) != (int(c[y, x + 1]) == 0):
+        edges[y, x] = True
+        edges[y, x + 1] = True
+
+
 @njit(cache=True, nogil=True)
 def _select_kernel(c, sig, threshold, edges):
+    c, sig, edges = unmanaged(c), unmanaged(sig), unmanaged(edges)
     h, w = c.shape
     for y in range(h):
         for x in range(w):
-            v = int(c[y, x])
-            if sig[y, x] > threshold:
-                edges[y, x] = True
-                # the neighbour across the largest jump (first of up, down, left, right on ties)
-                best, by, bx = -1, 0, 0
-                if y > 0 and abs(v - int(c[y - 1, x])) > best:
-                    best, by, bx = abs(v - int(c[y - 1, x])), y - 1, x
-                if y + 1 < h and abs(v - int(c[y + 1, x])) > best:
-                    best, by, bx = abs(v - int(c[y + 1, x])), y + 1, x
-                if x > 0 and abs(v - int(c[y, x - 1])) > best:
-                    best, by, bx = abs(v - int(c[y, x - 1])), y, x - 1
-                if x + 1 < w and abs(v - int(c[y, x + 1])) > best:
-                    best, by, bx = abs(v - int(c[y, x + 1])), y, x + 1
-                if best > threshold:
-                    edges[by, bx] = True
-            # both pixels of every sky / surface boundary
-            if y + 1 < h and (v == 0) != (int(c[y + 1, x]) == 0):
-                edges[y, x] = True
-                edges[y + 1, x] = True
-            if x + 1 < w and (v == 0) != (int(c[y, x + 1]) == 0):
-                edges[y, x] = True
-                edges[y, x + 1] = True
+            _select_at(c, sig[y, x], threshold, edges, y, x)
+
+
+@njit(cache=True, nogil=True)
+def _depth_edges_kernel(c, weight, threshold, sig, edges, signs, lap_rows):
+    """:func:`depth_edges` in one pass over the rows: a row's Laplacian and significance (the
+    interior without border cases, so it vectorises), its selection, and the previous row's
+    signs, which the selection can no longer change (lap_rows (2, w): the last two rows' Laplacian)."""
+    c, sig, edges, signs, lap_rows = unmanaged(c), unmanaged(sig), unmanaged(edges), unmanaged(signs), \
+        unmanaged(lap_rows)
+    h, w = c.shape
+    for y in range(h + 1):
+        if y < h:
+            r = y & 1
+            if 0 < y < h - 1 and w > 2:
+                for x in (0, w - 1):
+                    lap_rows[r, x] = _laplacian_at(c, y, x)
+                for x in range(1, w - 1):
+                    lap_rows[r, x] = (int(c[y - 1, x]) + int(c[y + 1, x]) + int(c[y, x - 1]) + int(c[y, x + 1])
+                                      - 4 * int(c[y, x]))
+            else:
+                for x in range(w):
+                    lap_rows[r, x] = _laplacian_at(c, y, x)
+            for x in range(w):
+                sig[y, x] = weight * np.float32(abs(lap_rows[r, x]))
+            for x in range(w):
+                s = sig[y, x]
+                zero = int(c[y, x]) == 0
+                if (s > threshold or (y + 1 < h and zero != (int(c[y + 1, x]) == 0))
+                        or (x + 1 < w and zero != (int(c[y, x + 1]) == 0))):
+                    _select_at(c, s, threshold, edges, y, x)
+        if y > 0:
+            r = (y - 1) & 1
+            for x in range(w):
+                signs[y - 1, x] = 0 if not edges[y - 1, x] else (1 if lap_rows[r, x] > 0 else -1)
+
+
+def depth_edges(codes, threshold: float = DEFAULT_THRESHOLD,
+                weight: float = 1.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(edges (h, w) bool, signs (h, w) int8, significance (h, w) float32) of codes (h, w) whose
+    significance is ``weight * |laplacian(codes)|`` (float32, as numpy computes it): the same
+    as :func:`select_edges` of that significance, in one compiled pass without temporaries."""
+    c = np.ascontiguousarray(codes, dtype=np.int32)
+    if c.ndim != 2:
+        raise ValueError(f"codes must have shape (h, w), got {c.shape}")
+    h, w = c.shape
+    edges = np.zeros((h, w), dtype=bool)
+    signs = np.empty((h, w), dtype=np.int8)
+    sig = np.empty((h, w), dtype=np.float32)
+    _depth_edges_kernel(c, np.float32(weight), np.float32(threshold), sig, edges, signs,
+                        np.empty((2, w), dtype=np.int64))
+    return edges, signs, sig
 
 
 def select_edges(codes, threshold: float = DEFAULT_THRESHOLD, significance=None,

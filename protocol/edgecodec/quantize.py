@@ -28,11 +28,18 @@ def code_of(r, near, far, min_code, span):
 
 @njit(cache=True, nogil=True)
 def _quantize_kernel(r_in, near, far, min_code, max_code, out):
+    # code_of without branches (every case computed, then selected), so the loop vectorises
     h, w = r_in.shape
     span = max_code - min_code
+    peeled = math.floor(0.5 * min_code)
     for y in range(h):
         for x in range(w):
-            out[y, x] = int(code_of(float(r_in[y, x]), near, far, min_code, span))
+            r = float(r_in[y, x])
+            finite = math.isfinite(r)
+            code = min_code + math.floor((near / (r if r > near else near)) * span + 0.5)
+            code = code if (finite and r > 0.0 and r <= far) else 0.0
+            code = peeled if (finite and r < 0.0) else code
+            out[y, x] = int(code)
 
 
 def quantize_codes(distance, quantizer: DepthQuantizer) -> np.ndarray:

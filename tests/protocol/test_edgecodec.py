@@ -662,3 +662,24 @@ def test_compiled_warp_matches_its_numpy_definition(min_code):
             np.testing.assert_array_equal(got.values, want.values)
             np.testing.assert_array_equal(got.edges, want.edges)
         assert got.values.dtype == np.int32
+
+
+@pytest.mark.parametrize("shape", [(1, 1), (1, 2), (2, 1), (1, 6), (6, 1), (2, 2), (2, 9), (3, 3), (3, 8), (9, 4), (31, 47)])
+@pytest.mark.parametrize("threshold, weight", [(3.5, 1.0), (8.0, 1.0), (2.0, 0.7)])
+def test_fused_depth_edges_match_the_selection_of_their_significance(shape, threshold, weight):
+    """depth_edges (one compiled pass) = select_edges of weight * |Laplacian| computed in numpy:
+    edges, signs and significance, on random codes, planes with sky and piecewise-planar scenes."""
+    from pibr.protocol.edgecodec.codec import depth_edges
+
+    rng = np.random.default_rng(shape[0] * 7 + shape[1])
+    y, x = np.indices(shape)
+    with_sky = np.where(rng.random(shape) < 0.2, 0, 700 + 3 * y - 5 * x)
+    for codes in (rng.integers(0, 4096, shape), with_sky, piecewise_planar_codes(*shape)):
+        lap = laplacian(codes)
+        sig = weight * np.abs(lap).astype(np.float32)
+        edges, signs = select_edges(codes, threshold, sig, lap)
+        got_edges, got_signs, got_sig = depth_edges(codes, threshold, weight)
+        np.testing.assert_array_equal(got_edges, edges)
+        np.testing.assert_array_equal(got_signs, signs)
+        np.testing.assert_array_equal(got_sig, sig)
+        assert got_sig.dtype == np.float32 and got_signs.dtype == np.int8
