@@ -39,7 +39,7 @@ from .motion import decode_motion, encode_motion
 from .arith import unmanaged
 from .quantize import code_of, quantize_codes
 from .regular import decode_regular, encode_regular, nearest_index, sample_positions
-from .values import decode_values, encode_values, temporal_values
+from .values import ValueWorkspace, decode_values, encode_values, temporal_values
 
 #: Default significance threshold in code units: above the Laplacian of a quantized plane (|L| <= 3).
 DEFAULT_THRESHOLD = 3.5
@@ -369,7 +369,7 @@ def _assemble(edges, signs, values, regular, rows, cols, bits, min_code, q, moti
     codes = np.zeros((h, w), dtype=np.uint16)
     valid = np.zeros((h, w), dtype=bool)
     edges = np.ascontiguousarray(edges, dtype=bool)
-    _assemble_kernel(edges, np.ascontiguousarray(values), np.ascontiguousarray(regular), rows, cols, codes, valid)
+    _assemble_kernel(edges, values, np.ascontiguousarray(regular), rows, cols, codes, valid)
     return DecodedSamples(edges=edges, signs=signs, codes=codes, valid=valid, regular=regular.astype(np.uint16),
                           regular_rows=rows, regular_cols=cols, bits=bits, min_code=min_code, q=q,
                           motion=motion, moving=moving)
@@ -403,6 +403,7 @@ class EdgeEncoder:
         self.rows, self.cols = sample_positions(self.width, self.height, spacing_log2)
         self.nearest_rows = nearest_index(self.rows, self.height)
         self.nearest_cols = nearest_index(self.cols, self.width)
+        self._values_workspace = ValueWorkspace(self.height, self.width)
 
     def codes(self, distance) -> np.ndarray:
         """distance (h, w) -> codes (h, w) int32 of this encoder's quantizer."""
@@ -448,13 +449,14 @@ class EdgeEncoder:
         use_t = self.temporal and warped_prev_edges is not None
         four = self.passes == 4
         tctx = temporal_context(warped_prev_edges, h, w) if use_t else None
-        tvals = temporal_values(warped_prev_values if use_t else None, h, w)
+        tvals = self._values_workspace.temporal_values(warped_prev_values if use_t else None)
 
         edge_bytes = encode_edge_image(edges, tctx, four)
         reg_true = codes[np.ix_(self.rows, self.cols)]
         reg_bytes, reg_dec = encode_regular(reg_true, self.q, self.max_code)
+        # val_dec: a view of the workspace, valid at the edges until the next frame (_assemble copies it)
         val_bytes, val_dec = encode_values(edges, codes, signs, reg_dec, self.nearest_rows, self.nearest_cols,
-                                           self.q, self.max_code, tvals)
+                                           self.q, self.max_code, tvals, workspace=self._values_workspace)
         mot_bytes, mot_dec, mov_dec = b"", None, None
         if motion is not None:
             motion = np.asarray(motion, dtype=np.float64)

@@ -272,18 +272,27 @@ def _padded(a, dtype, fill=0):
 
 @njit(cache=True, nogil=True)
 def _temporal_values_kernel(v, out):
+    v, out = unmanaged(v), unmanaged(out)
     h, w = v.shape
     for y in range(h):
         for x in range(w):
             out[PAD + y, PAD + x] = v[y, x] if v[y, x] >= 0 else -1
 
 
-def temporal_values(prev_values, height: int, width: int) -> np.ndarray:
+def temporal_values(prev_values, height: int, width: int, out=None) -> np.ndarray:
     """Padded (h + 2 PAD, w + 2 PAD) int32 of warped previous values, -1 where none.
 
     prev_values : (h, w) int, -1 (or any negative) where the warped previous frame has no sample; or None.
+    out : a padded array of this shape whose border is -1 (a :class:`ValueWorkspace`'s), filled
+    and returned instead of a new one.
     """
-    out = np.full((height + 2 * PAD, width + 2 * PAD), -1, dtype=np.int32)
+    shape = (height + 2 * PAD, width + 2 * PAD)
+    if out is None:
+        out = np.full(shape, -1, dtype=np.int32)
+    elif out.shape != shape or out.dtype != np.int32:
+        raise ValueError(f"out must be {shape} int32, got {out.shape} {out.dtype}")
+    elif prev_values is None:
+        out.fill(-1)
     if prev_values is None:
         return out
     v = np.asarray(prev_values)
@@ -295,35 +304,96 @@ def temporal_values(prev_values, height: int, width: int) -> np.ndarray:
     return out
 
 
+@njit(cache=True, nogil=True)
+def _fill_edge_image(edges, E):
+    """edges (h, w) bool into the interior of the padded E; returns the number of edges."""
+    edges, E = unmanaged(edges), unmanaged(E)
+    h, w = edges.shape
+    n = 0
+    for y in range(h):
+        for x in range(w):
+            e = edges[y, x]
+            E[PAD + y, PAD + x] = e
+            n += e
+    return n
+
+
+@njit(cache=True, nogil=True)
+def _clear_samples(E, S, A):
+    """Zero S and A where E has an edge: all the coder wrote there (V is read only where S is set)."""
+    E, S, A = unmanaged(E), unmanaged(S), unmanaged(A)
+    hp, wp = E.shape
+    for y in range(PAD, hp - PAD):
+        for x in range(PAD, wp - PAD):
+            if E[y, x]:
+                S[y, x] = 0
+                A[y, x] = 0
+
+
+class ValueWorkspace:
+    """The value coder's padded working images for one (h, w), kept from frame to frame: new
+    multi-megabyte arrays per frame cost more in page faults and zeroing than coding a frame's
+    few percent of edge pixels. Between uses S and A are zero (cleared at the last frame's
+    edges); V holds stale values, which the coder reads only where S marks a sample. Not
+    for concurrent use."""
+
+    def __init__(self, height: int, width: int):
+        shape = (height + 2 * PAD, width + 2 * PAD)
+        self.shape = (height, width)
+        self.E = np.zeros(shape, dtype=np.uint8)
+        self.V = np.zeros(shape, dtype=np.int32)
+        self.S = np.zeros(shape, dtype=np.int8)
+        self.A = np.zeros(shape, dtype=np.int32)
+        self._T = None
+
+    def temporal_values(self, prev_values) -> np.ndarray:
+        """:func:`temporal_values` of ``prev_values`` in this workspace's own padded array (valid until the next call)."""
+        if self._T is None:
+            self._T = np.full(self.E.shape, -1, dtype=np.int32)
+        return temporal_values(prev_values, *self.shape, out=self._T)
+
+
 def encode_values(edges, codes, signs, regular, nearest_rows, nearest_cols, q: int, max_code: int,
-                  tvalues=None) -> tuple[bytes, np.ndarray]:
+                  tvalues=None, workspace: ValueWorkspace | None = None) -> tuple[bytes, np.ndarray]:
     """Code the values of the edge samples.
 
     edges : (h, w) bool; codes : (h, w) int true codes; signs : (h, w) int, > 0 for a positive
     Laplacian; regular : (rh, rw) decoded regular samples; nearest_rows (h,) / nearest_cols (w,) :
-    index of the nearest regular sample per row / column; tvalues : from :func:`temporal_values`.
-    Returns (bytes, decoded codes (h, w) int32: what the decoder will reconstruct at the edges).
+    index of the nearest regular sample per row / column; tvalues : from :func:`temporal_values`;
+    workspace : a :class:`ValueWorkspace` of this size to work in (the encoder keeps one).
+    Returns (bytes, decoded codes (h, w) int32: what the decoder will reconstruct at the edges,
+    0 elsewhere; with a workspace, a view of its V, valid at the edges only and until its next use).
     """
     h, w = edges.shape
-    E = _padded(edges.astype(np.uint8), np.uint8)
     if tvalues is None:
         tvalues = temporal_values(None, h, w)
     codes = np.ascontiguousarray(codes, dtype=np.int32)
     signs = np.ascontiguousarray(signs, dtype=np.int8)
     RG = np.ascontiguousarray(regular, dtype=np.int32)
-    n = int(edges.sum())
+    if workspace is None:
+        workspace = ValueWorkspace(h, w)
+        own = True
+    else:
+        if workspace.shape != (h, w):
+            raise ValueError(f"workspace is for {workspace.shape}, edges are {(h, w)}")
+        own = False
+    ws = workspace
+    n = _fill_edge_image(np.ascontiguousarray(edges, dtype=bool), ws.E)
     capacity = 2 * n + 256
-    while True:
-        V = np.zeros(E.shape, dtype=np.int32)
-        S = np.zeros(E.shape, dtype=np.int8)
-        A = np.zeros(E.shape, dtype=np.int32)
-        buf = np.zeros(capacity, dtype=np.uint8)
-        es, _ = _code_values(False, _NO_DATA, buf, E, codes, signs, tvalues, RG, nearest_rows, nearest_cols, h, w, q,
-                             max_code, new_model(N_CONTEXTS), RATE_SHIFT, V, S, A)
-        out = encoder_bytes(es, buf)
-        if out is not None:
-            return out, V[PAD:-PAD, PAD:-PAD].copy()
-        capacity = int(es[4]) + 16
+    try:
+        while True:
+            buf = np.zeros(capacity, dtype=np.uint8)
+            es, _ = _code_values(False, _NO_DATA, buf, ws.E, codes, signs, tvalues, RG, nearest_rows, nearest_cols,
+                                 h, w, q, max_code, new_model(N_CONTEXTS), RATE_SHIFT, ws.V, ws.S, ws.A)
+            out = encoder_bytes(es, buf)
+            if out is not None:
+                break
+            capacity = int(es[4]) + 16
+            _clear_samples(ws.E, ws.S, ws.A)
+    finally:
+        if not own:
+            _clear_samples(ws.E, ws.S, ws.A)
+    return out, (ws.V[PAD:-PAD, PAD:-PAD] if not own else ws.V[PAD:-PAD, PAD:-PAD].copy())
 
 
 def decode_values(data, edges, regular, nearest_rows, nearest_cols, q: int, max_code: int,

@@ -683,3 +683,34 @@ def test_fused_depth_edges_match_the_selection_of_their_significance(shape, thre
         np.testing.assert_array_equal(got_signs, signs)
         np.testing.assert_array_equal(got_sig, sig)
         assert got_sig.dtype == np.float32 and got_signs.dtype == np.int8
+
+
+def test_value_workspace_reused_across_frames_gives_the_bytes_of_fresh_buffers():
+    """The encoder's value workspace (kept from frame to frame, cleared at the last frame's
+    edges): the same bytes and decoded values as new buffers, frame after frame, also when
+    the first output buffer is too small (random codes: large residuals) and the coder retries."""
+    from pibr.protocol.edgecodec.values import ValueWorkspace, encode_values, temporal_values
+
+    h, w = 40, 56
+    rows, cols = sample_positions(w, h, 3)
+    nr, nc = nearest_index(rows, h), nearest_index(cols, w)
+    ws = ValueWorkspace(h, w)
+    rng = np.random.default_rng(5)
+    retried = False
+    for frame in range(6):
+        edges = rng.random((h, w)) < (0.05 if frame % 2 else 0.4)
+        codes = rng.integers(0, 65536, (h, w)) if frame % 3 == 0 else piecewise_planar_codes(h, w) + frame
+        signs = np.where(rng.random((h, w)) < 0.5, 1, -1)
+        regular = codes[np.ix_(rows, cols)]
+        prev = np.where(rng.random((h, w)) < 0.1, rng.integers(0, 4096, (h, w)), -1) if frame else None
+        fresh_bytes, fresh_dec = encode_values(edges, codes, signs, regular, nr, nc, 1, 65535,
+                                               temporal_values(prev, h, w))
+        got_bytes, got_dec = encode_values(edges, codes, signs, regular, nr, nc, 1, 65535,
+                                           ws.temporal_values(prev), workspace=ws)
+        assert got_bytes == fresh_bytes
+        retried |= len(got_bytes) > 2 * edges.sum() + 256
+        np.testing.assert_array_equal(got_dec[edges], fresh_dec[edges])
+        assert not ws.S.any() and not ws.A.any()
+    assert retried  # the first output buffer was too small at least once
+    with pytest.raises(ValueError, match="workspace is for"):
+        encode_values(edges[:-1], codes[:-1], signs[:-1], regular, nr, nc[:w], 1, 4095, workspace=ws)
