@@ -66,6 +66,18 @@ BLOCK_LOG2 = 3
 PASS_PHASES = ((0, 0), (1, 1), (1, 0), (0, 1))
 
 
+@njit(cache=True, nogil=True)
+def _temporal_context_kernel(p, out):
+    """p (h + 2, w + 2) uint8: the warped edges with a border of zeros."""
+    p, out = unmanaged(p), unmanaged(out)
+    h, w = p.shape[0] - 2, p.shape[1] - 2
+    for y in range(h):
+        for x in range(w):
+            around = (p[y, x] | p[y, x + 1] | p[y, x + 2] | p[y + 1, x] | p[y + 1, x + 2] | p[y + 2, x]
+                      | p[y + 2, x + 1] | p[y + 2, x + 2])
+            out[PAD + y, PAD + x] = 2 * p[y + 1, x + 1] + around
+
+
 def temporal_context(prev_edges, height: int, width: int) -> np.ndarray:
     """Padded (h + 4, w + 4) uint8 in 0..3: 2 * warped edge at the pixel + any warped edge among its 8 neighbours.
 
@@ -77,14 +89,9 @@ def temporal_context(prev_edges, height: int, width: int) -> np.ndarray:
     e = np.asarray(prev_edges, dtype=bool)
     if e.shape != (height, width):
         raise ValueError(f"warped previous edges must have shape ({height}, {width}), got {e.shape}")
-    p = np.zeros((height + 2, width + 2), dtype=bool)
+    p = np.zeros((height + 2, width + 2), dtype=np.uint8)
     p[1:-1, 1:-1] = e
-    around = np.zeros((height, width), dtype=bool)
-    for dy in (0, 1, 2):
-        for dx in (0, 1, 2):
-            if dy != 1 or dx != 1:
-                around |= p[dy:dy + height, dx:dx + width]
-    out[PAD:-PAD, PAD:-PAD] = 2 * e.astype(np.uint8) + around.astype(np.uint8)
+    _temporal_context_kernel(p, out)
     return out
 
 

@@ -714,3 +714,4 @@ def test_value_workspace_reused_across_frames_gives_the_bytes_of_fresh_buffers()
     assert retried  # the first output buffer was too small at least once
     with pytest.raises(ValueError, match="workspace is for"):
         encode_values(edges[:-1], codes[:-1], signs[:-1], regular, nr, nc[:w], 1, 4095, workspace=ws)
+
