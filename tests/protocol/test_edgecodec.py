@@ -195,9 +195,11 @@ def _hand_coded_edge_image(h, w, occ, pixel_on):
     tctx = temporal_context(None, h, w)
     model = arith.AdaptiveBitModel.from_state(edge_module._model(True))
     enc = arith.RangeEncoder()
+    tmax = np.zeros(occ.shape, np.uint8)  # the largest temporal context per block
+    edge_module.block_maps(tctx, tctx, h, w, 3, None, tmax)
     for by in range(occ.shape[0]):
         for bx in range(occ.shape[1]):
-            c = edge_module._block_ctx(occ, tctx, by, bx, h, w, 3, edge_module._occ_offset(True))
+            c = edge_module._block_ctx(occ, tmax, by, bx, edge_module._occ_offset(True))
             arith.encode_bit(enc, model, c, int(occ[by, bx]))
     pad = edge_module.PAD
     img = np.zeros((h + 2 * pad, w + 2 * pad), np.uint8)
@@ -715,3 +717,25 @@ def test_value_workspace_reused_across_frames_gives_the_bytes_of_fresh_buffers()
     with pytest.raises(ValueError, match="workspace is for"):
         encode_values(edges[:-1], codes[:-1], signs[:-1], regular, nr, nc[:w], 1, 4095, workspace=ws)
 
+
+
+@pytest.mark.parametrize("shape", [(1, 1), (5, 13), (16, 16), (19, 8), (33, 41)])
+def test_block_maps_match_their_numpy_definition(shape):
+    """Occupancy and largest temporal context per 8 x 8 block, partial blocks at the border included."""
+    from pibr.protocol.edgecodec import edges as edge_module
+
+    pad, h, w = edge_module.PAD, *shape
+    rng = np.random.default_rng(shape[0] * 53 + shape[1])
+    img = np.zeros((h + 2 * pad, w + 2 * pad), np.uint8)
+    img[pad:-pad, pad:-pad] = rng.random(shape) < 0.01
+    tc = np.zeros_like(img)
+    tc[pad:-pad, pad:-pad] = np.where(rng.random(shape) < 0.05, rng.integers(0, 4, shape), 0)
+    occ_shape = edge_module.occupancy_shape(h, w, 3)
+    occ, tmax, tmax_only = (np.zeros(occ_shape, np.uint8) for _ in range(3))
+    edge_module.block_maps(img, tc, h, w, 3, occ, tmax)
+    edge_module.block_maps(img, tc, h, w, 3, None, tmax_only)
+    for by in range(occ_shape[0]):
+        for bx in range(occ_shape[1]):
+            block = (slice(pad + 8 * by, pad + min(8 * by + 8, h)), slice(pad + 8 * bx, pad + min(8 * bx + 8, w)))
+            assert occ[by, bx] == int(img[block].any())
+            assert tmax[by, bx] == tmax_only[by, bx] == tc[block].max()
