@@ -536,7 +536,7 @@ def _rotate(m, x, y, z):
             m[2, 0] * x + m[2, 1] * y + m[2, 2] * z)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")  # no division-by-zero checks: every divisor is > 0
 def _warp_kernel(edges, codes, rp, t, rc, near, far, min_code, max_code, eps, values):
     """:func:`warp_samples_numpy` per sample, operation for operation (so bit-identical): unproject
     (INVERSE), dequantize (DEQUANTIZE), move, project (FORWARD), quantize (QUANTIZE), splat max."""

@@ -109,11 +109,14 @@ def _activity_bucket(a):
 
 
 @njit(cache=True, nogil=True)
-def _code_values(decode, data, buf, E, codes, signs, TV, RG, ri, ci, h, w, q, max_code, m, rate, V, S, A):
+def _code_values(decode, data, buf, E, xs, starts, codes, signs, TV, RG, ri, ci, h, w, q, max_code, m, rate, V, S,
+                 A):
     """Encoder (``decode`` False: codes, signs (h, w) true values and signs (+1 / -1) at edges,
     output into ``buf``) and decoder (``decode`` True: from ``data``) of the edge values, one
-    loop for both so they cannot drift apart. V, S, A: padded outputs (values, sign codes 1 / 2,
-    residual sizes). Returns (encoder state, decoder state).
+    loop for both so they cannot drift apart. E: the padded edge image; xs, starts: its edges'
+    padded columns row by row (row y's in xs[starts[y]:starts[y + 1]], :func:`_fill_edge_image`),
+    so the loop visits the edges only. V, S, A: padded outputs (values, sign codes 1 / 2,
+    residual sizes), zero where S is. Returns (encoder state, decoder state).
 
     Everything per sample is written out in this one function on purpose: helpers that take
     the arrays cost numba reference-count updates (atomic instructions) per call, which perf
@@ -130,9 +133,8 @@ def _code_values(decode, data, buf, E, codes, signs, TV, RG, ri, ci, h, w, q, ma
     preds = np.zeros(N_PREDICTORS, dtype=np.int64)
     avail = np.zeros(N_PREDICTORS, dtype=np.int64)
     for y in range(PAD, PAD + h):
-        for x in range(PAD, PAD + w):
-            if E[y, x] == 0:
-                continue
+        for i_edge in range(starts[y - PAD], starts[y - PAD + 1]):
+            x = xs[i_edge]
             # 1. the Laplacian sign: context = signs of W, N, NW, NE and whether E, S are edges
             c = (int(S[y, x - 1]) + 3 * int(S[y - 1, x]) + 9 * int(S[y - 1, x - 1]) + 27 * int(S[y - 1, x + 1])
                  + 81 * (int(E[y, x + 1]) + 2 * int(E[y + 1, x])))
@@ -263,13 +265,6 @@ _NO_CODES = np.zeros((1, 1), dtype=np.int32)
 _NO_SIGNS = np.zeros((1, 1), dtype=np.int8)
 
 
-def _padded(a, dtype, fill=0):
-    h, w = a.shape
-    out = np.full((h + 2 * PAD, w + 2 * PAD), fill, dtype=dtype)
-    out[PAD:-PAD, PAD:-PAD] = a
-    return out
-
-
 @njit(cache=True, nogil=True)
 def _temporal_values_kernel(v, out):
     v, out = unmanaged(v), unmanaged(out)
@@ -305,29 +300,31 @@ def temporal_values(prev_values, height: int, width: int, out=None) -> np.ndarra
 
 
 @njit(cache=True, nogil=True)
-def _fill_edge_image(edges, E):
-    """edges (h, w) bool into the interior of the padded E; returns the number of edges."""
-    edges, E = unmanaged(edges), unmanaged(E)
+def _fill_edge_image(edges, E, xs, starts):
+    """edges (h, w) bool into the interior of the padded E (uint8), and their padded columns
+    row by row into xs (h * w,) and starts (h + 1,); returns the number of edges."""
+    edges, E, xs, starts = unmanaged(edges), unmanaged(E), unmanaged(xs), unmanaged(starts)
     h, w = edges.shape
     n = 0
     for y in range(h):
+        starts[y] = n
         for x in range(w):
             e = edges[y, x]
             E[PAD + y, PAD + x] = e
+            xs[n] = PAD + x  # kept only where e (branch-free compaction)
             n += e
+    starts[h] = n
     return n
 
 
 @njit(cache=True, nogil=True)
-def _clear_samples(E, S, A):
-    """Zero S and A where E has an edge: all the coder wrote there (V is read only where S is set)."""
-    E, S, A = unmanaged(E), unmanaged(S), unmanaged(A)
-    hp, wp = E.shape
-    for y in range(PAD, hp - PAD):
-        for x in range(PAD, wp - PAD):
-            if E[y, x]:
-                S[y, x] = 0
-                A[y, x] = 0
+def _clear_samples(xs, starts, S, A):
+    """Zero S and A at the edges listed in xs, starts: all the coder wrote there (V is read only where S is set)."""
+    xs, starts, S, A = unmanaged(xs), unmanaged(starts), unmanaged(S), unmanaged(A)
+    for y in range(len(starts) - 1):
+        for i in range(starts[y], starts[y + 1]):
+            S[PAD + y, xs[i]] = 0
+            A[PAD + y, xs[i]] = 0
 
 
 class ValueWorkspace:
@@ -344,6 +341,8 @@ class ValueWorkspace:
         self.V = np.zeros(shape, dtype=np.int32)
         self.S = np.zeros(shape, dtype=np.int8)
         self.A = np.zeros(shape, dtype=np.int32)
+        self.xs = np.empty(height * width, dtype=np.int32)
+        self.starts = np.empty(height + 1, dtype=np.int64)
         self._T = None
 
     def temporal_values(self, prev_values) -> np.ndarray:
@@ -378,21 +377,22 @@ def encode_values(edges, codes, signs, regular, nearest_rows, nearest_cols, q: i
             raise ValueError(f"workspace is for {workspace.shape}, edges are {(h, w)}")
         own = False
     ws = workspace
-    n = _fill_edge_image(np.ascontiguousarray(edges, dtype=bool), ws.E)
+    n = _fill_edge_image(np.ascontiguousarray(edges, dtype=bool), ws.E, ws.xs, ws.starts)
     capacity = 2 * n + 256
     try:
         while True:
             buf = np.zeros(capacity, dtype=np.uint8)
-            es, _ = _code_values(False, _NO_DATA, buf, ws.E, codes, signs, tvalues, RG, nearest_rows, nearest_cols,
-                                 h, w, q, max_code, new_model(N_CONTEXTS), RATE_SHIFT, ws.V, ws.S, ws.A)
+            es, _ = _code_values(False, _NO_DATA, buf, ws.E, ws.xs, ws.starts, codes, signs, tvalues, RG,
+                                 nearest_rows, nearest_cols, h, w, q, max_code, new_model(N_CONTEXTS), RATE_SHIFT,
+                                 ws.V, ws.S, ws.A)
             out = encoder_bytes(es, buf)
             if out is not None:
                 break
             capacity = int(es[4]) + 16
-            _clear_samples(ws.E, ws.S, ws.A)
+            _clear_samples(ws.xs, ws.starts, ws.S, ws.A)
     finally:
         if not own:
-            _clear_samples(ws.E, ws.S, ws.A)
+            _clear_samples(ws.xs, ws.starts, ws.S, ws.A)
     return out, (ws.V[PAD:-PAD, PAD:-PAD] if not own else ws.V[PAD:-PAD, PAD:-PAD].copy())
 
 
@@ -400,16 +400,15 @@ def decode_values(data, edges, regular, nearest_rows, nearest_cols, q: int, max_
                   tvalues=None) -> tuple[np.ndarray, np.ndarray, bool]:
     """-> (codes (h, w) int32, signs (h, w) int8 in {-1, 0, +1}, stream decoded cleanly)."""
     h, w = edges.shape
-    E = _padded(edges.astype(np.uint8), np.uint8)
+    ws = ValueWorkspace(h, w)
+    _fill_edge_image(np.ascontiguousarray(edges, dtype=bool), ws.E, ws.xs, ws.starts)
     if tvalues is None:
         tvalues = temporal_values(None, h, w)
-    V = np.zeros(E.shape, dtype=np.int32)
-    S = np.zeros(E.shape, dtype=np.int8)
-    A = np.zeros(E.shape, dtype=np.int32)
     arr = as_data(data)
-    _, ds = _code_values(True, arr, _NO_BUF, E, _NO_CODES, _NO_SIGNS, tvalues,
+    V, S = ws.V, ws.S
+    _, ds = _code_values(True, arr, _NO_BUF, ws.E, ws.xs, ws.starts, _NO_CODES, _NO_SIGNS, tvalues,
                          np.ascontiguousarray(regular, dtype=np.int32), nearest_rows, nearest_cols, h, w, q, max_code,
-                         new_model(N_CONTEXTS), RATE_SHIFT, V, S, A)
+                         new_model(N_CONTEXTS), RATE_SHIFT, V, S, ws.A)
     codes = np.empty((h, w), dtype=np.int32)
     signs = np.empty((h, w), dtype=np.int8)
     _unpad_decoded(V, S, codes, signs)
