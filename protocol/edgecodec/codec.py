@@ -39,6 +39,7 @@ from .motion import decode_motion, encode_motion
 from .arith import unmanaged
 from .quantize import code_of, quantize_codes
 from .regular import decode_regular, encode_regular, nearest_index, sample_positions
+from .values import PAD as VALUES_PAD
 from .values import ValueWorkspace, decode_values, encode_values, temporal_values
 
 #: Default significance threshold in code units: above the Laplacian of a quantized plane (|L| <= 3).
@@ -349,12 +350,12 @@ def _check_size(width, height):
 
 
 @njit(cache=True, nogil=True)
-def _assemble_kernel(edges, values, regular, rows, cols, codes, valid):
+def _assemble_kernel(edges, values, off, regular, rows, cols, codes, valid):
     h, w = edges.shape
     for y in range(h):
         for x in range(w):
             if edges[y, x]:
-                codes[y, x] = values[y, x]
+                codes[y, x] = values[off + y, off + x]
                 valid[y, x] = True
     for i in range(len(rows)):
         for j in range(len(cols)):
@@ -364,12 +365,16 @@ def _assemble_kernel(edges, values, regular, rows, cols, codes, valid):
                 codes[y, x] = regular[i, j]
 
 
-def _assemble(edges, signs, values, regular, rows, cols, bits, min_code, q, motion=None, moving=None):
+def _assemble(edges, signs, values, regular, rows, cols, bits, min_code, q, motion=None, moving=None,
+              values_pad: int = 0):
+    """The DecodedSamples of decoded parts; values (h + 2 pad, w + 2 pad): the edges' values
+    with a border of ``values_pad`` (the value coder's padded image, read without a copy)."""
     h, w = edges.shape
     codes = np.zeros((h, w), dtype=np.uint16)
     valid = np.zeros((h, w), dtype=bool)
     edges = np.ascontiguousarray(edges, dtype=bool)
-    _assemble_kernel(edges, values, np.ascontiguousarray(regular), rows, cols, codes, valid)
+    _assemble_kernel(edges, np.ascontiguousarray(values), values_pad, np.ascontiguousarray(regular), rows, cols,
+                     codes, valid)
     return DecodedSamples(edges=edges, signs=signs, codes=codes, valid=valid, regular=regular.astype(np.uint16),
                           regular_rows=rows, regular_cols=cols, bits=bits, min_code=min_code, q=q,
                           motion=motion, moving=moving)
@@ -454,8 +459,7 @@ class EdgeEncoder:
         edge_bytes = encode_edge_image(edges, tctx, four)
         reg_true = codes[np.ix_(self.rows, self.cols)]
         reg_bytes, reg_dec = encode_regular(reg_true, self.q, self.max_code)
-        # val_dec: a view of the workspace, valid at the edges until the next frame (_assemble copies it)
-        val_bytes, val_dec = encode_values(edges, codes, signs, reg_dec, self.nearest_rows, self.nearest_cols,
+        val_bytes, _ = encode_values(edges, codes, signs, reg_dec, self.nearest_rows, self.nearest_cols,
                                            self.q, self.max_code, tvals, workspace=self._values_workspace)
         mot_bytes, mot_dec, mov_dec = b"", None, None
         if motion is not None:
@@ -467,7 +471,7 @@ class EdgeEncoder:
             mot_bytes, mot_dec, mov_dec = encode_motion(motion, mov, self.motion_scale, self.motion_block_log2)
             if not mot_bytes:
                 mot_dec = mov_dec = None
-        n_edges = int(edges.sum())
+        n_edges = int(np.count_nonzero(edges))
         head = FrameHeader(width=w, height=h, bits=self.bits, min_code=self.quantizer.min_code, q=self.q,
                            n_edges=n_edges, temporal=use_t, four_passes=four, motion=bool(mot_bytes),
                            spacing_log2=self.spacing_log2)
@@ -475,8 +479,9 @@ class EdgeEncoder:
         stats = EncodeStats(header_bytes=bitstream.HEADER_SIZE, edge_bytes=len(edge_bytes),
                             regular_bytes=len(reg_bytes), value_bytes=len(val_bytes), motion_bytes=len(mot_bytes),
                             n_edges=n_edges, n_regular=reg_true.size, temporal=use_t, four_passes=four)
-        samples = _assemble(edges, signs, val_dec, reg_dec, self.rows, self.cols, self.bits,
-                            self.quantizer.min_code, self.q, mot_dec, mov_dec)
+        # the decoded values, read from the value workspace's padded image
+        samples = _assemble(edges, signs, self._values_workspace.V, reg_dec, self.rows, self.cols, self.bits,
+                            self.quantizer.min_code, self.q, mot_dec, mov_dec, values_pad=VALUES_PAD)
         return EncodedDepth(payload=payload, stats=stats, samples=samples)
 
 
@@ -507,7 +512,7 @@ class EdgeDecoder:
         edges, ok = decode_edge_image(sections["edges"], h, w, tctx, head.four_passes)
         if not ok:
             raise CodecError("edge codec: edge image stream is corrupt")
-        n = int(edges.sum())
+        n = int(np.count_nonzero(edges))
         if n != head.n_edges:
             raise CodecError(f"edge codec: edge image has {n} edges, header announces {head.n_edges}")
         shape = grid_shape(w, h, head.spacing_log2)
