@@ -172,33 +172,42 @@ def _select_kernel(c, sig, threshold, edges):
 
 
 @njit(cache=True, nogil=True)
-def _depth_edges_kernel(c, weight, threshold, sig, edges, signs, lap_rows):
+def _depth_edges_kernel(c, weight, threshold, sig, edges, signs, lap_rows, cand):
     """:func:`depth_edges` in one pass over the rows: a row's Laplacian and significance (the
     interior without border cases, so it vectorises), its selection, and the previous row's
-    signs, which the selection can no longer change (lap_rows (2, w): the last two rows' Laplacian)."""
-    c, sig, edges, signs, lap_rows = unmanaged(c), unmanaged(sig), unmanaged(edges), unmanaged(signs), \
-        unmanaged(lap_rows)
+    signs, which the selection can no longer change (lap_rows (2, w) int32: the last two rows'
+    Laplacian; cand (w,) uint8: scratch)."""
+    c, sig, edges, signs, lap_rows, cand = unmanaged(c), unmanaged(sig), unmanaged(edges), unmanaged(signs), \
+        unmanaged(lap_rows), unmanaged(cand)
     h, w = c.shape
     for y in range(h + 1):
         if y < h:
             r = y & 1
+            lap = lap_rows[r]
             if 0 < y < h - 1 and w > 2:
-                for x in (0, w - 1):
-                    lap_rows[r, x] = _laplacian_at(c, y, x)
+                lap[0] = _laplacian_at(c, y, 0)
+                lap[w - 1] = _laplacian_at(c, y, w - 1)
+                up, mid, down = c[y - 1], c[y], c[y + 1]
                 for x in range(1, w - 1):
-                    lap_rows[r, x] = (int(c[y - 1, x]) + int(c[y + 1, x]) + int(c[y, x - 1]) + int(c[y, x + 1])
-                                      - 4 * int(c[y, x]))
+                    lap[x] = up[x] + down[x] + mid[x - 1] + mid[x + 1] - 4 * mid[x]
             else:
                 for x in range(w):
-                    lap_rows[r, x] = _laplacian_at(c, y, x)
+                    lap[x] = _laplacian_at(c, y, x)
+            sig_row = sig[y]
             for x in range(w):
-                sig[y, x] = weight * np.float32(abs(lap_rows[r, x]))
+                sig_row[x] = weight * np.float32(abs(lap[x]))
+            # pixels where _select_at has something to do, flagged without branches (vectorises)
+            mid = c[y]
+            for x in range(w - 1):
+                cand[x] = (sig_row[x] > threshold) | ((mid[x] == 0) != (mid[x + 1] == 0))
+            cand[w - 1] = sig_row[w - 1] > threshold
+            if y + 1 < h:
+                down = c[y + 1]
+                for x in range(w):
+                    cand[x] |= (mid[x] == 0) != (down[x] == 0)
             for x in range(w):
-                s = sig[y, x]
-                zero = int(c[y, x]) == 0
-                if (s > threshold or (y + 1 < h and zero != (int(c[y + 1, x]) == 0))
-                        or (x + 1 < w and zero != (int(c[y, x + 1]) == 0))):
-                    _select_at(c, s, threshold, edges, y, x)
+                if cand[x]:
+                    _select_at(c, sig_row[x], threshold, edges, y, x)
         if y > 0:
             r = (y - 1) & 1
             for x in range(w):
@@ -218,7 +227,7 @@ def depth_edges(codes, threshold: float = DEFAULT_THRESHOLD,
     signs = np.empty((h, w), dtype=np.int8)
     sig = np.empty((h, w), dtype=np.float32)
     _depth_edges_kernel(c, np.float32(weight), np.float32(threshold), sig, edges, signs,
-                        np.empty((2, w), dtype=np.int64))
+                        np.empty((2, w), dtype=np.int32), np.empty(w, dtype=np.uint8))
     return edges, signs, sig
 
 
