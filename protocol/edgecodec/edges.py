@@ -177,15 +177,26 @@ def block_maps(img, tc, h, w, block_log2, occ, tmax):
     context tc in the block."""
     img, tc, tmax = unmanaged(img), unmanaged(tc), unmanaged(tmax)
     bh, bw = tmax.shape
+    # per block row: column-wise maximum / or over its rows (long loops that vectorise), then per block
+    col_t = np.empty(w, dtype=np.uint8)
+    col_e = np.empty(w, dtype=np.uint8)
     for by in range(bh):
+        col_t[:] = 0
+        col_e[:] = 0
+        for y in range(PAD + (by << block_log2), PAD + min((by + 1) << block_log2, h)):
+            t_row = tc[y, PAD:PAD + w]
+            for x in range(w):
+                col_t[x] = max(col_t[x], t_row[x])
+            if occ is not None:
+                e_row = img[y, PAD:PAD + w]
+                for x in range(w):
+                    col_e[x] |= e_row[x]
         for bx in range(bw):
             t = 0
             e = 0
-            for y in range(PAD + (by << block_log2), PAD + min((by + 1) << block_log2, h)):
-                for x in range(PAD + (bx << block_log2), PAD + min((bx + 1) << block_log2, w)):
-                    t = max(t, int(tc[y, x]))
-                    if occ is not None:
-                        e |= int(img[y, x])
+            for x in range(bx << block_log2, min((bx + 1) << block_log2, w)):
+                t = max(t, col_t[x])
+                e |= col_e[x]
             tmax[by, bx] = t
             if occ is not None:
                 occ[by, bx] = 1 if e else 0
