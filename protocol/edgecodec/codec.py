@@ -40,7 +40,7 @@ from .arith import unmanaged
 from .quantize import code_of, quantize_codes
 from .regular import decode_regular, encode_regular, nearest_index, sample_positions
 from .values import PAD as VALUES_PAD
-from .values import ValueWorkspace, decode_values, encode_values, temporal_values
+from .values import ValueWorkspace, decode_values, encode_values
 
 #: Default significance threshold in code units: above the Laplacian of a quantized plane (|L| <= 3).
 DEFAULT_THRESHOLD = 3.5
@@ -501,6 +501,7 @@ class EdgeDecoder:
         _check_size(width, height)
         self.width, self.height, self.bits = int(width), int(height), int(bits)
         self.quantizer = _check_quantizer(quantizer, bits)
+        self._values_workspace = ValueWorkspace(self.height, self.width)
 
     def decode(self, payload, warped_prev_edges=None, warped_prev_values=None) -> DecodedSamples:
         """payload -> :class:`DecodedSamples`. Raises :class:`CodecError` when it does not decode."""
@@ -515,7 +516,7 @@ class EdgeDecoder:
         if head.temporal and warped_prev_edges is None:
             raise CodecError("edge codec: payload was coded against the previous frame, which the decoder lacks")
         tctx = temporal_context(warped_prev_edges, h, w) if head.temporal else None
-        tvals = temporal_values(warped_prev_values if head.temporal else None, h, w)
+        tvals = self._values_workspace.temporal_values(warped_prev_values if head.temporal else None)
         max_code = (1 << head.bits) - 1
 
         edges, ok = decode_edge_image(sections["edges"], h, w, tctx, head.four_passes)
@@ -530,7 +531,8 @@ class EdgeDecoder:
             raise CodecError("edge codec: regular sample stream is corrupt")
         rows, cols = sample_positions(w, h, head.spacing_log2)
         values, signs, ok = decode_values(sections["values"], edges, regular, nearest_index(rows, h),
-                                          nearest_index(cols, w), head.q, max_code, tvals)
+                                          nearest_index(cols, w), head.q, max_code, tvals,
+                                          workspace=self._values_workspace)
         if not ok:
             raise CodecError("edge codec: edge value stream is corrupt")
         motion = moving = None

@@ -249,12 +249,14 @@ def _code_values(decode, data, buf, E, xs, starts, codes, signs, TV, RG, ri, ci,
 
 @njit(cache=True, nogil=True)
 def _unpad_decoded(V, S, codes, signs):
-    """Padded decoder outputs -> codes (h, w) and signs (h, w): +1 / -1 for sign codes 2 / 1, else 0."""
+    """Padded decoder outputs -> codes (h, w), 0 where S marks no sample (V may hold a
+    workspace's stale values there), and signs (h, w): +1 / -1 for sign codes 2 / 1, else 0."""
+    V, S, codes, signs = unmanaged(V), unmanaged(S), unmanaged(codes), unmanaged(signs)
     h, w = codes.shape
     for y in range(h):
         for x in range(w):
-            codes[y, x] = V[PAD + y, PAD + x]
             s = S[PAD + y, PAD + x]
+            codes[y, x] = V[PAD + y, PAD + x] if s != 0 else 0
             signs[y, x] = 1 if s == 2 else (-1 if s == 1 else 0)
 
 
@@ -397,19 +399,28 @@ def encode_values(edges, codes, signs, regular, nearest_rows, nearest_cols, q: i
 
 
 def decode_values(data, edges, regular, nearest_rows, nearest_cols, q: int, max_code: int,
-                  tvalues=None) -> tuple[np.ndarray, np.ndarray, bool]:
-    """-> (codes (h, w) int32, signs (h, w) int8 in {-1, 0, +1}, stream decoded cleanly)."""
+                  tvalues=None, workspace: ValueWorkspace | None = None) -> tuple[np.ndarray, np.ndarray, bool]:
+    """-> (codes (h, w) int32, 0 but at decoded edges, signs (h, w) int8 in {-1, 0, +1}, stream
+    decoded cleanly). workspace : a :class:`ValueWorkspace` of this size to work in (the decoder keeps one)."""
     h, w = edges.shape
-    ws = ValueWorkspace(h, w)
+    if workspace is None:
+        ws = ValueWorkspace(h, w)
+    elif workspace.shape != (h, w):
+        raise ValueError(f"workspace is for {workspace.shape}, edges are {(h, w)}")
+    else:
+        ws = workspace
     _fill_edge_image(np.ascontiguousarray(edges, dtype=bool), ws.E, ws.xs, ws.starts)
     if tvalues is None:
         tvalues = temporal_values(None, h, w)
     arr = as_data(data)
-    V, S = ws.V, ws.S
-    _, ds = _code_values(True, arr, _NO_BUF, ws.E, ws.xs, ws.starts, _NO_CODES, _NO_SIGNS, tvalues,
-                         np.ascontiguousarray(regular, dtype=np.int32), nearest_rows, nearest_cols, h, w, q, max_code,
-                         new_model(N_CONTEXTS), RATE_SHIFT, V, S, ws.A)
     codes = np.empty((h, w), dtype=np.int32)
     signs = np.empty((h, w), dtype=np.int8)
-    _unpad_decoded(V, S, codes, signs)
+    try:
+        _, ds = _code_values(True, arr, _NO_BUF, ws.E, ws.xs, ws.starts, _NO_CODES, _NO_SIGNS, tvalues,
+                             np.ascontiguousarray(regular, dtype=np.int32), nearest_rows, nearest_cols, h, w, q,
+                             max_code, new_model(N_CONTEXTS), RATE_SHIFT, ws.V, ws.S, ws.A)
+        _unpad_decoded(ws.V, ws.S, codes, signs)
+    finally:
+        if workspace is not None:
+            _clear_samples(ws.xs, ws.starts, ws.S, ws.A)
     return codes, signs, decoder_ok(ds, arr)

@@ -739,3 +739,31 @@ def test_block_maps_match_their_numpy_definition(shape):
             block = (slice(pad + 8 * by, pad + min(8 * by + 8, h)), slice(pad + 8 * bx, pad + min(8 * bx + 8, w)))
             assert occ[by, bx] == int(img[block].any())
             assert tmax[by, bx] == tmax_only[by, bx] == tc[block].max()
+
+
+def test_decoder_value_workspace_reused_across_frames_gives_fresh_results():
+    """The decoder's value workspace kept from frame to frame (also across a corrupt payload):
+    the same codes and signs as a fresh decode, 0 away from the edges."""
+    from pibr.protocol.edgecodec.values import ValueWorkspace, decode_values, encode_values
+
+    h, w = 40, 56
+    rows, cols = sample_positions(w, h, 3)
+    nr, nc = nearest_index(rows, h), nearest_index(cols, w)
+    ws = ValueWorkspace(h, w)
+    rng = np.random.default_rng(8)
+    for frame in range(5):
+        edges = rng.random((h, w)) < (0.05 if frame % 2 else 0.4)
+        codes = piecewise_planar_codes(h, w) + 7 * frame
+        signs = np.where(rng.random((h, w)) < 0.5, 1, -1)
+        regular = codes[np.ix_(rows, cols)]
+        data, _ = encode_values(edges, codes, signs, regular, nr, nc, 1, 4095)
+        if frame == 2:
+            data = data[: len(data) // 2]  # corrupt: decoding stops early
+        fresh = decode_values(data, edges, regular, nr, nc, 1, 4095)
+        got = decode_values(data, edges, regular, nr, nc, 1, 4095, workspace=ws)
+        assert got[2] == fresh[2] == (frame != 2)
+        np.testing.assert_array_equal(got[0], fresh[0])
+        np.testing.assert_array_equal(got[1], fresh[1])
+        assert not got[0][~edges].any() and not ws.S.any() and not ws.A.any()
+        if frame != 2:
+            np.testing.assert_array_equal(got[0][edges], codes[edges])
