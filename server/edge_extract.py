@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from pibr.protocol.depth import DepthQuantizer
-from pibr.protocol.edgecodec.codec import DEFAULT_THRESHOLD, laplacian, select_edges
+from pibr.protocol.edgecodec.codec import DEFAULT_THRESHOLD, depth_edges, laplacian, select_edges
 from pibr.protocol.edgecodec.motion import quantize_motion
 from pibr.protocol.edgecodec.quantize import quantize_codes
 
@@ -110,6 +110,9 @@ def extract_edge_samples(distance, quantizer: DepthQuantizer, threshold: float =
     Pass the result's ``edges``, ``signs`` and ``codes`` to ``EdgeEncoder.encode(..., edges=, signs=, codes=)``.
     """
     codes = quantize_codes(distance, quantizer)
+    if motion is None and colour is None:  # depth alone: one compiled pass, same result
+        edges, signs, sig = depth_edges(codes, threshold, depth_weight)
+        return EdgeSamples(edges=edges, signs=signs, significance=sig, codes=codes, threshold=float(threshold))
     importance = None if colour is None else perceptual_importance(colour, codes.shape)
     sig, lap = significance(codes, motion, depth_weight, motion_weight, motion_scale, importance)
     edges, signs = select_edges(codes, threshold, sig, lap)

@@ -36,9 +36,11 @@ from . import bitstream
 from .bitstream import FrameHeader, grid_shape
 from .edges import decode_edge_image, encode_edge_image, temporal_context
 from .motion import decode_motion, encode_motion
+from .arith import unmanaged
 from .quantize import code_of, quantize_codes
 from .regular import decode_regular, encode_regular, nearest_index, sample_positions
-from .values import decode_values, encode_values, temporal_values
+from .values import PAD as VALUES_PAD
+from .values import ValueWorkspace, decode_values, encode_values
 
 #: Default significance threshold in code units: above the Laplacian of a quantized plane (|L| <= 3).
 DEFAULT_THRESHOLD = 3.5
@@ -83,19 +85,27 @@ def _beyond(c0, c1, c2, linear_ok):
     return c0
 
 
+@njit(cache=True, nogil=True, inline='always')
+def _laplacian_at(c, y, x):
+    """:func:`laplacian` of codes c (h, w) at pixel (y, x) (pass c through ``unmanaged``)."""
+    h, w = c.shape
+    v = int(c[y, x])
+    up = int(c[y - 1, x]) if y > 0 else _beyond(v, int(c[min(1, h - 1), x]), int(c[min(2, h - 1), x]), h >= 3)
+    down = int(c[y + 1, x]) if y + 1 < h else \
+        _beyond(v, int(c[max(h - 2, 0), x]), int(c[max(h - 3, 0), x]), h >= 3)
+    left = int(c[y, x - 1]) if x > 0 else _beyond(v, int(c[y, min(1, w - 1)]), int(c[y, min(2, w - 1)]), w >= 3)
+    right = int(c[y, x + 1]) if x + 1 < w else \
+        _beyond(v, int(c[y, max(w - 2, 0)]), int(c[y, max(w - 3, 0)]), w >= 3)
+    return up + down + left + right - 4 * v
+
+
 @njit(cache=True, nogil=True)
 def _laplacian_kernel(c, out):
+    c, out = unmanaged(c), unmanaged(out)
     h, w = c.shape
     for y in range(h):
         for x in range(w):
-            v = int(c[y, x])
-            up = int(c[y - 1, x]) if y > 0 else _beyond(v, int(c[min(1, h - 1), x]), int(c[min(2, h - 1), x]), h >= 3)
-            down = int(c[y + 1, x]) if y + 1 < h else \
-                _beyond(v, int(c[max(h - 2, 0), x]), int(c[max(h - 3, 0), x]), h >= 3)
-            left = int(c[y, x - 1]) if x > 0 else _beyond(v, int(c[y, min(1, w - 1)]), int(c[y, min(2, w - 1)]), w >= 3)
-            right = int(c[y, x + 1]) if x + 1 < w else \
-                _beyond(v, int(c[y, max(w - 2, 0)]), int(c[y, max(w - 3, 0)]), w >= 3)
-            out[y, x] = up + down + left + right - 4 * v
+            out[y, x] = _laplacian_at(c, y, x)
 
 
 def laplacian(codes) -> np.ndarray:
@@ -122,33 +132,103 @@ def _signs_kernel(edges, lap, signs):
             signs[y, x] = 0 if not edges[y, x] else (1 if lap[y, x] > 0 else -1)
 
 
+@njit(cache=True, nogil=True, inline='always')
+def _select_at(c, significance, threshold, edges, y, x):
+    """The edge selection of :func:`select_edges` at pixel (y, x) of codes c (h, w), whose
+    significance is ``significance``: sets edges (h, w) there and at neighbours (pass the
+    arrays through ``unmanaged``)."""
+    h, w = c.shape
+    v = int(c[y, x])
+    if significance > threshold:
+        edges[y, x] = True
+        # the neighbour across the largest jump (first of up, down, left, right on ties)
+        best, by, bx = -1, 0, 0
+        if y > 0 and abs(v - int(c[y - 1, x])) > best:
+            best, by, bx = abs(v - int(c[y - 1, x])), y - 1, x
+        if y + 1 < h and abs(v - int(c[y + 1, x])) > best:
+            best, by, bx = abs(v - int(c[y + 1, x])), y + 1, x
+        if x > 0 and abs(v - int(c[y, x - 1])) > best:
+            best, by, bx = abs(v - int(c[y, x - 1])), y, x - 1
+        if x + 1 < w and abs(v - int(c[y, x + 1])) > best:
+            best, by, bx = abs(v - int(c[y, x + 1])), y, x + 1
+        if best > threshold:
+            edges[by, bx] = True
+    # both pixels of every sky / surface boundary
+    if y + 1 < h and (v == 0) != (int(c[y + 1, x]) == 0):
+        edges[y, x] = True
+        edges[y + 1, x] = True
+    if x + 1 < w and (v == 0) != (int(c[y, x + 1]) == 0):
+        edges[y, x] = True
+        edges[y, x + 1] = True
+
+
 @njit(cache=True, nogil=True)
 def _select_kernel(c, sig, threshold, edges):
+    c, sig, edges = unmanaged(c), unmanaged(sig), unmanaged(edges)
     h, w = c.shape
     for y in range(h):
         for x in range(w):
-            v = int(c[y, x])
-            if sig[y, x] > threshold:
-                edges[y, x] = True
-                # the neighbour across the largest jump (first of up, down, left, right on ties)
-                best, by, bx = -1, 0, 0
-                if y > 0 and abs(v - int(c[y - 1, x])) > best:
-                    best, by, bx = abs(v - int(c[y - 1, x])), y - 1, x
-                if y + 1 < h and abs(v - int(c[y + 1, x])) > best:
-                    best, by, bx = abs(v - int(c[y + 1, x])), y + 1, x
-                if x > 0 and abs(v - int(c[y, x - 1])) > best:
-                    best, by, bx = abs(v - int(c[y, x - 1])), y, x - 1
-                if x + 1 < w and abs(v - int(c[y, x + 1])) > best:
-                    best, by, bx = abs(v - int(c[y, x + 1])), y, x + 1
-                if best > threshold:
-                    edges[by, bx] = True
-            # both pixels of every sky / surface boundary
-            if y + 1 < h and (v == 0) != (int(c[y + 1, x]) == 0):
-                edges[y, x] = True
-                edges[y + 1, x] = True
-            if x + 1 < w and (v == 0) != (int(c[y, x + 1]) == 0):
-                edges[y, x] = True
-                edges[y, x + 1] = True
+            _select_at(c, sig[y, x], threshold, edges, y, x)
+
+
+@njit(cache=True, nogil=True)
+def _depth_edges_kernel(c, weight, threshold, sig, edges, signs, lap_rows, cand):
+    """:func:`depth_edges` in one pass over the rows: a row's Laplacian and significance (the
+    interior without border cases, so it vectorises), its selection, and the previous row's
+    signs, which the selection can no longer change (lap_rows (2, w) int32: the last two rows'
+    Laplacian; cand (w,) uint8: scratch)."""
+    c, sig, edges, signs, lap_rows, cand = unmanaged(c), unmanaged(sig), unmanaged(edges), unmanaged(signs), \
+        unmanaged(lap_rows), unmanaged(cand)
+    h, w = c.shape
+    for y in range(h + 1):
+        if y < h:
+            r = y & 1
+            lap = lap_rows[r]
+            if 0 < y < h - 1 and w > 2:
+                lap[0] = _laplacian_at(c, y, 0)
+                lap[w - 1] = _laplacian_at(c, y, w - 1)
+                up, mid, down = c[y - 1], c[y], c[y + 1]
+                for x in range(1, w - 1):
+                    lap[x] = up[x] + down[x] + mid[x - 1] + mid[x + 1] - 4 * mid[x]
+            else:
+                for x in range(w):
+                    lap[x] = _laplacian_at(c, y, x)
+            sig_row = sig[y]
+            for x in range(w):
+                sig_row[x] = weight * np.float32(abs(lap[x]))
+            # pixels where _select_at has something to do, flagged without branches (vectorises)
+            mid = c[y]
+            for x in range(w - 1):
+                cand[x] = (sig_row[x] > threshold) | ((mid[x] == 0) != (mid[x + 1] == 0))
+            cand[w - 1] = sig_row[w - 1] > threshold
+            if y + 1 < h:
+                down = c[y + 1]
+                for x in range(w):
+                    cand[x] |= (mid[x] == 0) != (down[x] == 0)
+            for x in range(w):
+                if cand[x]:
+                    _select_at(c, sig_row[x], threshold, edges, y, x)
+        if y > 0:
+            r = (y - 1) & 1
+            for x in range(w):
+                signs[y - 1, x] = 0 if not edges[y - 1, x] else (1 if lap_rows[r, x] > 0 else -1)
+
+
+def depth_edges(codes, threshold: float = DEFAULT_THRESHOLD,
+                weight: float = 1.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(edges (h, w) bool, signs (h, w) int8, significance (h, w) float32) of codes (h, w) whose
+    significance is ``weight * |laplacian(codes)|`` (float32, as numpy computes it): the same
+    as :func:`select_edges` of that significance, in one compiled pass without temporaries."""
+    c = np.ascontiguousarray(codes, dtype=np.int32)
+    if c.ndim != 2:
+        raise ValueError(f"codes must have shape (h, w), got {c.shape}")
+    h, w = c.shape
+    edges = np.zeros((h, w), dtype=bool)
+    signs = np.empty((h, w), dtype=np.int8)
+    sig = np.empty((h, w), dtype=np.float32)
+    _depth_edges_kernel(c, np.float32(weight), np.float32(threshold), sig, edges, signs,
+                        np.empty((2, w), dtype=np.int32), np.empty(w, dtype=np.uint8))
+    return edges, signs, sig
 
 
 def select_edges(codes, threshold: float = DEFAULT_THRESHOLD, significance=None,
@@ -279,12 +359,12 @@ def _check_size(width, height):
 
 
 @njit(cache=True, nogil=True)
-def _assemble_kernel(edges, values, regular, rows, cols, codes, valid):
+def _assemble_kernel(edges, values, off, regular, rows, cols, codes, valid):
     h, w = edges.shape
     for y in range(h):
         for x in range(w):
             if edges[y, x]:
-                codes[y, x] = values[y, x]
+                codes[y, x] = values[off + y, off + x]
                 valid[y, x] = True
     for i in range(len(rows)):
         for j in range(len(cols)):
@@ -294,12 +374,16 @@ def _assemble_kernel(edges, values, regular, rows, cols, codes, valid):
                 codes[y, x] = regular[i, j]
 
 
-def _assemble(edges, signs, values, regular, rows, cols, bits, min_code, q, motion=None, moving=None):
+def _assemble(edges, signs, values, regular, rows, cols, bits, min_code, q, motion=None, moving=None,
+              values_pad: int = 0):
+    """The DecodedSamples of decoded parts; values (h + 2 pad, w + 2 pad): the edges' values
+    with a border of ``values_pad`` (the value coder's padded image, read without a copy)."""
     h, w = edges.shape
     codes = np.zeros((h, w), dtype=np.uint16)
     valid = np.zeros((h, w), dtype=bool)
     edges = np.ascontiguousarray(edges, dtype=bool)
-    _assemble_kernel(edges, np.ascontiguousarray(values), np.ascontiguousarray(regular), rows, cols, codes, valid)
+    _assemble_kernel(edges, np.ascontiguousarray(values), values_pad, np.ascontiguousarray(regular), rows, cols,
+                     codes, valid)
     return DecodedSamples(edges=edges, signs=signs, codes=codes, valid=valid, regular=regular.astype(np.uint16),
                           regular_rows=rows, regular_cols=cols, bits=bits, min_code=min_code, q=q,
                           motion=motion, moving=moving)
@@ -333,6 +417,7 @@ class EdgeEncoder:
         self.rows, self.cols = sample_positions(self.width, self.height, spacing_log2)
         self.nearest_rows = nearest_index(self.rows, self.height)
         self.nearest_cols = nearest_index(self.cols, self.width)
+        self._values_workspace = ValueWorkspace(self.height, self.width)
 
     def codes(self, distance) -> np.ndarray:
         """distance (h, w) -> codes (h, w) int32 of this encoder's quantizer."""
@@ -378,13 +463,13 @@ class EdgeEncoder:
         use_t = self.temporal and warped_prev_edges is not None
         four = self.passes == 4
         tctx = temporal_context(warped_prev_edges, h, w) if use_t else None
-        tvals = temporal_values(warped_prev_values if use_t else None, h, w)
+        tvals = self._values_workspace.temporal_values(warped_prev_values if use_t else None)
 
         edge_bytes = encode_edge_image(edges, tctx, four)
         reg_true = codes[np.ix_(self.rows, self.cols)]
         reg_bytes, reg_dec = encode_regular(reg_true, self.q, self.max_code)
-        val_bytes, val_dec = encode_values(edges, codes, signs, reg_dec, self.nearest_rows, self.nearest_cols,
-                                           self.q, self.max_code, tvals)
+        val_bytes, _ = encode_values(edges, codes, signs, reg_dec, self.nearest_rows, self.nearest_cols,
+                                           self.q, self.max_code, tvals, workspace=self._values_workspace)
         mot_bytes, mot_dec, mov_dec = b"", None, None
         if motion is not None:
             motion = np.asarray(motion, dtype=np.float64)
@@ -395,7 +480,7 @@ class EdgeEncoder:
             mot_bytes, mot_dec, mov_dec = encode_motion(motion, mov, self.motion_scale, self.motion_block_log2)
             if not mot_bytes:
                 mot_dec = mov_dec = None
-        n_edges = int(edges.sum())
+        n_edges = int(np.count_nonzero(edges))
         head = FrameHeader(width=w, height=h, bits=self.bits, min_code=self.quantizer.min_code, q=self.q,
                            n_edges=n_edges, temporal=use_t, four_passes=four, motion=bool(mot_bytes),
                            spacing_log2=self.spacing_log2)
@@ -403,8 +488,9 @@ class EdgeEncoder:
         stats = EncodeStats(header_bytes=bitstream.HEADER_SIZE, edge_bytes=len(edge_bytes),
                             regular_bytes=len(reg_bytes), value_bytes=len(val_bytes), motion_bytes=len(mot_bytes),
                             n_edges=n_edges, n_regular=reg_true.size, temporal=use_t, four_passes=four)
-        samples = _assemble(edges, signs, val_dec, reg_dec, self.rows, self.cols, self.bits,
-                            self.quantizer.min_code, self.q, mot_dec, mov_dec)
+        # the decoded values, read from the value workspace's padded image
+        samples = _assemble(edges, signs, self._values_workspace.V, reg_dec, self.rows, self.cols, self.bits,
+                            self.quantizer.min_code, self.q, mot_dec, mov_dec, values_pad=VALUES_PAD)
         return EncodedDepth(payload=payload, stats=stats, samples=samples)
 
 
@@ -415,6 +501,7 @@ class EdgeDecoder:
         _check_size(width, height)
         self.width, self.height, self.bits = int(width), int(height), int(bits)
         self.quantizer = _check_quantizer(quantizer, bits)
+        self._values_workspace = ValueWorkspace(self.height, self.width)
 
     def decode(self, payload, warped_prev_edges=None, warped_prev_values=None) -> DecodedSamples:
         """payload -> :class:`DecodedSamples`. Raises :class:`CodecError` when it does not decode."""
@@ -429,13 +516,13 @@ class EdgeDecoder:
         if head.temporal and warped_prev_edges is None:
             raise CodecError("edge codec: payload was coded against the previous frame, which the decoder lacks")
         tctx = temporal_context(warped_prev_edges, h, w) if head.temporal else None
-        tvals = temporal_values(warped_prev_values if head.temporal else None, h, w)
+        tvals = self._values_workspace.temporal_values(warped_prev_values if head.temporal else None)
         max_code = (1 << head.bits) - 1
 
         edges, ok = decode_edge_image(sections["edges"], h, w, tctx, head.four_passes)
         if not ok:
             raise CodecError("edge codec: edge image stream is corrupt")
-        n = int(edges.sum())
+        n = int(np.count_nonzero(edges))
         if n != head.n_edges:
             raise CodecError(f"edge codec: edge image has {n} edges, header announces {head.n_edges}")
         shape = grid_shape(w, h, head.spacing_log2)
@@ -444,7 +531,8 @@ class EdgeDecoder:
             raise CodecError("edge codec: regular sample stream is corrupt")
         rows, cols = sample_positions(w, h, head.spacing_log2)
         values, signs, ok = decode_values(sections["values"], edges, regular, nearest_index(rows, h),
-                                          nearest_index(cols, w), head.q, max_code, tvals)
+                                          nearest_index(cols, w), head.q, max_code, tvals,
+                                          workspace=self._values_workspace)
         if not ok:
             raise CodecError("edge codec: edge value stream is corrupt")
         motion = moving = None
@@ -464,7 +552,7 @@ def _rotate(m, x, y, z):
             m[2, 0] * x + m[2, 1] * y + m[2, 2] * z)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")  # no division-by-zero checks: every divisor is > 0
 def _warp_kernel(edges, codes, rp, t, rc, near, far, min_code, max_code, eps, values):
     """:func:`warp_samples_numpy` per sample, operation for operation (so bit-identical): unproject
     (INVERSE), dequantize (DEQUANTIZE), move, project (FORWARD), quantize (QUANTIZE), splat max."""

@@ -44,7 +44,7 @@ import numpy as np
 from numba import njit
 
 from .arith import (RATE_SHIFT, as_data, dec_raw, dec_start, decoder_ok, enc_finish, enc_raw, enc_start,
-                    encoder_bytes, model_p1, model_update, new_model)
+                    encoder_bytes, model_p1, model_update, new_model, unmanaged)
 
 #: Padding around the working image so neighbour reads need no bounds checks.
 PAD = 4
@@ -66,6 +66,18 @@ BLOCK_LOG2 = 3
 PASS_PHASES = ((0, 0), (1, 1), (1, 0), (0, 1))
 
 
+@njit(cache=True, nogil=True)
+def _temporal_context_kernel(p, out):
+    """p (h + 2, w + 2) uint8: the warped edges with a border of zeros."""
+    p, out = unmanaged(p), unmanaged(out)
+    h, w = p.shape[0] - 2, p.shape[1] - 2
+    for y in range(h):
+        for x in range(w):
+            around = (p[y, x] | p[y, x + 1] | p[y, x + 2] | p[y + 1, x] | p[y + 1, x + 2] | p[y + 2, x]
+                      | p[y + 2, x + 1] | p[y + 2, x + 2])
+            out[PAD + y, PAD + x] = 2 * p[y + 1, x + 1] + around
+
+
 def temporal_context(prev_edges, height: int, width: int) -> np.ndarray:
     """Padded (h + 4, w + 4) uint8 in 0..3: 2 * warped edge at the pixel + any warped edge among its 8 neighbours.
 
@@ -77,54 +89,69 @@ def temporal_context(prev_edges, height: int, width: int) -> np.ndarray:
     e = np.asarray(prev_edges, dtype=bool)
     if e.shape != (height, width):
         raise ValueError(f"warped previous edges must have shape ({height}, {width}), got {e.shape}")
-    p = np.zeros((height + 2, width + 2), dtype=bool)
+    p = np.zeros((height + 2, width + 2), dtype=np.uint8)
     p[1:-1, 1:-1] = e
-    around = np.zeros((height, width), dtype=bool)
-    for dy in (0, 1, 2):
-        for dx in (0, 1, 2):
-            if dy != 1 or dx != 1:
-                around |= p[dy:dy + height, dx:dx + width]
-    out[PAD:-PAD, PAD:-PAD] = 2 * e.astype(np.uint8) + around.astype(np.uint8)
+    _temporal_context_kernel(p, out)
     return out
 
 
 @njit(cache=True, nogil=True)
-def _ctx_pass(img, tc, phase, y, x, big):
-    """Context of padded pixel (y, x) in pass ``phase`` (0..3 = A..D) of the four-pass order.
+def _ctx_a(img, tc, y, x, big):
+    c = (int(img[y, x - 2]) | (int(img[y, x - 4]) << 1) | (int(img[y - 2, x - 2]) << 2)
+         | (int(img[y - 2, x]) << 3) | (int(img[y - 2, x + 2]) << 4) | (int(img[y - 4, x]) << 5))
+    if big:
+        c |= ((int(img[y - 2, x - 4]) << 6) | (int(img[y - 2, x + 4]) << 7) | (int(img[y - 4, x - 2]) << 8)
+              | (int(img[y - 4, x + 2]) << 9))
+        return _OFF_A + (c << 2) + int(tc[y, x])
+    return _SMALL_A + (c << 2) + int(tc[y, x])
 
-    ``big``: the larger templates (intra frames); else the smaller ones (with a temporal
-    context, which carries most of the information and learns faster in fewer contexts).
-    """
-    t = int(tc[y, x])
-    if phase == 0:
-        c = (int(img[y, x - 2]) | (int(img[y, x - 4]) << 1) | (int(img[y - 2, x - 2]) << 2)
-             | (int(img[y - 2, x]) << 3) | (int(img[y - 2, x + 2]) << 4) | (int(img[y - 4, x]) << 5))
-        if big:
-            c |= ((int(img[y - 2, x - 4]) << 6) | (int(img[y - 2, x + 4]) << 7) | (int(img[y - 4, x - 2]) << 8)
-                  | (int(img[y - 4, x + 2]) << 9))
-            return _OFF_A + (c << 2) + t
-        return _SMALL_A + (c << 2) + t
-    if phase == 1:
-        c = (int(img[y - 1, x - 1]) | (int(img[y - 1, x + 1]) << 1) | (int(img[y + 1, x - 1]) << 2)
-             | (int(img[y + 1, x + 1]) << 3) | (int(img[y, x - 2]) << 4) | (int(img[y - 2, x]) << 5))
-        if big:
-            c |= (int(img[y - 2, x - 2]) << 6) | (int(img[y - 2, x + 2]) << 7)
-            return _OFF_B + (c << 2) + t
-        return _SMALL_B + (c << 2) + t
-    if phase == 2:
-        c = (int(img[y - 1, x]) | (int(img[y + 1, x]) << 1) | (int(img[y, x - 1]) << 2)
-             | (int(img[y, x + 1]) << 3) | (int(img[y, x - 2]) << 4) | (int(img[y - 2, x]) << 5))
-        if big:
-            c |= (int(img[y + 1, x - 2]) << 6) | (int(img[y + 1, x + 2]) << 7)
-            return _OFF_C + (c << 2) + t
-        return _SMALL_C + (c << 2) + t
+
+@njit(cache=True, nogil=True)
+def _ctx_b(img, tc, y, x, big):
+    c = (int(img[y - 1, x - 1]) | (int(img[y - 1, x + 1]) << 1) | (int(img[y + 1, x - 1]) << 2)
+         | (int(img[y + 1, x + 1]) << 3) | (int(img[y, x - 2]) << 4) | (int(img[y - 2, x]) << 5))
+    if big:
+        c |= (int(img[y - 2, x - 2]) << 6) | (int(img[y - 2, x + 2]) << 7)
+        return _OFF_B + (c << 2) + int(tc[y, x])
+    return _SMALL_B + (c << 2) + int(tc[y, x])
+
+
+@njit(cache=True, nogil=True)
+def _ctx_c(img, tc, y, x, big):
+    c = (int(img[y - 1, x]) | (int(img[y + 1, x]) << 1) | (int(img[y, x - 1]) << 2)
+         | (int(img[y, x + 1]) << 3) | (int(img[y, x - 2]) << 4) | (int(img[y - 2, x]) << 5))
+    if big:
+        c |= (int(img[y + 1, x - 2]) << 6) | (int(img[y + 1, x + 2]) << 7)
+        return _OFF_C + (c << 2) + int(tc[y, x])
+    return _SMALL_C + (c << 2) + int(tc[y, x])
+
+
+@njit(cache=True, nogil=True)
+def _ctx_d(img, tc, y, x, big):
     c = (int(img[y - 1, x - 1]) | (int(img[y - 1, x]) << 1) | (int(img[y - 1, x + 1]) << 2)
          | (int(img[y, x - 1]) << 3) | (int(img[y, x + 1]) << 4) | (int(img[y + 1, x - 1]) << 5)
          | (int(img[y + 1, x]) << 6) | (int(img[y + 1, x + 1]) << 7))
     if big:
         c |= (int(img[y, x - 2]) << 8) | (int(img[y - 2, x]) << 9)
-        return _OFF_D + (c << 2) + t
-    return _SMALL_D + (c << 2) + t
+        return _OFF_D + (c << 2) + int(tc[y, x])
+    return _SMALL_D + (c << 2) + int(tc[y, x])
+
+
+@njit(cache=True, nogil=True)
+def _ctx_pass(img, tc, phase, y, x, big):
+    """Context of padded pixel (y, x) in pass ``phase`` (0..3 = A..D) of the four-pass order
+    (one small function per pass, so the compiler inlines them into the coders' loops).
+
+    ``big``: the larger templates (intra frames); else the smaller ones (with a temporal
+    context, which carries most of the information and learns faster in fewer contexts).
+    """
+    if phase == 0:
+        return _ctx_a(img, tc, y, x, big)
+    if phase == 1:
+        return _ctx_b(img, tc, y, x, big)
+    if phase == 2:
+        return _ctx_c(img, tc, y, x, big)
+    return _ctx_d(img, tc, y, x, big)
 
 
 @njit(cache=True, nogil=True)
@@ -136,23 +163,50 @@ def _ctx_raster(img, tc, y, x):
     return (c << 2) + int(tc[y, x])
 
 
-@njit(cache=True, nogil=True)
-def block_occupancy(img, h, w, block_log2):
-    """(ceil(h / B), ceil(w / B)) uint8: 1 where a B x B block (B = 2^block_log2) of the padded image holds an edge."""
+def occupancy_shape(h: int, w: int, block_log2: int) -> tuple[int, int]:
+    """(ceil(h / B), ceil(w / B)), B = 2^block_log2: the shape of the block occupancy map."""
     bs = 1 << block_log2
-    occ = np.zeros(((h + bs - 1) >> block_log2, (w + bs - 1) >> block_log2), dtype=np.uint8)
-    for y in range(h):
-        for x in range(w):
-            if img[PAD + y, PAD + x]:
-                occ[y >> block_log2, x >> block_log2] = 1
-    return occ
+    return (h + bs - 1) >> block_log2, (w + bs - 1) >> block_log2
 
 
 @njit(cache=True, nogil=True)
-def _block_ctx(occ, tc, by, bx, h, w, block_log2, occ_off):
+def block_maps(img, tc, h, w, block_log2, occ, tmax):
+    """Per B x B block (B = 2^block_log2) of the padded images, in one pass: occ
+    (:func:`occupancy_shape`) uint8, set to 1 where the block of img holds an edge, else 0
+    (None: not wanted, as in the decoder), and tmax (same shape) uint8, the largest temporal
+    context tc in the block."""
+    img, tc, tmax = unmanaged(img), unmanaged(tc), unmanaged(tmax)
+    bh, bw = tmax.shape
+    # per block row: column-wise maximum / or over its rows (long loops that vectorise), then per block
+    col_t = np.empty(w, dtype=np.uint8)
+    col_e = np.empty(w, dtype=np.uint8)
+    for by in range(bh):
+        col_t[:] = 0
+        col_e[:] = 0
+        for y in range(PAD + (by << block_log2), PAD + min((by + 1) << block_log2, h)):
+            t_row = tc[y, PAD:PAD + w]
+            for x in range(w):
+                col_t[x] = max(col_t[x], t_row[x])
+            if occ is not None:
+                e_row = img[y, PAD:PAD + w]
+                for x in range(w):
+                    col_e[x] |= e_row[x]
+        for bx in range(bw):
+            t = 0
+            e = 0
+            for x in range(bx << block_log2, min((bx + 1) << block_log2, w)):
+                t = max(t, col_t[x])
+                e |= col_e[x]
+            tmax[by, bx] = t
+            if occ is not None:
+                occ[by, bx] = 1 if e else 0
+
+
+@njit(cache=True, nogil=True)
+def _block_ctx(occ, tmax, by, bx, occ_off):
     """Context of block (by, bx) of the occupancy map: its causal neighbours' occupancy
-    (W, N, NW, NE) and the largest temporal context inside the block."""
-    bh, bw = occ.shape
+    (W, N, NW, NE) and the largest temporal context inside the block (tmax, :func:`block_maps`)."""
+    bw = occ.shape[1]
     c = 0
     if bx > 0:
         c |= int(occ[by, bx - 1])
@@ -162,23 +216,21 @@ def _block_ctx(occ, tc, by, bx, h, w, block_log2, occ_off):
             c |= int(occ[by - 1, bx - 1]) << 2
         if bx + 1 < bw:
             c |= int(occ[by - 1, bx + 1]) << 3
-    t = 0
-    y0, x0 = by << block_log2, bx << block_log2
-    for y in range(y0, min(y0 + (1 << block_log2), h)):
-        for x in range(x0, min(x0 + (1 << block_log2), w)):
-            t = max(t, int(tc[PAD + y, PAD + x]))
-    return occ_off + (c << 2) + t
+    return occ_off + (c << 2) + int(tmax[by, bx])
 
 
 @njit(cache=True, nogil=True)
-def _encode_kernel(img, tc, h, w, four_passes, big, buf, m, rate, block_log2, occ_off):
+def _encode_kernel(img, tc, h, w, four_passes, big, buf, m, rate, block_log2, occ_off, occ):
+    # views without reference counting for the calls into the coder (see arith.unmanaged)
+    img, tc, buf, m, rate, occ = unmanaged(img), unmanaged(tc), unmanaged(buf), unmanaged(m), unmanaged(rate), \
+        unmanaged(occ)
     es = enc_start()
-    occ = block_occupancy(img, h, w, block_log2)
+    tmax = np.zeros(occ.shape, dtype=np.uint8)
+    block_maps(img, tc, h, w, block_log2, occ, tmax)
     bh, bw = occ.shape
-    bs = 1 << block_log2
     for by in range(bh):
         for bx in range(bw):
-            c = _block_ctx(occ, tc, by, bx, h, w, block_log2, occ_off)
+            c = _block_ctx(occ, tmax, by, bx, occ_off)
             b = int(occ[by, bx])
             es = enc_raw(es, buf, b, model_p1(m, c))
             model_update(m, c, b, rate)
@@ -193,7 +245,14 @@ def _encode_kernel(img, tc, h, w, four_passes, big, buf, m, rate, block_log2, oc
                     if occ[by, bx] == 0:
                         continue
                     for x in range((bx << block_log2) + px, min((bx + 1) << block_log2, w), 2):
-                        c = _ctx_pass(img, tc, phase, PAD + y, PAD + x, big)
+                        if phase == 0:
+                            c = _ctx_a(img, tc, PAD + y, PAD + x, big)
+                        elif phase == 1:
+                            c = _ctx_b(img, tc, PAD + y, PAD + x, big)
+                        elif phase == 2:
+                            c = _ctx_c(img, tc, PAD + y, PAD + x, big)
+                        else:
+                            c = _ctx_d(img, tc, PAD + y, PAD + x, big)
                         b = int(img[PAD + y, PAD + x])
                         es = enc_raw(es, buf, b, model_p1(m, c))
                         model_update(m, c, b, rate)
@@ -212,14 +271,17 @@ def _encode_kernel(img, tc, h, w, four_passes, big, buf, m, rate, block_log2, oc
 
 
 @njit(cache=True, nogil=True)
-def _decode_kernel(data, tc, h, w, four_passes, big, m, rate, img, block_log2, occ_off):
+def _decode_kernel(data, tc, h, w, four_passes, big, m, rate, img, block_log2, occ_off, occ):
+    # views without reference counting for the calls into the coder (see arith.unmanaged)
+    data, tc, m, rate, img, occ = unmanaged(data), unmanaged(tc), unmanaged(m), unmanaged(rate), unmanaged(img), \
+        unmanaged(occ)
     ds = dec_start(data)
-    bs = 1 << block_log2
-    occ = np.zeros(((h + bs - 1) >> block_log2, (w + bs - 1) >> block_log2), dtype=np.uint8)
+    tmax = np.zeros(occ.shape, dtype=np.uint8)
+    block_maps(img, tc, h, w, block_log2, None, tmax)
     bh, bw = occ.shape
     for by in range(bh):
         for bx in range(bw):
-            c = _block_ctx(occ, tc, by, bx, h, w, block_log2, occ_off)
+            c = _block_ctx(occ, tmax, by, bx, occ_off)
             ds, b = dec_raw(ds, data, model_p1(m, c))
             model_update(m, c, b, rate)
             occ[by, bx] = b
@@ -235,7 +297,14 @@ def _decode_kernel(data, tc, h, w, four_passes, big, m, rate, img, block_log2, o
                     if occ[by, bx] == 0:
                         continue
                     for x in range((bx << block_log2) + px, min((bx + 1) << block_log2, w), 2):
-                        c = _ctx_pass(img, tc, phase, PAD + y, PAD + x, big)
+                        if phase == 0:
+                            c = _ctx_a(img, tc, PAD + y, PAD + x, big)
+                        elif phase == 1:
+                            c = _ctx_b(img, tc, PAD + y, PAD + x, big)
+                        elif phase == 2:
+                            c = _ctx_c(img, tc, PAD + y, PAD + x, big)
+                        else:
+                            c = _ctx_d(img, tc, PAD + y, PAD + x, big)
                         ds, b = dec_raw(ds, data, model_p1(m, c))
                         model_update(m, c, b, rate)
                         img[PAD + y, PAD + x] = b
@@ -323,7 +392,7 @@ def encode_edge_image(mask, tctx=None, four_passes: bool = True, block_log2: int
     while True:
         buf = np.zeros(capacity, dtype=np.uint8)
         es = _encode_kernel(img, tctx, h, w, four_passes, big, buf, _model(four_passes), RATE_SHIFT, block_log2,
-                            _occ_offset(four_passes))
+                            _occ_offset(four_passes), np.zeros(occupancy_shape(h, w, block_log2), dtype=np.uint8))
         out = encoder_bytes(es, buf)
         if out is not None:
             return out
@@ -339,5 +408,6 @@ def decode_edge_image(data, height: int, width: int, tctx=None, four_passes: boo
     img = np.zeros((height + 2 * PAD, width + 2 * PAD), dtype=np.uint8)
     arr = as_data(data)
     ds = _decode_kernel(arr, tctx, height, width, four_passes, big, _model(four_passes), RATE_SHIFT, img,
-                        block_log2, _occ_offset(four_passes))
+                        block_log2, _occ_offset(four_passes),
+                        np.zeros(occupancy_shape(height, width, block_log2), dtype=np.uint8))
     return img[PAD:-PAD, PAD:-PAD].astype(bool), decoder_ok(ds, arr)

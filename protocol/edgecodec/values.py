@@ -44,7 +44,7 @@ import numpy as np
 from numba import njit
 
 from .arith import (INT_SLOT, RATE_SHIFT, as_data, dec_raw, dec_sint, dec_start, decoder_ok, enc_finish, enc_raw,
-                    enc_sint, enc_start, encoder_bytes, model_p1, model_update, new_model)
+                    enc_sint, enc_start, encoder_bytes, model_p1, model_update, new_model, unmanaged)
 
 PAD = 3
 N_PREDICTORS = 16
@@ -109,16 +109,21 @@ def _activity_bucket(a):
 
 
 @njit(cache=True, nogil=True)
-def _code_values(decode, data, buf, E, codes, signs, TV, RG, ri, ci, h, w, q, max_code, m, rate, V, S, A):
+def _code_values(decode, data, buf, E, xs, starts, codes, signs, TV, RG, ri, ci, h, w, q, max_code, m, rate, V, S,
+                 A):
     """Encoder (``decode`` False: codes, signs (h, w) true values and signs (+1 / -1) at edges,
     output into ``buf``) and decoder (``decode`` True: from ``data``) of the edge values, one
-    loop for both so they cannot drift apart. V, S, A: padded outputs (values, sign codes 1 / 2,
-    residual sizes). Returns (encoder state, decoder state).
+    loop for both so they cannot drift apart. E: the padded edge image; xs, starts: its edges'
+    padded columns row by row (row y's in xs[starts[y]:starts[y + 1]], :func:`_fill_edge_image`),
+    so the loop visits the edges only. V, S, A: padded outputs (values, sign codes 1 / 2,
+    residual sizes), zero where S is. Returns (encoder state, decoder state).
 
     Everything per sample is written out in this one function on purpose: helpers that take
     the arrays cost numba reference-count updates (atomic instructions) per call, which perf
     measured at ~40 % of the coder's time; only scalar helpers and the integer coders remain.
     """
+    # views without reference counting for the calls into the coder (see arith.unmanaged)
+    data, buf, m, rate = unmanaged(data), unmanaged(buf), unmanaged(m), unmanaged(rate)
     es = enc_start()
     ds = dec_start(data)
     scores = np.empty((256, N_PREDICTORS), dtype=np.int32)
@@ -128,9 +133,8 @@ def _code_values(decode, data, buf, E, codes, signs, TV, RG, ri, ci, h, w, q, ma
     preds = np.zeros(N_PREDICTORS, dtype=np.int64)
     avail = np.zeros(N_PREDICTORS, dtype=np.int64)
     for y in range(PAD, PAD + h):
-        for x in range(PAD, PAD + w):
-            if E[y, x] == 0:
-                continue
+        for i_edge in range(starts[y - PAD], starts[y - PAD + 1]):
+            x = xs[i_edge]
             # 1. the Laplacian sign: context = signs of W, N, NW, NE and whether E, S are edges
             c = (int(S[y, x - 1]) + 3 * int(S[y - 1, x]) + 9 * int(S[y - 1, x - 1]) + 27 * int(S[y - 1, x + 1])
                  + 81 * (int(E[y, x + 1]) + 2 * int(E[y + 1, x])))
@@ -245,12 +249,14 @@ def _code_values(decode, data, buf, E, codes, signs, TV, RG, ri, ci, h, w, q, ma
 
 @njit(cache=True, nogil=True)
 def _unpad_decoded(V, S, codes, signs):
-    """Padded decoder outputs -> codes (h, w) and signs (h, w): +1 / -1 for sign codes 2 / 1, else 0."""
+    """Padded decoder outputs -> codes (h, w), 0 where S marks no sample (V may hold a
+    workspace's stale values there), and signs (h, w): +1 / -1 for sign codes 2 / 1, else 0."""
+    V, S, codes, signs = unmanaged(V), unmanaged(S), unmanaged(codes), unmanaged(signs)
     h, w = codes.shape
     for y in range(h):
         for x in range(w):
-            codes[y, x] = V[PAD + y, PAD + x]
             s = S[PAD + y, PAD + x]
+            codes[y, x] = V[PAD + y, PAD + x] if s != 0 else 0
             signs[y, x] = 1 if s == 2 else (-1 if s == 1 else 0)
 
 
@@ -261,27 +267,29 @@ _NO_CODES = np.zeros((1, 1), dtype=np.int32)
 _NO_SIGNS = np.zeros((1, 1), dtype=np.int8)
 
 
-def _padded(a, dtype, fill=0):
-    h, w = a.shape
-    out = np.full((h + 2 * PAD, w + 2 * PAD), fill, dtype=dtype)
-    out[PAD:-PAD, PAD:-PAD] = a
-    return out
-
-
 @njit(cache=True, nogil=True)
 def _temporal_values_kernel(v, out):
+    v, out = unmanaged(v), unmanaged(out)
     h, w = v.shape
     for y in range(h):
         for x in range(w):
             out[PAD + y, PAD + x] = v[y, x] if v[y, x] >= 0 else -1
 
 
-def temporal_values(prev_values, height: int, width: int) -> np.ndarray:
+def temporal_values(prev_values, height: int, width: int, out=None) -> np.ndarray:
     """Padded (h + 2 PAD, w + 2 PAD) int32 of warped previous values, -1 where none.
 
     prev_values : (h, w) int, -1 (or any negative) where the warped previous frame has no sample; or None.
+    out : a padded array of this shape whose border is -1 (a :class:`ValueWorkspace`'s), filled
+    and returned instead of a new one.
     """
-    out = np.full((height + 2 * PAD, width + 2 * PAD), -1, dtype=np.int32)
+    shape = (height + 2 * PAD, width + 2 * PAD)
+    if out is None:
+        out = np.full(shape, -1, dtype=np.int32)
+    elif out.shape != shape or out.dtype != np.int32:
+        raise ValueError(f"out must be {shape} int32, got {out.shape} {out.dtype}")
+    elif prev_values is None:
+        out.fill(-1)
     if prev_values is None:
         return out
     v = np.asarray(prev_values)
@@ -293,52 +301,126 @@ def temporal_values(prev_values, height: int, width: int) -> np.ndarray:
     return out
 
 
+@njit(cache=True, nogil=True)
+def _fill_edge_image(edges, E, xs, starts):
+    """edges (h, w) bool into the interior of the padded E (uint8), and their padded columns
+    row by row into xs (h * w,) and starts (h + 1,); returns the number of edges."""
+    edges, E, xs, starts = unmanaged(edges), unmanaged(E), unmanaged(xs), unmanaged(starts)
+    h, w = edges.shape
+    n = 0
+    for y in range(h):
+        starts[y] = n
+        for x in range(w):
+            e = edges[y, x]
+            E[PAD + y, PAD + x] = e
+            xs[n] = PAD + x  # kept only where e (branch-free compaction)
+            n += e
+    starts[h] = n
+    return n
+
+
+@njit(cache=True, nogil=True)
+def _clear_samples(xs, starts, S, A):
+    """Zero S and A at the edges listed in xs, starts: all the coder wrote there (V is read only where S is set)."""
+    xs, starts, S, A = unmanaged(xs), unmanaged(starts), unmanaged(S), unmanaged(A)
+    for y in range(len(starts) - 1):
+        for i in range(starts[y], starts[y + 1]):
+            S[PAD + y, xs[i]] = 0
+            A[PAD + y, xs[i]] = 0
+
+
+class ValueWorkspace:
+    """The value coder's padded working images for one (h, w), kept from frame to frame: new
+    multi-megabyte arrays per frame cost more in page faults and zeroing than coding a frame's
+    few percent of edge pixels. Between uses S and A are zero (cleared at the last frame's
+    edges); V holds stale values, which the coder reads only where S marks a sample. Not
+    for concurrent use."""
+
+    def __init__(self, height: int, width: int):
+        shape = (height + 2 * PAD, width + 2 * PAD)
+        self.shape = (height, width)
+        self.E = np.zeros(shape, dtype=np.uint8)
+        self.V = np.zeros(shape, dtype=np.int32)
+        self.S = np.zeros(shape, dtype=np.int8)
+        self.A = np.zeros(shape, dtype=np.int32)
+        self.xs = np.empty(height * width, dtype=np.int32)
+        self.starts = np.empty(height + 1, dtype=np.int64)
+        self._T = None
+
+    def temporal_values(self, prev_values) -> np.ndarray:
+        """:func:`temporal_values` of ``prev_values`` in this workspace's own padded array (valid until the next call)."""
+        if self._T is None:
+            self._T = np.full(self.E.shape, -1, dtype=np.int32)
+        return temporal_values(prev_values, *self.shape, out=self._T)
+
+
 def encode_values(edges, codes, signs, regular, nearest_rows, nearest_cols, q: int, max_code: int,
-                  tvalues=None) -> tuple[bytes, np.ndarray]:
+                  tvalues=None, workspace: ValueWorkspace | None = None) -> tuple[bytes, np.ndarray]:
     """Code the values of the edge samples.
 
     edges : (h, w) bool; codes : (h, w) int true codes; signs : (h, w) int, > 0 for a positive
     Laplacian; regular : (rh, rw) decoded regular samples; nearest_rows (h,) / nearest_cols (w,) :
-    index of the nearest regular sample per row / column; tvalues : from :func:`temporal_values`.
-    Returns (bytes, decoded codes (h, w) int32: what the decoder will reconstruct at the edges).
+    index of the nearest regular sample per row / column; tvalues : from :func:`temporal_values`;
+    workspace : a :class:`ValueWorkspace` of this size to work in (the encoder keeps one).
+    Returns (bytes, decoded codes (h, w) int32: what the decoder will reconstruct at the edges,
+    0 elsewhere; with a workspace, a view of its V, valid at the edges only and until its next use).
     """
     h, w = edges.shape
-    E = _padded(edges.astype(np.uint8), np.uint8)
     if tvalues is None:
         tvalues = temporal_values(None, h, w)
     codes = np.ascontiguousarray(codes, dtype=np.int32)
     signs = np.ascontiguousarray(signs, dtype=np.int8)
     RG = np.ascontiguousarray(regular, dtype=np.int32)
-    n = int(edges.sum())
+    if workspace is None:
+        workspace = ValueWorkspace(h, w)
+        own = True
+    else:
+        if workspace.shape != (h, w):
+            raise ValueError(f"workspace is for {workspace.shape}, edges are {(h, w)}")
+        own = False
+    ws = workspace
+    n = _fill_edge_image(np.ascontiguousarray(edges, dtype=bool), ws.E, ws.xs, ws.starts)
     capacity = 2 * n + 256
-    while True:
-        V = np.zeros(E.shape, dtype=np.int32)
-        S = np.zeros(E.shape, dtype=np.int8)
-        A = np.zeros(E.shape, dtype=np.int32)
-        buf = np.zeros(capacity, dtype=np.uint8)
-        es, _ = _code_values(False, _NO_DATA, buf, E, codes, signs, tvalues, RG, nearest_rows, nearest_cols, h, w, q,
-                             max_code, new_model(N_CONTEXTS), RATE_SHIFT, V, S, A)
-        out = encoder_bytes(es, buf)
-        if out is not None:
-            return out, V[PAD:-PAD, PAD:-PAD].copy()
-        capacity = int(es[4]) + 16
+    try:
+        while True:
+            buf = np.zeros(capacity, dtype=np.uint8)
+            es, _ = _code_values(False, _NO_DATA, buf, ws.E, ws.xs, ws.starts, codes, signs, tvalues, RG,
+                                 nearest_rows, nearest_cols, h, w, q, max_code, new_model(N_CONTEXTS), RATE_SHIFT,
+                                 ws.V, ws.S, ws.A)
+            out = encoder_bytes(es, buf)
+            if out is not None:
+                break
+            capacity = int(es[4]) + 16
+            _clear_samples(ws.xs, ws.starts, ws.S, ws.A)
+    finally:
+        if not own:
+            _clear_samples(ws.xs, ws.starts, ws.S, ws.A)
+    return out, (ws.V[PAD:-PAD, PAD:-PAD] if not own else ws.V[PAD:-PAD, PAD:-PAD].copy())
 
 
 def decode_values(data, edges, regular, nearest_rows, nearest_cols, q: int, max_code: int,
-                  tvalues=None) -> tuple[np.ndarray, np.ndarray, bool]:
-    """-> (codes (h, w) int32, signs (h, w) int8 in {-1, 0, +1}, stream decoded cleanly)."""
+                  tvalues=None, workspace: ValueWorkspace | None = None) -> tuple[np.ndarray, np.ndarray, bool]:
+    """-> (codes (h, w) int32, 0 but at decoded edges, signs (h, w) int8 in {-1, 0, +1}, stream
+    decoded cleanly). workspace : a :class:`ValueWorkspace` of this size to work in (the decoder keeps one)."""
     h, w = edges.shape
-    E = _padded(edges.astype(np.uint8), np.uint8)
+    if workspace is None:
+        ws = ValueWorkspace(h, w)
+    elif workspace.shape != (h, w):
+        raise ValueError(f"workspace is for {workspace.shape}, edges are {(h, w)}")
+    else:
+        ws = workspace
+    _fill_edge_image(np.ascontiguousarray(edges, dtype=bool), ws.E, ws.xs, ws.starts)
     if tvalues is None:
         tvalues = temporal_values(None, h, w)
-    V = np.zeros(E.shape, dtype=np.int32)
-    S = np.zeros(E.shape, dtype=np.int8)
-    A = np.zeros(E.shape, dtype=np.int32)
     arr = as_data(data)
-    _, ds = _code_values(True, arr, _NO_BUF, E, _NO_CODES, _NO_SIGNS, tvalues,
-                         np.ascontiguousarray(regular, dtype=np.int32), nearest_rows, nearest_cols, h, w, q, max_code,
-                         new_model(N_CONTEXTS), RATE_SHIFT, V, S, A)
     codes = np.empty((h, w), dtype=np.int32)
     signs = np.empty((h, w), dtype=np.int8)
-    _unpad_decoded(V, S, codes, signs)
+    try:
+        _, ds = _code_values(True, arr, _NO_BUF, ws.E, ws.xs, ws.starts, _NO_CODES, _NO_SIGNS, tvalues,
+                             np.ascontiguousarray(regular, dtype=np.int32), nearest_rows, nearest_cols, h, w, q,
+                             max_code, new_model(N_CONTEXTS), RATE_SHIFT, ws.V, ws.S, ws.A)
+        _unpad_decoded(ws.V, ws.S, codes, signs)
+    finally:
+        if workspace is not None:
+            _clear_samples(ws.xs, ws.starts, ws.S, ws.A)
     return codes, signs, decoder_ok(ds, arr)

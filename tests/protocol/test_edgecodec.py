@@ -195,9 +195,11 @@ def _hand_coded_edge_image(h, w, occ, pixel_on):
     tctx = temporal_context(None, h, w)
     model = arith.AdaptiveBitModel.from_state(edge_module._model(True))
     enc = arith.RangeEncoder()
+    tmax = np.zeros(occ.shape, np.uint8)  # the largest temporal context per block
+    edge_module.block_maps(tctx, tctx, h, w, 3, None, tmax)
     for by in range(occ.shape[0]):
         for bx in range(occ.shape[1]):
-            c = edge_module._block_ctx(occ, tctx, by, bx, h, w, 3, edge_module._occ_offset(True))
+            c = edge_module._block_ctx(occ, tmax, by, bx, edge_module._occ_offset(True))
             arith.encode_bit(enc, model, c, int(occ[by, bx]))
     pad = edge_module.PAD
     img = np.zeros((h + 2 * pad, w + 2 * pad), np.uint8)
@@ -662,3 +664,106 @@ def test_compiled_warp_matches_its_numpy_definition(min_code):
             np.testing.assert_array_equal(got.values, want.values)
             np.testing.assert_array_equal(got.edges, want.edges)
         assert got.values.dtype == np.int32
+
+
+@pytest.mark.parametrize("shape", [(1, 1), (1, 2), (2, 1), (1, 6), (6, 1), (2, 2), (2, 9), (3, 3), (3, 8), (9, 4), (31, 47)])
+@pytest.mark.parametrize("threshold, weight", [(3.5, 1.0), (8.0, 1.0), (2.0, 0.7)])
+def test_fused_depth_edges_match_the_selection_of_their_significance(shape, threshold, weight):
+    """depth_edges (one compiled pass) = select_edges of weight * |Laplacian| computed in numpy:
+    edges, signs and significance, on random codes, planes with sky and piecewise-planar scenes."""
+    from pibr.protocol.edgecodec.codec import depth_edges
+
+    rng = np.random.default_rng(shape[0] * 7 + shape[1])
+    y, x = np.indices(shape)
+    with_sky = np.where(rng.random(shape) < 0.2, 0, 700 + 3 * y - 5 * x)
+    for codes in (rng.integers(0, 4096, shape), with_sky, piecewise_planar_codes(*shape)):
+        lap = laplacian(codes)
+        sig = weight * np.abs(lap).astype(np.float32)
+        edges, signs = select_edges(codes, threshold, sig, lap)
+        got_edges, got_signs, got_sig = depth_edges(codes, threshold, weight)
+        np.testing.assert_array_equal(got_edges, edges)
+        np.testing.assert_array_equal(got_signs, signs)
+        np.testing.assert_array_equal(got_sig, sig)
+        assert got_sig.dtype == np.float32 and got_signs.dtype == np.int8
+
+
+def test_value_workspace_reused_across_frames_gives_the_bytes_of_fresh_buffers():
+    """The encoder's value workspace (kept from frame to frame, cleared at the last frame's
+    edges): the same bytes and decoded values as new buffers, frame after frame, also when
+    the first output buffer is too small (random codes: large residuals) and the coder retries."""
+    from pibr.protocol.edgecodec.values import ValueWorkspace, encode_values, temporal_values
+
+    h, w = 40, 56
+    rows, cols = sample_positions(w, h, 3)
+    nr, nc = nearest_index(rows, h), nearest_index(cols, w)
+    ws = ValueWorkspace(h, w)
+    rng = np.random.default_rng(5)
+    retried = False
+    for frame in range(6):
+        edges = rng.random((h, w)) < (0.05 if frame % 2 else 0.4)
+        codes = rng.integers(0, 65536, (h, w)) if frame % 3 == 0 else piecewise_planar_codes(h, w) + frame
+        signs = np.where(rng.random((h, w)) < 0.5, 1, -1)
+        regular = codes[np.ix_(rows, cols)]
+        prev = np.where(rng.random((h, w)) < 0.1, rng.integers(0, 4096, (h, w)), -1) if frame else None
+        fresh_bytes, fresh_dec = encode_values(edges, codes, signs, regular, nr, nc, 1, 65535,
+                                               temporal_values(prev, h, w))
+        got_bytes, got_dec = encode_values(edges, codes, signs, regular, nr, nc, 1, 65535,
+                                           ws.temporal_values(prev), workspace=ws)
+        assert got_bytes == fresh_bytes
+        retried |= len(got_bytes) > 2 * edges.sum() + 256
+        np.testing.assert_array_equal(got_dec[edges], fresh_dec[edges])
+        assert not ws.S.any() and not ws.A.any()
+    assert retried  # the first output buffer was too small at least once
+    with pytest.raises(ValueError, match="workspace is for"):
+        encode_values(edges[:-1], codes[:-1], signs[:-1], regular, nr, nc[:w], 1, 4095, workspace=ws)
+
+
+
+@pytest.mark.parametrize("shape", [(1, 1), (5, 13), (16, 16), (19, 8), (33, 41)])
+def test_block_maps_match_their_numpy_definition(shape):
+    """Occupancy and largest temporal context per 8 x 8 block, partial blocks at the border included."""
+    from pibr.protocol.edgecodec import edges as edge_module
+
+    pad, h, w = edge_module.PAD, *shape
+    rng = np.random.default_rng(shape[0] * 53 + shape[1])
+    img = np.zeros((h + 2 * pad, w + 2 * pad), np.uint8)
+    img[pad:-pad, pad:-pad] = rng.random(shape) < 0.01
+    tc = np.zeros_like(img)
+    tc[pad:-pad, pad:-pad] = np.where(rng.random(shape) < 0.05, rng.integers(0, 4, shape), 0)
+    occ_shape = edge_module.occupancy_shape(h, w, 3)
+    occ, tmax, tmax_only = (np.zeros(occ_shape, np.uint8) for _ in range(3))
+    edge_module.block_maps(img, tc, h, w, 3, occ, tmax)
+    edge_module.block_maps(img, tc, h, w, 3, None, tmax_only)
+    for by in range(occ_shape[0]):
+        for bx in range(occ_shape[1]):
+            block = (slice(pad + 8 * by, pad + min(8 * by + 8, h)), slice(pad + 8 * bx, pad + min(8 * bx + 8, w)))
+            assert occ[by, bx] == int(img[block].any())
+            assert tmax[by, bx] == tmax_only[by, bx] == tc[block].max()
+
+
+def test_decoder_value_workspace_reused_across_frames_gives_fresh_results():
+    """The decoder's value workspace kept from frame to frame (also across a corrupt payload):
+    the same codes and signs as a fresh decode, 0 away from the edges."""
+    from pibr.protocol.edgecodec.values import ValueWorkspace, decode_values, encode_values
+
+    h, w = 40, 56
+    rows, cols = sample_positions(w, h, 3)
+    nr, nc = nearest_index(rows, h), nearest_index(cols, w)
+    ws = ValueWorkspace(h, w)
+    rng = np.random.default_rng(8)
+    for frame in range(5):
+        edges = rng.random((h, w)) < (0.05 if frame % 2 else 0.4)
+        codes = piecewise_planar_codes(h, w) + 7 * frame
+        signs = np.where(rng.random((h, w)) < 0.5, 1, -1)
+        regular = codes[np.ix_(rows, cols)]
+        data, _ = encode_values(edges, codes, signs, regular, nr, nc, 1, 4095)
+        if frame == 2:
+            data = data[: len(data) // 2]  # corrupt: decoding stops early
+        fresh = decode_values(data, edges, regular, nr, nc, 1, 4095)
+        got = decode_values(data, edges, regular, nr, nc, 1, 4095, workspace=ws)
+        assert got[2] == fresh[2] == (frame != 2)
+        np.testing.assert_array_equal(got[0], fresh[0])
+        np.testing.assert_array_equal(got[1], fresh[1])
+        assert not got[0][~edges].any() and not ws.S.any() and not ws.A.any()
+        if frame != 2:
+            np.testing.assert_array_equal(got[0][edges], codes[edges])
