@@ -94,7 +94,6 @@ uniform mat3 u_out_to_extra; // output camera -> extra camera rotation
 uniform bool u_extra_sky;    // the extra view's sky may fill in (it marks peeled pixels apart)
 uniform vec2 u_tan_half;
 uniform vec2 u_out_size;
-out vec4 f_color;
 // Where no proxy fragment landed: the sky along this pixel's ray. Sky is at infinity, so any
 // view shows it in the same direction: the primary view's if it shows sky there, else the
 // extra view's if that one does (it saw past what blocks the primary: a lamp post in front of
@@ -129,6 +128,7 @@ _RESOLVE_FS = """
 %(frame)s
 uniform sampler2D u_refs;
 %(background)s
+out vec4 f_color;
 void main() {
     vec2 ref = texelFetch(u_refs, ivec2(gl_FragCoord.xy), 0).xy;
     float view = floor(0.5 * ref.x);
@@ -171,36 +171,47 @@ float view_error(vec3 c, bool extra, out vec2 uv, out bool sky, out bool past) {
 }
 """
 
-# One program, two passes over the proxies (u_fallback), so that no fragment writes gl_FragDepth:
-# on a software rasteriser that rules out early depth tests, and every overlapping fragment
-# would run the shader.
-_PROXY_FS = "#version 410\n%(frame)s\n" + _VIEW_ERROR_GLSL + """
-in vec3 v_p;
-in vec3 v_e;
-out vec2 f_ref;   // the pixel's record, see record()
+_ACCEPT_GLSL = """
 // A pixel's record, two floats: where to fetch its colour (uv in [0, 1]^2) and from which view
 // (0 primary, 1 extra, 2 none: black; 3, the clear value: no proxy fragment here), in the
 // integer parts: u + 2 view, v + 2 accepted. 8 bytes, not 16, to clear and write; the uv keep
 // 2^-22 of precision, a quarter of a thousandth of a pixel.
 vec2 record(vec2 uv, float view, bool accepted) { return vec2(uv.x + 2.0 * view, uv.y + (accepted ? 2.0 : 0.0)); }
-uniform bool u_fallback;
-// Pass 1, accepted fragments only, depth in [0, 0.5): fragments behind an accepted one already
-// drawn fail the depth test before the shader runs (objects are drawn nearest first).
-void accept() {
+// Whether a view vouches for the proxy point at p (primary camera space) = e (extra camera
+// space); if so, its record.
+bool accepted(vec3 p, vec3 e, out vec2 ref) {
     vec2 uv_p, uv_e;
     bool sky_p, sky_e, past_p, past_e;
-    if (view_error(v_p, false, uv_p, sky_p, past_p) < u_tau) {   // the primary saw this very point
-        f_ref = record(uv_p, 0.0, true);
-        return;
+    ref = vec2(0.0);
+    if (view_error(p, false, uv_p, sky_p, past_p) < u_tau) {   // the primary saw this very point
+        ref = record(uv_p, 0.0, true);
+        return true;
     }
     // Where the primary view saw past the fragment (a farther surface, or sky), its point is
     // empty space: carve it, whatever the extra view seems to confirm there. The extra view
     // fills only what the primary could not see: points hidden behind its nearer surfaces.
-    if (u_has_extra && !(past_p || sky_p) && view_error(v_e, true, uv_e, sky_e, past_e) < u_tau) {
-        f_ref = record(uv_e, 1.0, true);
-        return;
+    if (u_has_extra && !(past_p || sky_p) && view_error(e, true, uv_e, sky_e, past_e) < u_tau) {
+        ref = record(uv_e, 1.0, true);
+        return true;
     }
-    discard;
+    return false;
+}
+"""
+
+# One program, two passes over the proxies (u_fallback), so that no fragment writes gl_FragDepth:
+# on a software rasteriser that rules out early depth tests, and every overlapping fragment
+# would run the shader.
+_PROXY_FS = "#version 410\n%(frame)s\n" + _VIEW_ERROR_GLSL + _ACCEPT_GLSL + """
+in vec3 v_p;
+in vec3 v_e;
+out vec4 f_ref;   // the pixel's record, see record() (zw: 0; only _SCREEN_FS fills them)
+uniform bool u_fallback;
+// Pass 1, accepted fragments only, depth in [0, 0.5): fragments behind an accepted one already
+// drawn fail the depth test before the shader runs (objects are drawn nearest first).
+void accept() {
+    vec2 ref;
+    if (!accepted(v_p, v_e, ref)) discard;
+    f_ref = vec4(ref, 0.0, 0.0);
 }
 
 // Pass 2, depth in [0.5, 1]: only pixels where no fragment was accepted still pass the depth
@@ -214,10 +225,108 @@ void fallback() {
     if (sky_p) discard;   // the primary sees nothing there: carve, let the sky show
     float e_e = NO_MATCH;
     if (u_has_extra && !past_p) e_e = view_error(v_e, true, uv_e, sky_e, past_e);
-    f_ref = (e_e < e_p) ? record(uv_e, 1.0, false) : record(uv_p, v_p.z <= 0.0 ? 0.0 : 2.0, false);
+    f_ref = vec4((e_e < e_p) ? record(uv_e, 1.0, false) : record(uv_p, v_p.z <= 0.0 ? 0.0 : 2.0, false), 0.0, 0.0);
 }
 void main() {
     if (u_fallback) fallback(); else accept();
+}
+"""
+
+
+# The carving passes, restricted to the pixels that need them. In most pixels the nearest proxy
+# fragment is accepted, and then it is the nearest accepted one: the fragment carving picks.
+# So a pass with a trivial shader (early depth tests, nothing shaded twice) first keeps each
+# pixel's nearest fragment, in pass 1's own depth and clip space (the same fragment wins the
+# same ties), and one full-screen pass tests it with pass 1's own code, writing every pixel's
+# record (the background's too, so that the resolve does one lookup) and a depth that lets the
+# carving passes shade only what is left: 0 where the record is final; 0.5 where the nearest
+# fragment is not accepted but the primary does not see sky there: pass 1 may still find an
+# accepted fragment behind it, else it is pass 2's pick (the nearest fragment not on sky), its
+# fallback record already written; 1 where pass 2 must look further. Counters tell which passes
+# have any pixel left to shade (a pass costs its rasterisation even where every fragment fails
+# the depth test).
+_PRESORT_FS = """
+#version 410
+in vec3 v_p;
+in vec3 v_e;
+layout(location = 0) out vec4 f_p;   // primary camera space, 1: a proxy fragment
+layout(location = 1) out vec4 f_e;   // extra camera space
+void main() {
+    f_p = vec4(v_p, 1.0);
+    f_e = vec4(v_e, 0.0);
+}
+"""
+
+_SCREEN_FS = "#version 430\n%(frame)s\n" + _VIEW_ERROR_GLSL + _ACCEPT_GLSL + """
+%(background)s
+uniform sampler2D u_nearest_depth;   // 1 where nothing was drawn
+uniform sampler2D u_nearest_p;       // _PRESORT_FS's, or a point's record with w = 2
+uniform sampler2D u_nearest_e;
+layout(std430, binding = 0) buffer Left { uint n_carve; uint n_fallback; };   // pixels each carving pass must shade
+out vec4 f_ref;   // a record (zw 0), or the background: (6, kind, uv), kind 0 primary, 1 extra, 2 primary with alpha 0, 3 black
+// The nearest fragment's record as the carving passes would write it: 0 accepted (pass 1), 1
+// not accepted (pass 2's, if no other fragment is accepted), 2 the primary sees sky: none.
+int nearest_record(vec3 p, vec3 e, out vec2 ref) {
+    vec2 uv_p, uv_e;
+    bool sky_p, sky_e, past_p, past_e;
+    ref = vec2(0.0);
+    float e_p = view_error(p, false, uv_p, sky_p, past_p);
+    float e_e = NO_MATCH;
+    if (u_has_extra && !past_p) e_e = view_error(e, true, uv_e, sky_e, past_e);
+    if (e_p < u_tau) { ref = record(uv_p, 0.0, true); return 0; }       // accepted()
+    if (!sky_p && e_e < u_tau) { ref = record(uv_e, 1.0, true); return 0; }
+    if (sky_p) return 2;                                                 // fallback()
+    ref = (e_e < e_p) ? record(uv_e, 1.0, false) : record(uv_p, p.z <= 0.0 ? 0.0 : 2.0, false);
+    return 1;
+}
+void main() {
+    ivec2 px = ivec2(gl_FragCoord.xy);
+    vec4 rect;
+    vec2 uv;
+    float alpha;
+    float kind = 3.0;
+    if (background(rect, uv, alpha)) kind = alpha == 0.0 ? 2.0 : (rect == u_extra_color ? 1.0 : 0.0);
+    f_ref = vec4(6.0, kind, uv);
+    gl_FragDepth = 0.0;
+    if (texelFetch(u_nearest_depth, px, 0).r == 1.0) return;   // no proxy here
+    vec4 p = texelFetch(u_nearest_p, px, 0);
+    if (p.w == 2.0) { f_ref = vec4(p.xy, 0.0, 0.0); return; }   // a moving pixel's point: accepted
+    vec2 ref;
+    int r = nearest_record(p.xyz, texelFetch(u_nearest_e, px, 0).xyz, ref);
+    if (r == 0) { f_ref = vec4(ref, 0.0, 0.0); return; }
+    atomicAdd(n_carve, 1u);
+    if (r == 1) {
+        f_ref = vec4(ref, 0.0, 0.0);
+        gl_FragDepth = 0.5;
+    } else {
+        atomicAdd(n_fallback, 1u);
+        gl_FragDepth = 1.0;
+    }
+}
+"""
+
+# After _SCREEN_FS: one lookup per pixel, from the view and place its record says.
+_SCREEN_RESOLVE_FS = """
+#version 410
+%(frame)s
+uniform sampler2D u_refs;
+uniform vec4 u_primary_color;
+uniform vec4 u_extra_color;
+out vec4 f_color;
+void main() {
+    vec4 ref = texelFetch(u_refs, ivec2(gl_FragCoord.xy), 0);
+    float view = floor(0.5 * ref.x);
+    vec2 uv = vec2(ref.x - 2.0 * view, ref.y >= 2.0 ? ref.y - 2.0 : ref.y);
+    float alpha = ref.y >= 2.0 ? 1.0 : 0.0;
+    vec4 rect = view == 0.0 ? u_primary_color : u_extra_color;
+    bool black = view == 2.0;
+    if (view == 3.0) {
+        uv = ref.zw;
+        rect = ref.y == 1.0 ? u_extra_color : u_primary_color;
+        alpha = ref.y < 2.0 ? 1.0 : 0.0;
+        black = ref.y == 3.0;
+    }
+    f_color = black ? vec4(0.0) : vec4(atlas_rgb(rect, uv), alpha);
 }
 """
 
@@ -252,6 +361,7 @@ uniform sampler2D u_pos;
 uniform mat4 u_world_to_primary;
 uniform mat4 u_world_to_extra;
 %(background)s
+out vec4 f_color;
 void main() {
     vec4 w = texelFetch(u_pos, ivec2(gl_FragCoord.xy), 0);
     vec4 rect = u_primary_color;
@@ -321,7 +431,7 @@ _POINTS_FS = """
 %(frame)s
 flat in float v_d;
 out vec4 f_out;
-uniform bool u_position;          // carve=False: the records are world positions
+uniform int u_out;                // 0: a record; 1: the world position (carve=False); 2: a record, tagged 2 (_SCREEN_FS)
 uniform mat3 u_out_to_primary;    // output camera rotation -> primary camera space
 uniform vec3 u_eye;               // output camera position in primary camera space
 uniform mat4 u_primary_to_world;
@@ -337,7 +447,8 @@ void main() {
     vec3 p = u_eye + t * r;
     if (t <= 0.0 || p.z > 0.0) discard;
     vec2 uv = wa_uv(wa_project(p).xy);
-    f_out = u_position ? vec4((u_primary_to_world * vec4(p, 1.0)).xyz, 1.0) : vec4(uv.x, uv.y + 2.0, 0.0, 0.0);
+    if (u_out == 1) f_out = vec4((u_primary_to_world * vec4(p, 1.0)).xyz, 1.0);
+    else f_out = vec4(uv.x, uv.y + 2.0, 0.0, u_out == 2 ? 2.0 : 0.0);
 }
 """
 
@@ -363,9 +474,12 @@ class ProxyIBR(Method):
     def __init__(self, ctx, output, config, proxies=None, tau: float = DEFAULT_TAU,
                  lod_target_px: float = DEFAULT_TARGET_PX, lod_level: str | None = None, extra_view: bool = True,
                  carve: bool = True, motion: str = DEFAULT_MOTION, poses: PoseHistory | None = None,
-                 oracle_pose=None, horizon_frames: float = DEFAULT_HORIZON_FRAMES, slack_codes: float | None = None):
+                 oracle_pose=None, horizon_frames: float = DEFAULT_HORIZON_FRAMES, slack_codes: float | None = None,
+                 carve_all: bool = False):
         """slack_codes: depth codes of transport error forgiven before the tau test (None: the
-        depth codec's ``DEPTH_SLACK_CODES``)."""
+        depth codec's ``DEPTH_SLACK_CODES``); ``carve_all``: run the carving passes over every
+        pixel, not only where the nearest fragment fails the test (the same image, slower: the
+        reference the presort is checked against, see _PRESORT_FS)."""
         super().__init__(ctx, output, config)
         if not proxies:
             from pibr.protocol.errors import ConfigError
@@ -373,6 +487,7 @@ class ProxyIBR(Method):
             raise ConfigError("the proxy method needs the scene's proxies; the server sent none")
         self.tau = tau
         self.carve = bool(carve)
+        self.presort = self.carve and not carve_all
         self.objects = proxies
         self.moving = [i for i, o in enumerate(proxies) if o.moving]
         self._moving_set = set(self.moving)
@@ -387,45 +502,76 @@ class ProxyIBR(Method):
         self._seen = (None, {})   # (frame key, index -> motion) of the newest frame's own transforms
         self.selector = LodSelector(proxies, output, lod_target_px, force_level=lod_level)
         glsl = {"frame": frame_glsl(config), "background": _BACKGROUND_GLSL}
+        size = (output.width, output.height)
         if self.carve:
             self.prog = ctx.program(vertex_shader=_PROXY_VS, fragment_shader=_PROXY_FS % glsl)
-            self.resolve = ctx.program(vertex_shader=FULLSCREEN_VS, fragment_shader=_RESOLVE_FS % glsl)
-            # (u, v + view, v + accepted) records; see record() in _PROXY_FS
-            self.refs = ctx.texture((output.width, output.height), 2, dtype="f4")
-            geometry, test = self.prog, self.prog
+            resolve_fs = _SCREEN_RESOLVE_FS if self.presort else _RESOLVE_FS
+            self.resolve = ctx.program(vertex_shader=FULLSCREEN_VS, fragment_shader=resolve_fs % glsl)
+            # (u, v + view, v + accepted) records, see record() in _PROXY_FS; and the background's
+            # uv after _SCREEN_FS
+            self.refs = ctx.texture(size, 4 if self.presort else 2, dtype="f4")
+            geometry, tests = self.prog, [self.prog]
         else:
             self.prog = ctx.program(vertex_shader=_NEAREST_VS, fragment_shader=_NEAREST_FS)
             self.resolve = ctx.program(vertex_shader=FULLSCREEN_VS, fragment_shader=_NEAREST_RESOLVE_FS % glsl)
-            self.refs = ctx.texture((output.width, output.height), 4, dtype="f4")   # position, 1
-            geometry, test = self.prog, self.resolve
-        for p in (self.prog, self.resolve):
+            self.refs = ctx.texture(size, 4, dtype="f4")   # position, 1
+            geometry, tests = self.prog, [self.resolve]
+        self.presort_prog = self.screen = self.screen_vao = self.screen_vbo = self.left = None
+        self.nearest_p = self.nearest_e = self.nearest_depth = self.nearest_fbo = self.nearest_depth_fbo = None
+        self.background = self.resolve   # the program that finds the background of a pixel
+        if self.presort:
+            self.presort_prog = ctx.program(vertex_shader=_PROXY_VS, fragment_shader=_PRESORT_FS)
+            self.presort_prog["u_depth_half"].value = -1.0   # pass 1's depth and clip space
+            self.screen = self.background = ctx.program(vertex_shader=FULLSCREEN_VS,
+                                                        fragment_shader=_SCREEN_FS % glsl)
+            self.screen["u_nearest_p"].value = 5
+            self.screen["u_nearest_e"].value = 6
+            self.screen["u_nearest_depth"].value = 7
+            self.screen_vbo, self.screen_vao = fullscreen_quad(ctx, self.screen)
+            self.nearest_p = ctx.texture(size, 4, dtype="f4")
+            self.nearest_e = ctx.texture(size, 4, dtype="f4")
+            self.nearest_depth = ctx.depth_texture(size)
+            self.nearest_depth.compare_func = ""   # read the depth itself
+            for t in (self.nearest_p, self.nearest_e, self.nearest_depth):
+                t.filter = (ctx.NEAREST, ctx.NEAREST)
+            self.nearest_fbo = ctx.framebuffer(color_attachments=[self.nearest_p, self.nearest_e],
+                                               depth_attachment=self.nearest_depth)
+            self.nearest_depth_fbo = ctx.framebuffer(depth_attachment=self.nearest_depth)
+            self.left = ctx.buffer(reserve=8)   # the Left block of _SCREEN_FS
+            tests.append(self.screen)
+        for p in (self.prog, self.resolve, self.screen):
+            if p is None:
+                continue
             bind_frame_uniforms(p, config)
             if slack_codes is not None and "u_slack_codes" in p:
                 p["u_slack_codes"].value = float(slack_codes)
         self.refs.filter = (ctx.NEAREST, ctx.NEAREST)
-        self.refs_depth = ctx.depth_renderbuffer((output.width, output.height))
+        self.refs_depth = ctx.depth_renderbuffer(size)
         self.refs_fbo = ctx.framebuffer(color_attachments=[self.refs], depth_attachment=self.refs_depth)
         self.resolve["u_refs" if self.carve else "u_pos"].value = 5
-        self.resolve["u_tan_half"].value = output_tan_half(output)
-        self.resolve["u_out_size"].value = (float(output.width), float(output.height))
-        for k, rect in (("u_primary_color", "primary.color"), ("u_extra_color", "extra.color")):
-            if k in self.resolve:
-                self.resolve[k].value = rect_uniform(config, rect)
+        self.background["u_tan_half"].value = output_tan_half(output)
+        self.background["u_out_size"].value = (float(output.width), float(output.height))
+        for prog in {self.resolve, self.background}:
+            for k, rect in (("u_primary_color", "primary.color"), ("u_extra_color", "extra.color")):
+                if k in prog:
+                    prog[k].value = rect_uniform(config, rect)
         # extra_view=False ignores a transmitted extra view: what proxy IBR does without one.
         self.uses_extra_view = bool(extra_view) and has_extra_depth(config)
-        test["u_has_extra"].value = self.uses_extra_view
+        for test in tests:
+            test["u_has_extra"].value = self.uses_extra_view
         # Sessions whose extra view marks peeled pixels apart from sky, in depth codes that keep
         # the mark (min_code >= 2; see protocol/depth.py), let the extra view vouch for sky.
-        self.resolve["u_extra_sky"].value = (self.uses_extra_view and bool(config.options.get("peel_marker"))
+        self.background["u_extra_sky"].value = (self.uses_extra_view and bool(config.options.get("peel_marker"))
                                              and config.depth_min_code >= 2)
-        test["u_tau"].value = float(tau)
+        for test in tests:
+            test["u_tau"].value = float(tau)
         self.resolve_vbo, self.resolve_vao = fullscreen_quad(ctx, self.resolve)
         self.points = self.points_vbo = self.points_vao = None
         if self.motion == "flow":
             self.points = ctx.program(vertex_shader=_POINTS_VS % glsl, fragment_shader=_POINTS_FS % glsl)
             bind_frame_uniforms(self.points, config)
             self.points["u_view_size"].value = (float(config.primary.width), float(config.primary.height))
-            self.points["u_position"].value = not self.carve
+            self.points["u_out"].value = 0 if self.carve else 1
             self.points["u_tan_half"].value = output_tan_half(output)
             self.points["u_out_size"].value = (float(output.width), float(output.height))
             self.points_vbo = ctx.buffer(reserve=12 * 1024, dynamic=True)
@@ -437,7 +583,7 @@ class ProxyIBR(Method):
         self.near, self.far = config.near, config.far
         self.projection = output_projection(output, self.near, self.far)
         self._buffers = []
-        self.vaos = []   # per object: level -> (vao, triangles)
+        self.vaos = []   # per object: level -> (vao, triangles); vao: (geometry's, presort's or None)
         for o in proxies:
             levels = {}
             for level in ("original", "proxy", "box"):
@@ -446,8 +592,9 @@ class ProxyIBR(Method):
                     continue
                 vbo = ctx.buffer(np.ascontiguousarray(v, np.float32).tobytes())
                 ibo = ctx.buffer(np.ascontiguousarray(f, np.uint32).tobytes())
-                vao = ctx.vertex_array(geometry, [(vbo, "3f", "in_position")], index_buffer=ibo,
-                                       index_element_size=4)
+                vao = tuple(None if prog is None else
+                            ctx.vertex_array(prog, [(vbo, "3f", "in_position")], index_buffer=ibo, index_element_size=4)
+                            for prog in (geometry, self.presort_prog))
                 self._buffers += [vbo, ibo]
                 levels[level] = (vao, len(f))
             self.vaos.append(levels)
@@ -464,18 +611,20 @@ class ProxyIBR(Method):
         if self.carve:
             # Proxies, depth-tested, accepted fragments in front of the rest; each pixel keeps
             # where to fetch its colour.
-            self.refs_fbo.clear(*_NO_PROXY, 0.0, 0.0, depth=1.0)
             ctx.enable_direct(_GL_CLIP_DISTANCE0)
-            if moved is not None:
+            if self.presort:
+                left = self._presort(draws, moved, out_pose, frame)
+            else:
+                self.refs_fbo.clear(*_NO_PROXY, 0.0, 0.0, depth=1.0)
+                left = (1, 1)
+            self.last_carved = left
+            if left[0] and moved is not None:
                 self._draw_points(moved, out_pose, frame)
-            for depth_half in (-1.0, 1.0):   # accepted fragments, then the rest behind them
-                self.prog["u_fallback"].value = depth_half > 0
-                self.prog["u_depth_half"].value = depth_half
-                for vao, mvp, to_primary, to_extra, _ in draws:
-                    self.prog["u_mvp"].write(mvp)
-                    self.prog["u_to_primary"].write(to_primary)
-                    self.prog["u_to_extra"].write(to_extra)
-                    vao.render(ctx.TRIANGLES)
+            for depth_half, n in zip((-1.0, 1.0), left):   # accepted fragments, then the rest behind them
+                if n:
+                    self.prog["u_fallback"].value = depth_half > 0
+                    self.prog["u_depth_half"].value = depth_half
+                    self._draw_proxies(self.prog, 0, draws)
             ctx.disable_direct(_GL_CLIP_DISTANCE0)
         else:
             self.refs_fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)   # w = 0: no proxy here
@@ -486,20 +635,56 @@ class ProxyIBR(Method):
             for vao, mvp, _, _, seen in draws:
                 self.prog["u_mvp"].write(mvp)
                 self.prog["u_seen"].write(seen)
-                vao.render(ctx.TRIANGLES)
+                vao[0].render(ctx.TRIANGLES)
             self.resolve["u_world_to_primary"].write(mat4_bytes(frame.primary_pose.view_matrix()))
             self.resolve["u_world_to_extra"].write(mat4_bytes((frame.extra_pose or frame.primary_pose).view_matrix()))
         ctx.disable(ctx.DEPTH_TEST)
         output_fbo.use()
         self.refs.use(5)
-        rot = frame.primary_pose.rotation().T @ out_pose.rotation()
-        self.resolve["u_out_to_src"].write(rot.T.astype("f4").tobytes())
-        if self.uses_extra_view and frame.extra_pose is not None:
-            rot = frame.extra_pose.rotation().T @ out_pose.rotation()
-            self.resolve["u_out_to_extra"].write(rot.T.astype("f4").tobytes())
+        if not self.presort:
+            self._background_rotations(out_pose, frame)
         self.resolve_vao.render(ctx.TRIANGLE_STRIP)
 
-    def _draw_points(self, moved, out_pose: Pose, frame) -> None:
+    def _background_rotations(self, out_pose: Pose, frame) -> None:
+        rot = frame.primary_pose.rotation().T @ out_pose.rotation()
+        self.background["u_out_to_src"].write(rot.T.astype("f4").tobytes())
+        if self.uses_extra_view and frame.extra_pose is not None:
+            rot = frame.extra_pose.rotation().T @ out_pose.rotation()
+            self.background["u_out_to_extra"].write(rot.T.astype("f4").tobytes())
+
+    def _presort(self, draws, moved, out_pose: Pose, frame) -> tuple[int, int]:
+        """Each pixel's nearest fragment (_PRESORT_FS), tested (_SCREEN_FS): leaves every pixel's
+        record in refs, and the depth each needs for the carving passes. -> how many pixels
+        each carving pass must still shade."""
+        ctx = self.ctx
+        self.nearest_depth_fbo.clear(depth=1.0)   # the colours are read only where a fragment was drawn
+        self.nearest_fbo.use()
+        if moved is not None:
+            self._draw_points(moved, out_pose, frame, tagged=True)
+        self._draw_proxies(self.presort_prog, 1, draws)
+        self.refs_fbo.use()
+        self.nearest_p.use(5)
+        self.nearest_e.use(6)
+        self.nearest_depth.use(7)
+        self._background_rotations(out_pose, frame)
+        self.left.write(bytes(8))
+        self.left.bind_to_storage_buffer(0)
+        ctx.depth_func = "1"   # always: the screen pass sets every pixel's depth
+        self.screen_vao.render(ctx.TRIANGLE_STRIP)
+        ctx.depth_func = "<"
+        ctx.memory_barrier()   # the counters' writes are incoherent until then
+        carve, fallback = np.frombuffer(self.left.read(), np.uint32)
+        return int(carve), int(fallback)
+
+    def _draw_proxies(self, prog, which: int, draws) -> None:
+        """The proxies of ``draws`` (see _draws) with ``prog``, through their vao ``which``."""
+        for vao, mvp, to_primary, to_extra, _ in draws:
+            prog["u_mvp"].write(mvp)
+            prog["u_to_primary"].write(to_primary)
+            prog["u_to_extra"].write(to_extra)
+            vao[which].render(self.ctx.TRIANGLES)
+
+    def _draw_points(self, moved, out_pose: Pose, frame, tagged: bool = False) -> None:
         """The extrapolated view's moving pixels (flow_warp.Extrapolated) as points, accepted."""
         n = len(moved.moved)
         self.last_points = n
@@ -520,6 +705,8 @@ class ProxyIBR(Method):
         if "u_primary_to_world" in self.points:
             self.points["u_primary_to_world"].write(mat4_bytes(src.matrix()))
         self.points["u_depth_half"].value = -1.0
+        if self.carve:
+            self.points["u_out"].value = 2 if tagged else 0
         self.ctx.point_size = self.point_size
         self.points_vao.render(self.ctx.POINTS, vertices=n)
 
@@ -570,11 +757,15 @@ class ProxyIBR(Method):
 
     def release(self) -> None:
         for levels in self.vaos:
-            for vao, _ in levels.values():
-                vao.release()
+            for vaos, _ in levels.values():
+                for vao in vaos:
+                    if vao is not None:
+                        vao.release()
         for b in self._buffers:
             b.release()
         for r in (self.prog, self.resolve_vao, self.resolve_vbo, self.resolve,
-                  self.refs_fbo, self.refs, self.refs_depth, self.points_vao, self.points_vbo, self.points):
+                  self.refs_fbo, self.refs, self.refs_depth, self.points_vao, self.points_vbo, self.points,
+                  self.presort_prog, self.screen_vao, self.screen_vbo, self.screen, self.nearest_fbo,
+                  self.nearest_depth_fbo, self.nearest_p, self.nearest_e, self.nearest_depth, self.left):
             if r is not None:
                 r.release()
