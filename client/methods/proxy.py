@@ -147,6 +147,8 @@ void main() {
 
 #: The record of a pixel no proxy fragment reached (view 3).
 _NO_PROXY = (6.0, 0.0)
+#: The Left block of _SCREEN_FS before it runs: no pixel, empty boxes.
+_LEFT_EMPTY = np.array([0, 0] + [0xFFFFFFFF, 0xFFFFFFFF, 0, 0] * 2, np.uint32).tobytes()
 
 _VIEW_ERROR_GLSL = """
 uniform bool u_has_extra;
@@ -235,16 +237,19 @@ void main() {
 
 # The carving passes, restricted to the pixels that need them. In most pixels the nearest proxy
 # fragment is accepted, and then it is the nearest accepted one: the fragment carving picks.
-# So a pass with a trivial shader (early depth tests, nothing shaded twice) first keeps each
+# So a pass with a trivial shader (early depth tests: nothing is shaded twice) first keeps each
 # pixel's nearest fragment, in pass 1's own depth and clip space (the same fragment wins the
-# same ties), and one full-screen pass tests it with pass 1's own code, writing every pixel's
-# record (the background's too, so that the resolve does one lookup) and a depth that lets the
-# carving passes shade only what is left: 0 where the record is final; 0.5 where the nearest
-# fragment is not accepted but the primary does not see sky there: pass 1 may still find an
-# accepted fragment behind it, else it is pass 2's pick (the nearest fragment not on sky), its
-# fallback record already written; 1 where pass 2 must look further. Counters tell which passes
-# have any pixel left to shade (a pass costs its rasterisation even where every fragment fails
-# the depth test).
+# same ties), and one full-screen pass tests it with pass 1's own arithmetic, writing the
+# pixel's record where that is final and a depth that lets the later passes shade only the
+# pixels left to them: 0 where the record is final; 0.5 where the nearest fragment is not
+# accepted but the primary view does not see sky there: pass 1 may still find an accepted
+# fragment behind it, else the nearest fragment is pass 2's pick, its fallback record already
+# written; 1 where no proxy was drawn, or pass 2 must look past the nearest fragment: the
+# background pass then writes the background's record (one lookup per pixel in the resolve).
+# This rasteriser runs every branch of a shader, so what a pixel may not need goes into a pass
+# of its own that the depth test keeps off the other pixels; and a pass costs its rasterisation
+# even where every fragment fails the depth test, so counters and bounding boxes (in pixels)
+# of what is left skip the carving passes or scissor them.
 _PRESORT_FS = """
 #version 410
 in vec3 v_p;
@@ -258,12 +263,12 @@ void main() {
 """
 
 _SCREEN_FS = "#version 430\n%(frame)s\n" + _VIEW_ERROR_GLSL + _ACCEPT_GLSL + """
-%(background)s
 uniform sampler2D u_nearest_depth;   // 1 where nothing was drawn
 uniform sampler2D u_nearest_p;       // _PRESORT_FS's, or a point's record with w = 2
 uniform sampler2D u_nearest_e;
-layout(std430, binding = 0) buffer Left { uint n_carve; uint n_fallback; };   // pixels each carving pass must shade
-out vec4 f_ref;   // a record (zw 0), or the background: (6, kind, uv), kind 0 primary, 1 extra, 2 primary with alpha 0, 3 black
+// Pixels left to each carving pass, and their bounding boxes (min x, min y, max x, max y).
+layout(std430, binding = 0) buffer Left { uint n_left[2]; uint boxes[8]; };   // pass 1's, pass 2's
+out vec4 f_ref;   // a record (zw 0)
 // The nearest fragment's record as the carving passes would write it: 0 accepted (pass 1), 1
 // not accepted (pass 2's, if no other fragment is accepted), 2 the primary sees sky: none.
 int nearest_record(vec3 p, vec3 e, out vec2 ref) {
@@ -279,29 +284,49 @@ int nearest_record(vec3 p, vec3 e, out vec2 ref) {
     ref = (e_e < e_p) ? record(uv_e, 1.0, false) : record(uv_p, p.z <= 0.0 ? 0.0 : 2.0, false);
     return 1;
 }
+void count(int pass, uvec2 px) {
+    atomicAdd(n_left[pass], 1u);
+    atomicMin(boxes[4 * pass], px.x);
+    atomicMin(boxes[4 * pass + 1], px.y);
+    atomicMax(boxes[4 * pass + 2], px.x);
+    atomicMax(boxes[4 * pass + 3], px.y);
+}
 void main() {
     ivec2 px = ivec2(gl_FragCoord.xy);
+    f_ref = vec4(0.0);
+    gl_FragDepth = 1.0;
+    if (texelFetch(u_nearest_depth, px, 0).r == 1.0) return;   // no proxy here: the background
+    vec4 p = texelFetch(u_nearest_p, px, 0);
+    vec2 ref = p.xy;   // a moving pixel's point (w = 2): accepted
+    int r = p.w == 2.0 ? 0 : nearest_record(p.xyz, texelFetch(u_nearest_e, px, 0).xyz, ref);
+    f_ref = vec4(ref, 0.0, 0.0);
+    if (r == 0) {
+        gl_FragDepth = 0.0;
+        return;
+    }
+    count(0, uvec2(px));
+    if (r == 1) gl_FragDepth = 0.5;
+    else count(1, uvec2(px));
+}
+"""
+
+# Where the depth is still 1 after _SCREEN_FS: the background's record, (6, kind, uv), kind 0
+# primary, 1 extra, 2 primary with alpha 0, 3 black. The quad lies at depth 0.75.
+_BACKGROUND_VS = """
+#version 410
+in vec2 in_pos;
+void main() { gl_Position = vec4(in_pos, 0.5, 1.0); }
+"""
+
+_BACKGROUND_FS = "#version 410\n%(frame)s\n%(background)s\n" + """
+out vec4 f_ref;
+void main() {
     vec4 rect;
     vec2 uv;
     float alpha;
     float kind = 3.0;
     if (background(rect, uv, alpha)) kind = alpha == 0.0 ? 2.0 : (rect == u_extra_color ? 1.0 : 0.0);
     f_ref = vec4(6.0, kind, uv);
-    gl_FragDepth = 0.0;
-    if (texelFetch(u_nearest_depth, px, 0).r == 1.0) return;   // no proxy here
-    vec4 p = texelFetch(u_nearest_p, px, 0);
-    if (p.w == 2.0) { f_ref = vec4(p.xy, 0.0, 0.0); return; }   // a moving pixel's point: accepted
-    vec2 ref;
-    int r = nearest_record(p.xyz, texelFetch(u_nearest_e, px, 0).xyz, ref);
-    if (r == 0) { f_ref = vec4(ref, 0.0, 0.0); return; }
-    atomicAdd(n_carve, 1u);
-    if (r == 1) {
-        f_ref = vec4(ref, 0.0, 0.0);
-        gl_FragDepth = 0.5;
-    } else {
-        atomicAdd(n_fallback, 1u);
-        gl_FragDepth = 1.0;
-    }
 }
 """
 
@@ -517,13 +542,15 @@ class ProxyIBR(Method):
             self.refs = ctx.texture(size, 4, dtype="f4")   # position, 1
             geometry, tests = self.prog, [self.resolve]
         self.presort_prog = self.screen = self.screen_vao = self.screen_vbo = self.left = None
+        self.background_vao = self.background_vbo = None
         self.nearest_p = self.nearest_e = self.nearest_depth = self.nearest_fbo = self.nearest_depth_fbo = None
         self.background = self.resolve   # the program that finds the background of a pixel
         if self.presort:
             self.presort_prog = ctx.program(vertex_shader=_PROXY_VS, fragment_shader=_PRESORT_FS)
             self.presort_prog["u_depth_half"].value = -1.0   # pass 1's depth and clip space
-            self.screen = self.background = ctx.program(vertex_shader=FULLSCREEN_VS,
-                                                        fragment_shader=_SCREEN_FS % glsl)
+            self.screen = ctx.program(vertex_shader=FULLSCREEN_VS, fragment_shader=_SCREEN_FS % glsl)
+            self.background = ctx.program(vertex_shader=_BACKGROUND_VS, fragment_shader=_BACKGROUND_FS % glsl)
+            self.background_vbo, self.background_vao = fullscreen_quad(ctx, self.background)
             self.screen["u_nearest_p"].value = 5
             self.screen["u_nearest_e"].value = 6
             self.screen["u_nearest_depth"].value = 7
@@ -537,9 +564,9 @@ class ProxyIBR(Method):
             self.nearest_fbo = ctx.framebuffer(color_attachments=[self.nearest_p, self.nearest_e],
                                                depth_attachment=self.nearest_depth)
             self.nearest_depth_fbo = ctx.framebuffer(depth_attachment=self.nearest_depth)
-            self.left = ctx.buffer(reserve=8)   # the Left block of _SCREEN_FS
+            self.left = ctx.buffer(reserve=40)   # the Left block of _SCREEN_FS
             tests.append(self.screen)
-        for p in (self.prog, self.resolve, self.screen):
+        for p in {self.prog, self.resolve, self.screen, self.background}:
             if p is None:
                 continue
             bind_frame_uniforms(p, config)
@@ -613,18 +640,21 @@ class ProxyIBR(Method):
             # where to fetch its colour.
             ctx.enable_direct(_GL_CLIP_DISTANCE0)
             if self.presort:
-                left = self._presort(draws, moved, out_pose, frame)
+                boxes = self._presort(draws, moved, out_pose, frame)
             else:
                 self.refs_fbo.clear(*_NO_PROXY, 0.0, 0.0, depth=1.0)
-                left = (1, 1)
-            self.last_carved = left
-            if left[0] and moved is not None:
-                self._draw_points(moved, out_pose, frame)
-            for depth_half, n in zip((-1.0, 1.0), left):   # accepted fragments, then the rest behind them
-                if n:
-                    self.prog["u_fallback"].value = depth_half > 0
-                    self.prog["u_depth_half"].value = depth_half
-                    self._draw_proxies(self.prog, 0, draws)
+                boxes = ((0, 0, self.output.width, self.output.height),) * 2
+            self.last_carve_boxes = boxes
+            for depth_half, box in zip((-1.0, 1.0), boxes):   # accepted fragments, then the rest behind them
+                if box is None:
+                    continue
+                ctx.scissor = box
+                if depth_half < 0 and moved is not None:
+                    self._draw_points(moved, out_pose, frame)
+                self.prog["u_fallback"].value = depth_half > 0
+                self.prog["u_depth_half"].value = depth_half
+                self._draw_proxies(self.prog, 0, draws)
+            ctx.scissor = None
             ctx.disable_direct(_GL_CLIP_DISTANCE0)
         else:
             self.refs_fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)   # w = 0: no proxy here
@@ -652,10 +682,11 @@ class ProxyIBR(Method):
             rot = frame.extra_pose.rotation().T @ out_pose.rotation()
             self.background["u_out_to_extra"].write(rot.T.astype("f4").tobytes())
 
-    def _presort(self, draws, moved, out_pose: Pose, frame) -> tuple[int, int]:
-        """Each pixel's nearest fragment (_PRESORT_FS), tested (_SCREEN_FS): leaves every pixel's
-        record in refs, and the depth each needs for the carving passes. -> how many pixels
-        each carving pass must still shade."""
+    def _presort(self, draws, moved, out_pose: Pose, frame) -> tuple:
+        """Each pixel's nearest fragment (_PRESORT_FS), tested (_SCREEN_FS), and the background
+        where no proxy was drawn or pass 2 must look further: leaves every pixel's record in
+        refs, and the depth each needs for the carving passes. -> (x, y, width, height) of the
+        pixels each carving pass must still shade, or None where there are none."""
         ctx = self.ctx
         self.nearest_depth_fbo.clear(depth=1.0)   # the colours are read only where a fragment was drawn
         self.nearest_fbo.use()
@@ -666,15 +697,21 @@ class ProxyIBR(Method):
         self.nearest_p.use(5)
         self.nearest_e.use(6)
         self.nearest_depth.use(7)
-        self._background_rotations(out_pose, frame)
-        self.left.write(bytes(8))
+        self.left.write(_LEFT_EMPTY)
         self.left.bind_to_storage_buffer(0)
         ctx.depth_func = "1"   # always: the screen pass sets every pixel's depth
         self.screen_vao.render(ctx.TRIANGLE_STRIP)
         ctx.depth_func = "<"
+        self._background_rotations(out_pose, frame)
+        self.refs_fbo.depth_mask = False
+        self.refs_fbo.use()
+        self.background_vao.render(ctx.TRIANGLE_STRIP)
+        self.refs_fbo.depth_mask = True
+        self.refs_fbo.use()
         ctx.memory_barrier()   # the counters' writes are incoherent until then
-        carve, fallback = np.frombuffer(self.left.read(), np.uint32)
-        return int(carve), int(fallback)
+        left = np.frombuffer(self.left.read(), np.uint32)
+        return tuple((int(box[0]), int(box[1]), int(box[2] - box[0] + 1), int(box[3] - box[1] + 1)) if n else None
+                     for n, box in zip(left[:2], (left[2:6], left[6:10])))
 
     def _draw_proxies(self, prog, which: int, draws) -> None:
         """The proxies of ``draws`` (see _draws) with ``prog``, through their vao ``which``."""
@@ -766,6 +803,6 @@ class ProxyIBR(Method):
         for r in (self.prog, self.resolve_vao, self.resolve_vbo, self.resolve,
                   self.refs_fbo, self.refs, self.refs_depth, self.points_vao, self.points_vbo, self.points,
                   self.presort_prog, self.screen_vao, self.screen_vbo, self.screen, self.nearest_fbo,
-                  self.nearest_depth_fbo, self.nearest_p, self.nearest_e, self.nearest_depth, self.left):
+                  self.nearest_depth_fbo, self.background_vao, self.background_vbo, self.background, self.nearest_p, self.nearest_e, self.nearest_depth, self.left):
             if r is not None:
                 r.release()
