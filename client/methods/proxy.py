@@ -147,9 +147,6 @@ void main() {
 
 #: The record of a pixel no proxy fragment reached (view 3).
 _NO_PROXY = (6.0, 0.0)
-#: The Left block of _SCREEN_FS before it runs: no pixel, empty boxes.
-_LEFT_EMPTY = np.array([0, 0] + [0xFFFFFFFF, 0xFFFFFFFF, 0, 0] * 2, np.uint32).tobytes()
-
 _VIEW_ERROR_GLSL = """
 uniform bool u_has_extra;
 uniform float u_tau;
@@ -200,14 +197,14 @@ bool accepted(vec3 p, vec3 e, out vec2 ref) {
 }
 """
 
-# One program, two passes over the proxies (u_fallback), so that no fragment writes gl_FragDepth:
-# on a software rasteriser that rules out early depth tests, and every overlapping fragment
-# would run the shader.
+# Two passes over the proxies, so that no fragment writes gl_FragDepth: on a software rasteriser
+# that rules out early depth tests, and every overlapping fragment would run the shader. One
+# program per pass (%(main)s): this rasteriser runs both sides of every branch, even of a
+# uniform one, so a program that could do either pass would pay for both in each.
 _PROXY_FS = "#version 410\n%(frame)s\n" + _VIEW_ERROR_GLSL + _ACCEPT_GLSL + """
 in vec3 v_p;
 in vec3 v_e;
-out vec4 f_ref;   // the pixel's record, see record() (zw: 0; only _SCREEN_FS fills them)
-uniform bool u_fallback;
+out vec4 f_ref;   // the pixel's record, see record() (zw: 0, see _BACKGROUND_FS)
 // Pass 1, accepted fragments only, depth in [0, 0.5): fragments behind an accepted one already
 // drawn fail the depth test before the shader runs (objects are drawn nearest first).
 void accept() {
@@ -229,96 +226,30 @@ void fallback() {
     if (u_has_extra && !past_p) e_e = view_error(v_e, true, uv_e, sky_e, past_e);
     f_ref = vec4((e_e < e_p) ? record(uv_e, 1.0, false) : record(uv_p, v_p.z <= 0.0 ? 0.0 : 2.0, false), 0.0, 0.0);
 }
-void main() {
-    if (u_fallback) fallback(); else accept();
-}
+%(main)s
+
 """
+_ACCEPT_MAIN, _FALLBACK_MAIN = "void main() { accept(); }", "void main() { fallback(); }"
+#: carve_all: the two passes in one program, chosen by u_fallback
+_EITHER_MAIN = "uniform bool u_fallback;\nvoid main() { if (u_fallback) fallback(); else accept(); }"
 
 
-# The carving passes, restricted to the pixels that need them. In most pixels the nearest proxy
-# fragment is accepted, and then it is the nearest accepted one: the fragment carving picks.
-# So a pass with a trivial shader (early depth tests: nothing is shaded twice) first keeps each
-# pixel's nearest fragment, in pass 1's own depth and clip space (the same fragment wins the
-# same ties), and one full-screen pass tests it with pass 1's own arithmetic, writing the
-# pixel's record where that is final and a depth that lets the later passes shade only the
-# pixels left to them: 0 where the record is final; 0.5 where the nearest fragment is not
-# accepted but the primary view does not see sky there: pass 1 may still find an accepted
-# fragment behind it, else the nearest fragment is pass 2's pick, its fallback record already
-# written; 1 where no proxy was drawn, or pass 2 must look past the nearest fragment: the
-# background pass then writes the background's record (one lookup per pixel in the resolve).
-# This rasteriser runs every branch of a shader, so what a pixel may not need goes into a pass
-# of its own that the depth test keeps off the other pixels; and a pass costs its rasterisation
-# even where every fragment fails the depth test, so counters and bounding boxes (in pixels)
-# of what is left skip the carving passes or scissor them.
-_PRESORT_FS = """
-#version 410
-in vec3 v_p;
-in vec3 v_e;
-layout(location = 0) out vec4 f_p;   // primary camera space, 1: a proxy fragment
-layout(location = 1) out vec4 f_e;   // extra camera space
-void main() {
-    f_p = vec4(v_p, 1.0);
-    f_e = vec4(v_e, 0.0);
-}
-"""
-
-_SCREEN_FS = "#version 430\n%(frame)s\n" + _VIEW_ERROR_GLSL + _ACCEPT_GLSL + """
-uniform sampler2D u_nearest_depth;   // 1 where nothing was drawn
-uniform sampler2D u_nearest_p;       // _PRESORT_FS's, or a point's record with w = 2
-uniform sampler2D u_nearest_e;
-// Pixels left to each carving pass, and their bounding boxes (min x, min y, max x, max y).
-layout(std430, binding = 0) buffer Left { uint n_left[2]; uint boxes[8]; };   // pass 1's, pass 2's
-out vec4 f_ref;   // a record (zw 0)
-// The nearest fragment's record as the carving passes would write it: 0 accepted (pass 1), 1
-// not accepted (pass 2's, if no other fragment is accepted), 2 the primary sees sky: none.
-int nearest_record(vec3 p, vec3 e, out vec2 ref) {
-    vec2 uv_p, uv_e;
-    bool sky_p, sky_e, past_p, past_e;
-    ref = vec2(0.0);
-    float e_p = view_error(p, false, uv_p, sky_p, past_p);
-    float e_e = NO_MATCH;
-    if (u_has_extra && !past_p) e_e = view_error(e, true, uv_e, sky_e, past_e);
-    if (e_p < u_tau) { ref = record(uv_p, 0.0, true); return 0; }       // accepted()
-    if (!sky_p && e_e < u_tau) { ref = record(uv_e, 1.0, true); return 0; }
-    if (sky_p) return 2;                                                 // fallback()
-    ref = (e_e < e_p) ? record(uv_e, 1.0, false) : record(uv_p, p.z <= 0.0 ? 0.0 : 2.0, false);
-    return 1;
-}
-void count(int pass, uvec2 px) {
-    atomicAdd(n_left[pass], 1u);
-    atomicMin(boxes[4 * pass], px.x);
-    atomicMin(boxes[4 * pass + 1], px.y);
-    atomicMax(boxes[4 * pass + 2], px.x);
-    atomicMax(boxes[4 * pass + 3], px.y);
-}
-void main() {
-    ivec2 px = ivec2(gl_FragCoord.xy);
-    f_ref = vec4(0.0);
-    gl_FragDepth = 1.0;
-    if (texelFetch(u_nearest_depth, px, 0).r == 1.0) return;   // no proxy here: the background
-    vec4 p = texelFetch(u_nearest_p, px, 0);
-    vec2 ref = p.xy;   // a moving pixel's point (w = 2): accepted
-    int r = p.w == 2.0 ? 0 : nearest_record(p.xyz, texelFetch(u_nearest_e, px, 0).xyz, ref);
-    f_ref = vec4(ref, 0.0, 0.0);
-    if (r == 0) {
-        gl_FragDepth = 0.0;
-        return;
-    }
-    count(0, uvec2(px));
-    if (r == 1) gl_FragDepth = 0.5;
-    else count(1, uvec2(px));
-}
-"""
-
-# Where the depth is still 1 after _SCREEN_FS: the background's record, (6, kind, uv), kind 0
-# primary, 1 extra, 2 primary with alpha 0, 3 black. The quad lies at depth 0.75.
+# After pass 1, the pixels where it accepted no fragment, at depth 1 still (the quad lies at
+# 0.75): their record is the background's, (6, kind, uv) with kind 0 primary, 1 extra, 2 primary
+# with alpha 0, 3 black, unless pass 2 finds a proxy fragment there; and they are counted, with
+# their bounding box, so that pass 2 is scissored to them, or skipped. Only these pixels run the
+# background's lookups, not all (the resolve after it does one lookup per pixel), and pass 2
+# costs its rasterisation even where every fragment fails the depth test.
 _BACKGROUND_VS = """
 #version 410
 in vec2 in_pos;
 void main() { gl_Position = vec4(in_pos, 0.5, 1.0); }
 """
 
-_BACKGROUND_FS = "#version 410\n%(frame)s\n%(background)s\n" + """
+_BACKGROUND_FS = "#version 430\n%(frame)s\n%(background)s\n" + """
+// the depth test before the shader, although it writes the counters (it would run the shader first)
+layout(early_fragment_tests) in;
+layout(std430, binding = 0) buffer Left { uint n_left; uint box[4]; };   // box: min x, min y, max x, max y
 out vec4 f_ref;
 void main() {
     vec4 rect;
@@ -327,11 +258,19 @@ void main() {
     float kind = 3.0;
     if (background(rect, uv, alpha)) kind = alpha == 0.0 ? 2.0 : (rect == u_extra_color ? 1.0 : 0.0);
     f_ref = vec4(6.0, kind, uv);
+    uvec2 px = uvec2(gl_FragCoord.xy);
+    atomicAdd(n_left, 1u);
+    atomicMin(box[0], px.x);
+    atomicMin(box[1], px.y);
+    atomicMax(box[2], px.x);
+    atomicMax(box[3], px.y);
 }
 """
+#: The Left block of _BACKGROUND_FS before it runs: no pixel, an empty box.
+_LEFT_EMPTY = np.array([0, 0xFFFFFFFF, 0xFFFFFFFF, 0, 0], np.uint32).tobytes()
 
-# After _SCREEN_FS: one lookup per pixel, from the view and place its record says.
-_SCREEN_RESOLVE_FS = """
+# The resolve after _BACKGROUND_FS: one lookup per pixel, from the view and place its record says.
+_RECORD_RESOLVE_FS = """
 #version 410
 %(frame)s
 uniform sampler2D u_refs;
@@ -345,7 +284,7 @@ void main() {
     float alpha = ref.y >= 2.0 ? 1.0 : 0.0;
     vec4 rect = view == 0.0 ? u_primary_color : u_extra_color;
     bool black = view == 2.0;
-    if (view == 3.0) {
+    if (view == 3.0) {   // the background's record
         uv = ref.zw;
         rect = ref.y == 1.0 ? u_extra_color : u_primary_color;
         alpha = ref.y < 2.0 ? 1.0 : 0.0;
@@ -456,7 +395,7 @@ _POINTS_FS = """
 %(frame)s
 flat in float v_d;
 out vec4 f_out;
-uniform int u_out;                // 0: a record; 1: the world position (carve=False); 2: a record, tagged 2 (_SCREEN_FS)
+uniform bool u_position;          // carve=False: the records are world positions
 uniform mat3 u_out_to_primary;    // output camera rotation -> primary camera space
 uniform vec3 u_eye;               // output camera position in primary camera space
 uniform mat4 u_primary_to_world;
@@ -472,8 +411,7 @@ void main() {
     vec3 p = u_eye + t * r;
     if (t <= 0.0 || p.z > 0.0) discard;
     vec2 uv = wa_uv(wa_project(p).xy);
-    if (u_out == 1) f_out = vec4((u_primary_to_world * vec4(p, 1.0)).xyz, 1.0);
-    else f_out = vec4(uv.x, uv.y + 2.0, 0.0, u_out == 2 ? 2.0 : 0.0);
+    f_out = u_position ? vec4((u_primary_to_world * vec4(p, 1.0)).xyz, 1.0) : vec4(uv.x, uv.y + 2.0, 0.0, 0.0);
 }
 """
 
@@ -502,9 +440,9 @@ class ProxyIBR(Method):
                  oracle_pose=None, horizon_frames: float = DEFAULT_HORIZON_FRAMES, slack_codes: float | None = None,
                  carve_all: bool = False):
         """slack_codes: depth codes of transport error forgiven before the tau test (None: the
-        depth codec's ``DEPTH_SLACK_CODES``); ``carve_all``: run the carving passes over every
-        pixel, not only where the nearest fragment fails the test (the same image, slower: the
-        reference the presort is checked against, see _PRESORT_FS)."""
+        depth codec's ``DEPTH_SLACK_CODES``); ``carve_all``: carve as before, both passes over
+        every pixel with one program and the background found in the resolve (the same image,
+        slower: the reference the tests and ``bench/proxy_speed.py`` compare with)."""
         super().__init__(ctx, output, config)
         if not proxies:
             from pibr.protocol.errors import ConfigError
@@ -512,11 +450,12 @@ class ProxyIBR(Method):
             raise ConfigError("the proxy method needs the scene's proxies; the server sent none")
         self.tau = tau
         self.carve = bool(carve)
-        self.presort = self.carve and not carve_all
+        self.carve_all = self.carve and bool(carve_all)
         self.objects = proxies
         self.moving = [i for i, o in enumerate(proxies) if o.moving]
         self._moving_set = set(self.moving)
         self.last_points = 0
+        self.last_fallback_pixels = 0   # pixels left to pass 2 in the last render (carving, not carve_all)
         self._own_history = poses is None
         if poses is None:
             poses = PoseHistory(np.stack([o.transform for o in proxies]), np.stack([o.bounds for o in proxies]))
@@ -528,77 +467,63 @@ class ProxyIBR(Method):
         self.selector = LodSelector(proxies, output, lod_target_px, force_level=lod_level)
         glsl = {"frame": frame_glsl(config), "background": _BACKGROUND_GLSL}
         size = (output.width, output.height)
-        if self.carve:
-            self.prog = ctx.program(vertex_shader=_PROXY_VS, fragment_shader=_PROXY_FS % glsl)
-            resolve_fs = _SCREEN_RESOLVE_FS if self.presort else _RESOLVE_FS
-            self.resolve = ctx.program(vertex_shader=FULLSCREEN_VS, fragment_shader=resolve_fs % glsl)
-            # (u, v + view, v + accepted) records, see record() in _PROXY_FS; and the background's
-            # uv after _SCREEN_FS
-            self.refs = ctx.texture(size, 4 if self.presort else 2, dtype="f4")
-            geometry, tests = self.prog, [self.prog]
-        else:
-            self.prog = ctx.program(vertex_shader=_NEAREST_VS, fragment_shader=_NEAREST_FS)
+        self.background = self.background_vbo = self.background_vao = self.left = None
+        if not self.carve:
+            self.passes = [ctx.program(vertex_shader=_NEAREST_VS, fragment_shader=_NEAREST_FS)]
             self.resolve = ctx.program(vertex_shader=FULLSCREEN_VS, fragment_shader=_NEAREST_RESOLVE_FS % glsl)
             self.refs = ctx.texture(size, 4, dtype="f4")   # position, 1
-            geometry, tests = self.prog, [self.resolve]
-        self.presort_prog = self.screen = self.screen_vao = self.screen_vbo = self.left = None
-        self.background_vao = self.background_vbo = None
-        self.nearest_p = self.nearest_e = self.nearest_depth = self.nearest_fbo = self.nearest_depth_fbo = None
-        self.background = self.resolve   # the program that finds the background of a pixel
-        if self.presort:
-            self.presort_prog = ctx.program(vertex_shader=_PROXY_VS, fragment_shader=_PRESORT_FS)
-            self.presort_prog["u_depth_half"].value = -1.0   # pass 1's depth and clip space
-            self.screen = ctx.program(vertex_shader=FULLSCREEN_VS, fragment_shader=_SCREEN_FS % glsl)
+            tests = [self.resolve]
+        elif self.carve_all:
+            self.passes = [ctx.program(vertex_shader=_PROXY_VS, fragment_shader=_PROXY_FS % (glsl | {"main": _EITHER_MAIN}))]
+            self.resolve = ctx.program(vertex_shader=FULLSCREEN_VS, fragment_shader=_RESOLVE_FS % glsl)
+            # (u, v + view, v + accepted) records; see record() in _PROXY_FS
+            self.refs = ctx.texture(size, 2, dtype="f4")
+            tests = self.passes
+        else:
+            self.passes = [ctx.program(vertex_shader=_PROXY_VS, fragment_shader=_PROXY_FS % (glsl | {"main": main}))
+                           for main in (_ACCEPT_MAIN, _FALLBACK_MAIN)]
+            self.resolve = ctx.program(vertex_shader=FULLSCREEN_VS, fragment_shader=_RECORD_RESOLVE_FS % glsl)
             self.background = ctx.program(vertex_shader=_BACKGROUND_VS, fragment_shader=_BACKGROUND_FS % glsl)
             self.background_vbo, self.background_vao = fullscreen_quad(ctx, self.background)
-            self.screen["u_nearest_p"].value = 5
-            self.screen["u_nearest_e"].value = 6
-            self.screen["u_nearest_depth"].value = 7
-            self.screen_vbo, self.screen_vao = fullscreen_quad(ctx, self.screen)
-            self.nearest_p = ctx.texture(size, 4, dtype="f4")
-            self.nearest_e = ctx.texture(size, 4, dtype="f4")
-            self.nearest_depth = ctx.depth_texture(size)
-            self.nearest_depth.compare_func = ""   # read the depth itself
-            for t in (self.nearest_p, self.nearest_e, self.nearest_depth):
-                t.filter = (ctx.NEAREST, ctx.NEAREST)
-            self.nearest_fbo = ctx.framebuffer(color_attachments=[self.nearest_p, self.nearest_e],
-                                               depth_attachment=self.nearest_depth)
-            self.nearest_depth_fbo = ctx.framebuffer(depth_attachment=self.nearest_depth)
-            self.left = ctx.buffer(reserve=40)   # the Left block of _SCREEN_FS
-            tests.append(self.screen)
-        for p in {self.prog, self.resolve, self.screen, self.background}:
-            if p is None:
-                continue
+            self.left = ctx.buffer(_LEFT_EMPTY)   # the Left block of _BACKGROUND_FS
+            # records as carve_all's, or the background's (see _BACKGROUND_FS)
+            self.refs = ctx.texture(size, 4, dtype="f4")
+            tests = self.passes
+        self.prog = self.passes[0]
+        # the program that finds a pixel's background
+        self.finds_background = self.background if self.background is not None else self.resolve
+        for p in {*self.passes, self.resolve, self.finds_background}:
             bind_frame_uniforms(p, config)
             if slack_codes is not None and "u_slack_codes" in p:
                 p["u_slack_codes"].value = float(slack_codes)
         self.refs.filter = (ctx.NEAREST, ctx.NEAREST)
         self.refs_depth = ctx.depth_renderbuffer(size)
         self.refs_fbo = ctx.framebuffer(color_attachments=[self.refs], depth_attachment=self.refs_depth)
+        self.refs_depth_fbo = ctx.framebuffer(depth_attachment=self.refs_depth)
         self.resolve["u_refs" if self.carve else "u_pos"].value = 5
-        self.background["u_tan_half"].value = output_tan_half(output)
-        self.background["u_out_size"].value = (float(output.width), float(output.height))
-        for prog in {self.resolve, self.background}:
+        self.finds_background["u_tan_half"].value = output_tan_half(output)
+        self.finds_background["u_out_size"].value = (float(output.width), float(output.height))
+        for p in {self.resolve, self.finds_background}:
             for k, rect in (("u_primary_color", "primary.color"), ("u_extra_color", "extra.color")):
-                if k in prog:
-                    prog[k].value = rect_uniform(config, rect)
+                if k in p:
+                    p[k].value = rect_uniform(config, rect)
         # extra_view=False ignores a transmitted extra view: what proxy IBR does without one.
         self.uses_extra_view = bool(extra_view) and has_extra_depth(config)
         for test in tests:
-            test["u_has_extra"].value = self.uses_extra_view
+            for k, value in (("u_has_extra", self.uses_extra_view), ("u_tau", float(tau))):
+                if k in test:   # the fallback pass has no tau
+                    test[k].value = value
         # Sessions whose extra view marks peeled pixels apart from sky, in depth codes that keep
         # the mark (min_code >= 2; see protocol/depth.py), let the extra view vouch for sky.
-        self.background["u_extra_sky"].value = (self.uses_extra_view and bool(config.options.get("peel_marker"))
-                                             and config.depth_min_code >= 2)
-        for test in tests:
-            test["u_tau"].value = float(tau)
+        self.finds_background["u_extra_sky"].value = (self.uses_extra_view and bool(config.options.get("peel_marker"))
+                                                      and config.depth_min_code >= 2)
         self.resolve_vbo, self.resolve_vao = fullscreen_quad(ctx, self.resolve)
         self.points = self.points_vbo = self.points_vao = None
         if self.motion == "flow":
             self.points = ctx.program(vertex_shader=_POINTS_VS % glsl, fragment_shader=_POINTS_FS % glsl)
             bind_frame_uniforms(self.points, config)
             self.points["u_view_size"].value = (float(config.primary.width), float(config.primary.height))
-            self.points["u_out"].value = 0 if self.carve else 1
+            self.points["u_position"].value = not self.carve
             self.points["u_tan_half"].value = output_tan_half(output)
             self.points["u_out_size"].value = (float(output.width), float(output.height))
             self.points_vbo = ctx.buffer(reserve=12 * 1024, dynamic=True)
@@ -610,7 +535,7 @@ class ProxyIBR(Method):
         self.near, self.far = config.near, config.far
         self.projection = output_projection(output, self.near, self.far)
         self._buffers = []
-        self.vaos = []   # per object: level -> (vao, triangles); vao: (geometry's, presort's or None)
+        self.vaos = []   # per object: level -> (one vao per program of self.passes, triangles, (8, 4) box corners)
         for o in proxies:
             levels = {}
             for level in ("original", "proxy", "box"):
@@ -619,11 +544,13 @@ class ProxyIBR(Method):
                     continue
                 vbo = ctx.buffer(np.ascontiguousarray(v, np.float32).tobytes())
                 ibo = ctx.buffer(np.ascontiguousarray(f, np.uint32).tobytes())
-                vao = tuple(None if prog is None else
-                            ctx.vertex_array(prog, [(vbo, "3f", "in_position")], index_buffer=ibo, index_element_size=4)
-                            for prog in (geometry, self.presort_prog))
+                vaos = [ctx.vertex_array(p, [(vbo, "3f", "in_position")], index_buffer=ibo, index_element_size=4)
+                        for p in self.passes]
                 self._buffers += [vbo, ibo]
-                levels[level] = (vao, len(f))
+                lo, hi = np.min(v, axis=0), np.max(v, axis=0)
+                corners = np.array([[x, y, z, 1.0] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
+                                    for z in (lo[2], hi[2])])
+                levels[level] = (vaos, len(f), corners)
             self.vaos.append(levels)
         self.last_primitives = 0
 
@@ -635,93 +562,94 @@ class ProxyIBR(Method):
         draws = self._draws(out_pose, frame, scene_t, skip_moving=moved is not None)
         self.refs_fbo.use()
         ctx.enable(ctx.DEPTH_TEST)
-        if self.carve:
+        if self.carve_all:
             # Proxies, depth-tested, accepted fragments in front of the rest; each pixel keeps
             # where to fetch its colour.
+            self.refs_fbo.clear(*_NO_PROXY, 0.0, 0.0, depth=1.0)
             ctx.enable_direct(_GL_CLIP_DISTANCE0)
-            if self.presort:
-                boxes = self._presort(draws, moved, out_pose, frame)
-            else:
-                self.refs_fbo.clear(*_NO_PROXY, 0.0, 0.0, depth=1.0)
-                boxes = ((0, 0, self.output.width, self.output.height),) * 2
-            self.last_carve_boxes = boxes
-            for depth_half, box in zip((-1.0, 1.0), boxes):   # accepted fragments, then the rest behind them
-                if box is None:
-                    continue
-                ctx.scissor = box
-                if depth_half < 0 and moved is not None:
-                    self._draw_points(moved, out_pose, frame)
-                self.prog["u_fallback"].value = depth_half > 0
-                self.prog["u_depth_half"].value = depth_half
-                self._draw_proxies(self.prog, 0, draws)
-            ctx.scissor = None
+            if moved is not None:
+                self._draw_points(moved, out_pose, frame)
+            prog = self.prog
+            for depth_half in (-1.0, 1.0):   # accepted fragments, then the rest behind them
+                prog["u_fallback"].value = depth_half > 0
+                prog["u_depth_half"].value = depth_half
+                self._draw_proxies(0, draws)
             ctx.disable_direct(_GL_CLIP_DISTANCE0)
+        elif self.carve:
+            self._carve(draws, moved, out_pose, frame)
         else:
             self.refs_fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)   # w = 0: no proxy here
             if moved is not None:
                 ctx.enable_direct(_GL_CLIP_DISTANCE0)
                 self._draw_points(moved, out_pose, frame)
                 ctx.disable_direct(_GL_CLIP_DISTANCE0)
-            for vao, mvp, _, _, seen in draws:
+            for vaos, mvp, _, _, seen, _ in draws:
                 self.prog["u_mvp"].write(mvp)
                 self.prog["u_seen"].write(seen)
-                vao[0].render(ctx.TRIANGLES)
+                vaos[0].render(ctx.TRIANGLES)
             self.resolve["u_world_to_primary"].write(mat4_bytes(frame.primary_pose.view_matrix()))
             self.resolve["u_world_to_extra"].write(mat4_bytes((frame.extra_pose or frame.primary_pose).view_matrix()))
         ctx.disable(ctx.DEPTH_TEST)
         output_fbo.use()
         self.refs.use(5)
-        if not self.presort:
+        if self.finds_background is self.resolve:
             self._background_rotations(out_pose, frame)
         self.resolve_vao.render(ctx.TRIANGLE_STRIP)
 
-    def _background_rotations(self, out_pose: Pose, frame) -> None:
-        rot = frame.primary_pose.rotation().T @ out_pose.rotation()
-        self.background["u_out_to_src"].write(rot.T.astype("f4").tobytes())
-        if self.uses_extra_view and frame.extra_pose is not None:
-            rot = frame.extra_pose.rotation().T @ out_pose.rotation()
-            self.background["u_out_to_extra"].write(rot.T.astype("f4").tobytes())
-
-    def _presort(self, draws, moved, out_pose: Pose, frame) -> tuple:
-        """Each pixel's nearest fragment (_PRESORT_FS), tested (_SCREEN_FS), and the background
-        where no proxy was drawn or pass 2 must look further: leaves every pixel's record in
-        refs, and the depth each needs for the carving passes. -> (x, y, width, height) of the
-        pixels each carving pass must still shade, or None where there are none."""
+    def _carve(self, draws, moved, out_pose: Pose, frame) -> None:
+        """Both carving passes and the background between them (_BACKGROUND_FS): every pixel's
+        record into refs."""
         ctx = self.ctx
-        self.nearest_depth_fbo.clear(depth=1.0)   # the colours are read only where a fragment was drawn
-        self.nearest_fbo.use()
-        if moved is not None:
-            self._draw_points(moved, out_pose, frame, tagged=True)
-        self._draw_proxies(self.presort_prog, 1, draws)
+        self.refs_depth_fbo.clear(depth=1.0)   # every pixel's record is written below
         self.refs_fbo.use()
-        self.nearest_p.use(5)
-        self.nearest_e.use(6)
-        self.nearest_depth.use(7)
+        ctx.enable_direct(_GL_CLIP_DISTANCE0)
+        if moved is not None:
+            self._draw_points(moved, out_pose, frame)
+        self.passes[0]["u_depth_half"].value = -1.0
+        self._draw_proxies(0, draws)   # pass 1: accepted fragments
+        ctx.disable_direct(_GL_CLIP_DISTANCE0)
+        self._background_rotations(out_pose, frame)
         self.left.write(_LEFT_EMPTY)
         self.left.bind_to_storage_buffer(0)
-        ctx.depth_func = "1"   # always: the screen pass sets every pixel's depth
-        self.screen_vao.render(ctx.TRIANGLE_STRIP)
-        ctx.depth_func = "<"
-        self._background_rotations(out_pose, frame)
-        self.refs_fbo.depth_mask = False
+        self.refs_fbo.depth_mask = False   # pass 2 still sees where pass 1 accepted nothing
         self.refs_fbo.use()
         self.background_vao.render(ctx.TRIANGLE_STRIP)
         self.refs_fbo.depth_mask = True
         self.refs_fbo.use()
-        ctx.memory_barrier()   # the counters' writes are incoherent until then
+        ctx.memory_barrier()   # the counter's writes are incoherent until then
         left = np.frombuffer(self.left.read(), np.uint32)
-        return tuple((int(box[0]), int(box[1]), int(box[2] - box[0] + 1), int(box[3] - box[1] + 1)) if n else None
-                     for n, box in zip(left[:2], (left[2:6], left[6:10])))
+        self.last_fallback_pixels = int(left[0])
+        if left[0] == 0:
+            return
+        x0, y0, x1, y1 = (int(x) for x in left[1:])
+        ctx.enable_direct(_GL_CLIP_DISTANCE0)
+        ctx.scissor = (x0, y0, x1 - x0 + 1, y1 - y0 + 1)
+        self.passes[1]["u_depth_half"].value = 1.0
+        self._draw_proxies(1, draws, (x0, y0, x1, y1))   # pass 2: the rest, behind
+        ctx.scissor = None
+        ctx.disable_direct(_GL_CLIP_DISTANCE0)
 
-    def _draw_proxies(self, prog, which: int, draws) -> None:
-        """The proxies of ``draws`` (see _draws) with ``prog``, through their vao ``which``."""
-        for vao, mvp, to_primary, to_extra, _ in draws:
+    def _background_rotations(self, out_pose: Pose, frame) -> None:
+        prog = self.finds_background
+        rot = frame.primary_pose.rotation().T @ out_pose.rotation()
+        prog["u_out_to_src"].write(rot.T.astype("f4").tobytes())
+        if self.uses_extra_view and frame.extra_pose is not None:
+            rot = frame.extra_pose.rotation().T @ out_pose.rotation()
+            prog["u_out_to_extra"].write(rot.T.astype("f4").tobytes())
+
+    def _draw_proxies(self, which: int, draws, box=None) -> None:
+        """The proxies of ``draws`` (see _draws) with program ``which`` of self.passes; only those
+        whose screen rectangle meets ``box`` (x0, y0, x1, y1 inclusive, window pixels) if given."""
+        prog = self.passes[which]
+        for vaos, mvp, to_primary, to_extra, _, rect in draws:
+            if box is not None and (rect[0] > box[2] or rect[2] < box[0] or rect[1] > box[3] or rect[3] < box[1]):
+                continue
             prog["u_mvp"].write(mvp)
             prog["u_to_primary"].write(to_primary)
             prog["u_to_extra"].write(to_extra)
-            vao[which].render(self.ctx.TRIANGLES)
+            vaos[which].render(self.ctx.TRIANGLES)
 
-    def _draw_points(self, moved, out_pose: Pose, frame, tagged: bool = False) -> None:
+    def _draw_points(self, moved, out_pose: Pose, frame) -> None:
         """The extrapolated view's moving pixels (flow_warp.Extrapolated) as points, accepted."""
         n = len(moved.moved)
         self.last_points = n
@@ -742,16 +670,14 @@ class ProxyIBR(Method):
         if "u_primary_to_world" in self.points:
             self.points["u_primary_to_world"].write(mat4_bytes(src.matrix()))
         self.points["u_depth_half"].value = -1.0
-        if self.carve:
-            self.points["u_out"].value = 2 if tagged else 0
         self.ctx.point_size = self.point_size
         self.points_vao.render(self.ctx.POINTS, vertices=n)
 
     def _draws(self, out_pose: Pose, frame, scene_t: float, skip_moving: bool = False) -> list:
-        """[(vao, mvp, to_primary, to_extra, seen)] of the objects to draw, nearest first (so the
-        depth test rejects most hidden fragments before they are shaded); matrices as uniform
-        bytes (seen: object -> world where the views saw it). ``skip_moving``: leave the moving
-        objects out (``flow`` draws their pixels instead)."""
+        """[(vaos, mvp, to_primary, to_extra, seen, rect)] of the objects to draw, nearest first (so
+        the depth test rejects most hidden fragments before they are shaded); matrices as uniform
+        bytes (seen: object -> world where the views saw it), rect: see _screen_rect.
+        ``skip_moving``: leave the moving objects out (``flow`` draws their pixels instead)."""
         view = out_pose.view_matrix()
         to_p = frame.primary_pose.view_matrix()
         to_e = frame.extra_pose.view_matrix() if frame.extra_pose is not None else to_p
@@ -770,12 +696,26 @@ class ProxyIBR(Method):
             model = now.get(sel.index, obj.transform)
             # A moving object is drawn where it is now, but looked up where the views saw it.
             seen = seen_motion[sel.index] @ obj.transform if sel.index in seen_motion else model
-            vao, n = levels[level]
-            draws.append((vao, mat4_bytes(vp @ model), mat4_bytes(to_p @ seen), mat4_bytes(to_e @ seen),
-                          mat4_bytes(seen)))
+            vaos, n, corners = levels[level]
+            mvp = vp @ model
+            draws.append((vaos, mat4_bytes(mvp), mat4_bytes(to_p @ seen), mat4_bytes(to_e @ seen),
+                          mat4_bytes(seen), self._screen_rect(mvp, corners)))
             tris += n
         self.last_primitives = tris
         return draws
+
+    def _screen_rect(self, mvp: np.ndarray, corners: np.ndarray) -> tuple[int, int, int, int]:
+        """(x0, y0, x1, y1), inclusive, window pixels (GL's, bottom row 0) holding every fragment
+        of a mesh whose bounding box has ``corners`` (8, 4), drawn with ``mvp``; the whole output
+        where the box reaches behind the camera."""
+        w, h = self.output.width, self.output.height
+        clip = corners @ mvp.T
+        if np.any(clip[:, 3] <= 1e-6):
+            return 0, 0, w - 1, h - 1
+        x = (clip[:, 0] / clip[:, 3] + 1.0) * (0.5 * w)
+        y = (1.0 - clip[:, 1] / clip[:, 3]) * (0.5 * h)   # the images are drawn top row first
+        return (max(int(np.floor(x.min())) - 1, 0), max(int(np.floor(y.min())) - 1, 0),
+                min(int(np.ceil(x.max())) + 1, w - 1), min(int(np.ceil(y.max())) + 1, h - 1))
 
     def _frame_motions(self, frame) -> dict:
         """index -> (4, 4) motion of the moving objects at ``frame``'s scene time, from its own
@@ -794,15 +734,13 @@ class ProxyIBR(Method):
 
     def release(self) -> None:
         for levels in self.vaos:
-            for vaos, _ in levels.values():
+            for vaos, _, _ in levels.values():
                 for vao in vaos:
-                    if vao is not None:
-                        vao.release()
+                    vao.release()
         for b in self._buffers:
             b.release()
-        for r in (self.prog, self.resolve_vao, self.resolve_vbo, self.resolve,
-                  self.refs_fbo, self.refs, self.refs_depth, self.points_vao, self.points_vbo, self.points,
-                  self.presort_prog, self.screen_vao, self.screen_vbo, self.screen, self.nearest_fbo,
-                  self.nearest_depth_fbo, self.background_vao, self.background_vbo, self.background, self.nearest_p, self.nearest_e, self.nearest_depth, self.left):
+        for r in (*self.passes, self.resolve_vao, self.resolve_vbo, self.resolve, self.refs_fbo, self.refs_depth_fbo,
+                  self.refs, self.refs_depth, self.points_vao, self.points_vbo, self.points, self.background_vao,
+                  self.background_vbo, self.background, self.left):
             if r is not None:
                 r.release()
