@@ -30,14 +30,29 @@ among the static proxies. A frame whose view shows nothing moving places the mov
 proxies as ``static`` does.
 
 Shading is deferred: the proxy passes store, per pixel, which view and where to sample; one
-full-screen pass then fetches each pixel's colour once, from that view only (or the
-background where no proxy was drawn). Nothing writes gl_FragDepth (on a software rasteriser
-that rules out early depth tests, so every overlapping fragment would run the shader):
-the proxies are drawn twice, accepted fragments first into the front half of the depth range,
-then the rest into the back half, where only pixels with no accepted fragment still pass.
-Measured here (room, 960x540, CPU ms in one run): 140 against 178 for one pass writing
-gl_FragDepth and resolving with a lookup per view; the images agree to 2/255 on 0.05 % of
-pixels (the records' uv precision), bit for bit with float32 records of uv, view and alpha.
+full-screen pass then fetches each pixel's colour once, from that view only. Nothing writes
+gl_FragDepth (on a software rasteriser that rules out early depth tests, so every overlapping
+fragment would run the shader): the proxies are drawn twice, accepted fragments first into
+the front half of the depth range, then the rest into the back half, where only pixels with
+no accepted fragment still pass. Measured here (room, 960x540, CPU ms in one run): 140 against
+178 for one pass writing gl_FragDepth and resolving with a lookup per view; the images agree
+to 2/255 on 0.05 % of pixels (the records' uv precision), bit for bit with float32 records of
+uv, view and alpha.
+
+What llvmpipe (Mesa 22.3) charges for, and how the passes avoid it: it runs both sides of every
+branch, even a uniform one, so each pass has a program of its own and the background's
+lookups run in a pass of their own (_BACKGROUND_FS), after pass 1, on the pixels where it
+accepted nothing, which the depth test picks before the shader runs; the resolve then does one
+lookup. Rasterising costs per covered pixel even where every fragment fails the depth test
+(a pass over all proxies with no fragment shaded: about 0.8x the floor of ``pibr bench ibr``),
+so pass 2 is scissored to the box around those pixels and skipped where there are none.
+``carve_all`` keeps the previous passes (one program for both, pass 2 over every pixel, the
+background in the resolve): the images are equal bit for bit (tests), at 0.78x its CPU at
+960x540 and 0.65x at 1280x720 (bench/proxy_speed.py, one run: 140 against 180 CPU-ms, 5.2x
+against 6.7x the floor; 222 against 341, 3.6x against 5.5x). Tried and slower here: first testing each pixel's nearest fragment
+(a trivial-shader pass, then a full-screen test) and carving only where it fails: the two
+extra full-screen and geometry passes cost more than the shading they save; scissoring the
+carving passes per cell of a grid: every extra draw of an object repeats its vertex work.
 
 ``carve=False`` (``--no-carve``) tests only each pixel's nearest proxy fragment, in the resolve,
 after one pass with a trivial shader: 86 CPU-ms in the same run, but an unconfirmed proxy
@@ -85,7 +100,8 @@ void main() {
 }
 """
 
-# What both resolves share: the views' colour rectangles and the background of a pixel.
+# The views' colour rectangles and the background of a pixel (for _BACKGROUND_FS and the resolves
+# of carve_all and carve=False).
 _BACKGROUND_GLSL = """
 uniform vec4 u_primary_color;
 uniform vec4 u_extra_color;
