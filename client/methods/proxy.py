@@ -47,9 +47,9 @@ lookup. Rasterising costs per covered pixel even where every fragment fails the 
 (a pass over all proxies with no fragment shaded: about 0.8x the floor of ``pibr bench ibr``),
 so pass 2 is scissored to the box around those pixels and skipped where there are none.
 ``carve_all`` keeps the previous passes (one program for both, pass 2 over every pixel, the
-background in the resolve): the images are equal bit for bit (tests), at 0.78x its CPU at
-960x540 and 0.65x at 1280x720 (bench/proxy_speed.py, one run: 140 against 180 CPU-ms, 5.2x
-against 6.7x the floor; 222 against 341, 3.6x against 5.5x). Tried and slower here: first testing each pixel's nearest fragment
+background in the resolve): the images are equal bit for bit (tests), at 0.76-0.78x its CPU
+at 960x540 and 0.65-0.68x at 1280x720 (bench/proxy_speed.py, two runs; in the first 140
+against 180 CPU-ms, 5.2x against 6.7x the floor; 222 against 341, 3.6x against 5.5x). Tried and slower here: first testing each pixel's nearest fragment
 (a trivial-shader pass, then a full-screen test) and carving only where it fails: the two
 extra full-screen and geometry passes cost more than the shading they save; scissoring the
 carving passes per cell of a grid: every extra draw of an object repeats its vertex work.
