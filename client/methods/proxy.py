@@ -30,14 +30,29 @@ among the static proxies. A frame whose view shows nothing moving places the mov
 proxies as ``static`` does.
 
 Shading is deferred: the proxy passes store, per pixel, which view and where to sample; one
-full-screen pass then fetches each pixel's colour once, from that view only (or the
-background where no proxy was drawn). Nothing writes gl_FragDepth (on a software rasteriser
-that rules out early depth tests, so every overlapping fragment would run the shader):
-the proxies are drawn twice, accepted fragments first into the front half of the depth range,
-then the rest into the back half, where only pixels with no accepted fragment still pass.
-Measured here (room, 960x540, CPU ms in one run): 140 against 178 for one pass writing
-gl_FragDepth and resolving with a lookup per view; the images agree to 2/255 on 0.05 % of
-pixels (the records' uv precision), bit for bit with float32 records of uv, view and alpha.
+full-screen pass then fetches each pixel's colour once, from that view only. Nothing writes
+gl_FragDepth (on a software rasteriser that rules out early depth tests, so every overlapping
+fragment would run the shader): the proxies are drawn twice, accepted fragments first into
+the front half of the depth range, then the rest into the back half, where only pixels with
+no accepted fragment still pass. Measured here (room, 960x540, CPU ms in one run): 140 against
+178 for one pass writing gl_FragDepth and resolving with a lookup per view; the images agree
+to 2/255 on 0.05 % of pixels (the records' uv precision), bit for bit with float32 records of
+uv, view and alpha.
+
+What llvmpipe (Mesa 22.3) charges for, and how the passes avoid it: it runs both sides of every
+branch, even a uniform one, so each pass has a program of its own and the background's
+lookups run in a pass of their own (_BACKGROUND_FS), after pass 1, on the pixels where it
+accepted nothing, which the depth test picks before the shader runs; the resolve then does one
+lookup. Rasterising costs per covered pixel even where every fragment fails the depth test
+(a pass over all proxies with no fragment shaded: about 0.8x the floor of ``pibr bench ibr``),
+so pass 2 is scissored to the box around those pixels and skipped where there are none.
+``carve_all`` keeps the previous passes (one program for both, pass 2 over every pixel, the
+background in the resolve): the images are equal bit for bit (tests), at 0.76-0.78x its CPU
+at 960x540 and 0.65-0.68x at 1280x720 (bench/proxy_speed.py, two runs; in the first 140
+against 180 CPU-ms, 5.2x against 6.7x the floor; 222 against 341, 3.6x against 5.5x). Tried and slower here: first testing each pixel's nearest fragment
+(a trivial-shader pass, then a full-screen test) and carving only where it fails: the two
+extra full-screen and geometry passes cost more than the shading they save; scissoring the
+carving passes per cell of a grid: every extra draw of an object repeats its vertex work.
 
 ``carve=False`` (``--no-carve``) tests only each pixel's nearest proxy fragment, in the resolve,
 after one pass with a trivial shader: 86 CPU-ms in the same run, but an unconfirmed proxy
@@ -85,7 +100,8 @@ void main() {
 }
 """
 
-# What both resolves share: the views' colour rectangles and the background of a pixel.
+# The views' colour rectangles and the background of a pixel (for _BACKGROUND_FS and the resolves
+# of carve_all and carve=False).
 _BACKGROUND_GLSL = """
 uniform vec4 u_primary_color;
 uniform vec4 u_extra_color;
@@ -94,7 +110,6 @@ uniform mat3 u_out_to_extra; // output camera -> extra camera rotation
 uniform bool u_extra_sky;    // the extra view's sky may fill in (it marks peeled pixels apart)
 uniform vec2 u_tan_half;
 uniform vec2 u_out_size;
-out vec4 f_color;
 // Where no proxy fragment landed: the sky along this pixel's ray. Sky is at infinity, so any
 // view shows it in the same direction: the primary view's if it shows sky there, else the
 // extra view's if that one does (it saw past what blocks the primary: a lamp post in front of
@@ -129,6 +144,7 @@ _RESOLVE_FS = """
 %(frame)s
 uniform sampler2D u_refs;
 %(background)s
+out vec4 f_color;
 void main() {
     vec2 ref = texelFetch(u_refs, ivec2(gl_FragCoord.xy), 0).xy;
     float view = floor(0.5 * ref.x);
@@ -147,7 +163,6 @@ void main() {
 
 #: The record of a pixel no proxy fragment reached (view 3).
 _NO_PROXY = (6.0, 0.0)
-
 _VIEW_ERROR_GLSL = """
 uniform bool u_has_extra;
 uniform float u_tau;
@@ -171,36 +186,47 @@ float view_error(vec3 c, bool extra, out vec2 uv, out bool sky, out bool past) {
 }
 """
 
-# One program, two passes over the proxies (u_fallback), so that no fragment writes gl_FragDepth:
-# on a software rasteriser that rules out early depth tests, and every overlapping fragment
-# would run the shader.
-_PROXY_FS = "#version 410\n%(frame)s\n" + _VIEW_ERROR_GLSL + """
-in vec3 v_p;
-in vec3 v_e;
-out vec2 f_ref;   // the pixel's record, see record()
+_ACCEPT_GLSL = """
 // A pixel's record, two floats: where to fetch its colour (uv in [0, 1]^2) and from which view
 // (0 primary, 1 extra, 2 none: black; 3, the clear value: no proxy fragment here), in the
 // integer parts: u + 2 view, v + 2 accepted. 8 bytes, not 16, to clear and write; the uv keep
 // 2^-22 of precision, a quarter of a thousandth of a pixel.
 vec2 record(vec2 uv, float view, bool accepted) { return vec2(uv.x + 2.0 * view, uv.y + (accepted ? 2.0 : 0.0)); }
-uniform bool u_fallback;
-// Pass 1, accepted fragments only, depth in [0, 0.5): fragments behind an accepted one already
-// drawn fail the depth test before the shader runs (objects are drawn nearest first).
-void accept() {
+// Whether a view vouches for the proxy point at p (primary camera space) = e (extra camera
+// space); if so, its record.
+bool accepted(vec3 p, vec3 e, out vec2 ref) {
     vec2 uv_p, uv_e;
     bool sky_p, sky_e, past_p, past_e;
-    if (view_error(v_p, false, uv_p, sky_p, past_p) < u_tau) {   // the primary saw this very point
-        f_ref = record(uv_p, 0.0, true);
-        return;
+    ref = vec2(0.0);
+    if (view_error(p, false, uv_p, sky_p, past_p) < u_tau) {   // the primary saw this very point
+        ref = record(uv_p, 0.0, true);
+        return true;
     }
     // Where the primary view saw past the fragment (a farther surface, or sky), its point is
     // empty space: carve it, whatever the extra view seems to confirm there. The extra view
     // fills only what the primary could not see: points hidden behind its nearer surfaces.
-    if (u_has_extra && !(past_p || sky_p) && view_error(v_e, true, uv_e, sky_e, past_e) < u_tau) {
-        f_ref = record(uv_e, 1.0, true);
-        return;
+    if (u_has_extra && !(past_p || sky_p) && view_error(e, true, uv_e, sky_e, past_e) < u_tau) {
+        ref = record(uv_e, 1.0, true);
+        return true;
     }
-    discard;
+    return false;
+}
+"""
+
+# Two passes over the proxies, so that no fragment writes gl_FragDepth: on a software rasteriser
+# that rules out early depth tests, and every overlapping fragment would run the shader. One
+# program per pass (%(main)s): this rasteriser runs both sides of every branch, even of a
+# uniform one, so a program that could do either pass would pay for both in each.
+_PROXY_FS = "#version 410\n%(frame)s\n" + _VIEW_ERROR_GLSL + _ACCEPT_GLSL + """
+in vec3 v_p;
+in vec3 v_e;
+out vec4 f_ref;   // the pixel's record, see record() (zw: 0, see _BACKGROUND_FS)
+// Pass 1, accepted fragments only, depth in [0, 0.5): fragments behind an accepted one already
+// drawn fail the depth test before the shader runs (objects are drawn nearest first).
+void accept() {
+    vec2 ref;
+    if (!accepted(v_p, v_e, ref)) discard;
+    f_ref = vec4(ref, 0.0, 0.0);
 }
 
 // Pass 2, depth in [0.5, 1]: only pixels where no fragment was accepted still pass the depth
@@ -214,10 +240,73 @@ void fallback() {
     if (sky_p) discard;   // the primary sees nothing there: carve, let the sky show
     float e_e = NO_MATCH;
     if (u_has_extra && !past_p) e_e = view_error(v_e, true, uv_e, sky_e, past_e);
-    f_ref = (e_e < e_p) ? record(uv_e, 1.0, false) : record(uv_p, v_p.z <= 0.0 ? 0.0 : 2.0, false);
+    f_ref = vec4((e_e < e_p) ? record(uv_e, 1.0, false) : record(uv_p, v_p.z <= 0.0 ? 0.0 : 2.0, false), 0.0, 0.0);
 }
+%(main)s
+
+"""
+_ACCEPT_MAIN, _FALLBACK_MAIN = "void main() { accept(); }", "void main() { fallback(); }"
+#: carve_all: the two passes in one program, chosen by u_fallback
+_EITHER_MAIN = "uniform bool u_fallback;\nvoid main() { if (u_fallback) fallback(); else accept(); }"
+
+
+# After pass 1, the pixels where it accepted no fragment, at depth 1 still (the quad lies at
+# 0.75): their record is the background's, (6, kind, uv) with kind 0 primary, 1 extra, 2 primary
+# with alpha 0, 3 black, unless pass 2 finds a proxy fragment there; and they are counted, with
+# their bounding box, so that pass 2 is scissored to them, or skipped. Only these pixels run the
+# background's lookups, not all (the resolve after it does one lookup per pixel), and pass 2
+# costs its rasterisation even where every fragment fails the depth test.
+_BACKGROUND_VS = """
+#version 410
+in vec2 in_pos;
+void main() { gl_Position = vec4(in_pos, 0.5, 1.0); }
+"""
+
+_BACKGROUND_FS = "#version 430\n%(frame)s\n%(background)s\n" + """
+// the depth test before the shader, although it writes the counters (it would run the shader first)
+layout(early_fragment_tests) in;
+layout(std430, binding = 0) buffer Left { uint n_left; uint box[4]; };   // box: min x, min y, max x, max y
+out vec4 f_ref;
 void main() {
-    if (u_fallback) fallback(); else accept();
+    vec4 rect;
+    vec2 uv;
+    float alpha;
+    float kind = 3.0;
+    if (background(rect, uv, alpha)) kind = alpha == 0.0 ? 2.0 : (rect == u_extra_color ? 1.0 : 0.0);
+    f_ref = vec4(6.0, kind, uv);
+    uvec2 px = uvec2(gl_FragCoord.xy);
+    atomicAdd(n_left, 1u);
+    atomicMin(box[0], px.x);
+    atomicMin(box[1], px.y);
+    atomicMax(box[2], px.x);
+    atomicMax(box[3], px.y);
+}
+"""
+#: The Left block of _BACKGROUND_FS before it runs: no pixel, an empty box.
+_LEFT_EMPTY = np.array([0, 0xFFFFFFFF, 0xFFFFFFFF, 0, 0], np.uint32).tobytes()
+
+# The resolve after _BACKGROUND_FS: one lookup per pixel, from the view and place its record says.
+_RECORD_RESOLVE_FS = """
+#version 410
+%(frame)s
+uniform sampler2D u_refs;
+uniform vec4 u_primary_color;
+uniform vec4 u_extra_color;
+out vec4 f_color;
+void main() {
+    vec4 ref = texelFetch(u_refs, ivec2(gl_FragCoord.xy), 0);
+    float view = floor(0.5 * ref.x);
+    vec2 uv = vec2(ref.x - 2.0 * view, ref.y >= 2.0 ? ref.y - 2.0 : ref.y);
+    float alpha = ref.y >= 2.0 ? 1.0 : 0.0;
+    vec4 rect = view == 0.0 ? u_primary_color : u_extra_color;
+    bool black = view == 2.0;
+    if (view == 3.0) {   // the background's record
+        uv = ref.zw;
+        rect = ref.y == 1.0 ? u_extra_color : u_primary_color;
+        alpha = ref.y < 2.0 ? 1.0 : 0.0;
+        black = ref.y == 3.0;
+    }
+    f_color = black ? vec4(0.0) : vec4(atlas_rgb(rect, uv), alpha);
 }
 """
 
@@ -252,6 +341,7 @@ uniform sampler2D u_pos;
 uniform mat4 u_world_to_primary;
 uniform mat4 u_world_to_extra;
 %(background)s
+out vec4 f_color;
 void main() {
     vec4 w = texelFetch(u_pos, ivec2(gl_FragCoord.xy), 0);
     vec4 rect = u_primary_color;
@@ -363,9 +453,12 @@ class ProxyIBR(Method):
     def __init__(self, ctx, output, config, proxies=None, tau: float = DEFAULT_TAU,
                  lod_target_px: float = DEFAULT_TARGET_PX, lod_level: str | None = None, extra_view: bool = True,
                  carve: bool = True, motion: str = DEFAULT_MOTION, poses: PoseHistory | None = None,
-                 oracle_pose=None, horizon_frames: float = DEFAULT_HORIZON_FRAMES, slack_codes: float | None = None):
+                 oracle_pose=None, horizon_frames: float = DEFAULT_HORIZON_FRAMES, slack_codes: float | None = None,
+                 carve_all: bool = False):
         """slack_codes: depth codes of transport error forgiven before the tau test (None: the
-        depth codec's ``DEPTH_SLACK_CODES``)."""
+        depth codec's ``DEPTH_SLACK_CODES``); ``carve_all``: carve as before, both passes over
+        every pixel with one program and the background found in the resolve (the same image,
+        slower: the reference the tests and ``bench/proxy_speed.py`` compare with)."""
         super().__init__(ctx, output, config)
         if not proxies:
             from pibr.protocol.errors import ConfigError
@@ -373,10 +466,12 @@ class ProxyIBR(Method):
             raise ConfigError("the proxy method needs the scene's proxies; the server sent none")
         self.tau = tau
         self.carve = bool(carve)
+        self.carve_all = self.carve and bool(carve_all)
         self.objects = proxies
         self.moving = [i for i, o in enumerate(proxies) if o.moving]
         self._moving_set = set(self.moving)
         self.last_points = 0
+        self.last_fallback_pixels = 0   # pixels left to pass 2 in the last render (carving, not carve_all)
         self._own_history = poses is None
         if poses is None:
             poses = PoseHistory(np.stack([o.transform for o in proxies]), np.stack([o.bounds for o in proxies]))
@@ -387,38 +482,57 @@ class ProxyIBR(Method):
         self._seen = (None, {})   # (frame key, index -> motion) of the newest frame's own transforms
         self.selector = LodSelector(proxies, output, lod_target_px, force_level=lod_level)
         glsl = {"frame": frame_glsl(config), "background": _BACKGROUND_GLSL}
-        if self.carve:
-            self.prog = ctx.program(vertex_shader=_PROXY_VS, fragment_shader=_PROXY_FS % glsl)
+        size = (output.width, output.height)
+        self.background = self.background_vbo = self.background_vao = self.left = None
+        if not self.carve:
+            self.passes = [ctx.program(vertex_shader=_NEAREST_VS, fragment_shader=_NEAREST_FS)]
+            self.resolve = ctx.program(vertex_shader=FULLSCREEN_VS, fragment_shader=_NEAREST_RESOLVE_FS % glsl)
+            self.refs = ctx.texture(size, 4, dtype="f4")   # position, 1
+            tests = [self.resolve]
+        elif self.carve_all:
+            self.passes = [ctx.program(vertex_shader=_PROXY_VS, fragment_shader=_PROXY_FS % (glsl | {"main": _EITHER_MAIN}))]
             self.resolve = ctx.program(vertex_shader=FULLSCREEN_VS, fragment_shader=_RESOLVE_FS % glsl)
             # (u, v + view, v + accepted) records; see record() in _PROXY_FS
-            self.refs = ctx.texture((output.width, output.height), 2, dtype="f4")
-            geometry, test = self.prog, self.prog
+            self.refs = ctx.texture(size, 2, dtype="f4")
+            tests = self.passes
         else:
-            self.prog = ctx.program(vertex_shader=_NEAREST_VS, fragment_shader=_NEAREST_FS)
-            self.resolve = ctx.program(vertex_shader=FULLSCREEN_VS, fragment_shader=_NEAREST_RESOLVE_FS % glsl)
-            self.refs = ctx.texture((output.width, output.height), 4, dtype="f4")   # position, 1
-            geometry, test = self.prog, self.resolve
-        for p in (self.prog, self.resolve):
+            self.passes = [ctx.program(vertex_shader=_PROXY_VS, fragment_shader=_PROXY_FS % (glsl | {"main": main}))
+                           for main in (_ACCEPT_MAIN, _FALLBACK_MAIN)]
+            self.resolve = ctx.program(vertex_shader=FULLSCREEN_VS, fragment_shader=_RECORD_RESOLVE_FS % glsl)
+            self.background = ctx.program(vertex_shader=_BACKGROUND_VS, fragment_shader=_BACKGROUND_FS % glsl)
+            self.background_vbo, self.background_vao = fullscreen_quad(ctx, self.background)
+            self.left = ctx.buffer(_LEFT_EMPTY)   # the Left block of _BACKGROUND_FS
+            # records as carve_all's, or the background's (see _BACKGROUND_FS)
+            self.refs = ctx.texture(size, 4, dtype="f4")
+            tests = self.passes
+        self.prog = self.passes[0]
+        # the program that finds a pixel's background
+        self.finds_background = self.background if self.background is not None else self.resolve
+        for p in {*self.passes, self.resolve, self.finds_background}:
             bind_frame_uniforms(p, config)
             if slack_codes is not None and "u_slack_codes" in p:
                 p["u_slack_codes"].value = float(slack_codes)
         self.refs.filter = (ctx.NEAREST, ctx.NEAREST)
-        self.refs_depth = ctx.depth_renderbuffer((output.width, output.height))
+        self.refs_depth = ctx.depth_renderbuffer(size)
         self.refs_fbo = ctx.framebuffer(color_attachments=[self.refs], depth_attachment=self.refs_depth)
+        self.refs_depth_fbo = ctx.framebuffer(depth_attachment=self.refs_depth)
         self.resolve["u_refs" if self.carve else "u_pos"].value = 5
-        self.resolve["u_tan_half"].value = output_tan_half(output)
-        self.resolve["u_out_size"].value = (float(output.width), float(output.height))
-        for k, rect in (("u_primary_color", "primary.color"), ("u_extra_color", "extra.color")):
-            if k in self.resolve:
-                self.resolve[k].value = rect_uniform(config, rect)
+        self.finds_background["u_tan_half"].value = output_tan_half(output)
+        self.finds_background["u_out_size"].value = (float(output.width), float(output.height))
+        for p in {self.resolve, self.finds_background}:
+            for k, rect in (("u_primary_color", "primary.color"), ("u_extra_color", "extra.color")):
+                if k in p:
+                    p[k].value = rect_uniform(config, rect)
         # extra_view=False ignores a transmitted extra view: what proxy IBR does without one.
         self.uses_extra_view = bool(extra_view) and has_extra_depth(config)
-        test["u_has_extra"].value = self.uses_extra_view
+        for test in tests:
+            for k, value in (("u_has_extra", self.uses_extra_view), ("u_tau", float(tau))):
+                if k in test:   # the fallback pass has no tau
+                    test[k].value = value
         # Sessions whose extra view marks peeled pixels apart from sky, in depth codes that keep
         # the mark (min_code >= 2; see protocol/depth.py), let the extra view vouch for sky.
-        self.resolve["u_extra_sky"].value = (self.uses_extra_view and bool(config.options.get("peel_marker"))
-                                             and config.depth_min_code >= 2)
-        test["u_tau"].value = float(tau)
+        self.finds_background["u_extra_sky"].value = (self.uses_extra_view and bool(config.options.get("peel_marker"))
+                                                      and config.depth_min_code >= 2)
         self.resolve_vbo, self.resolve_vao = fullscreen_quad(ctx, self.resolve)
         self.points = self.points_vbo = self.points_vao = None
         if self.motion == "flow":
@@ -437,7 +551,7 @@ class ProxyIBR(Method):
         self.near, self.far = config.near, config.far
         self.projection = output_projection(output, self.near, self.far)
         self._buffers = []
-        self.vaos = []   # per object: level -> (vao, triangles)
+        self.vaos = []   # per object: level -> (one vao per program of self.passes, triangles, (8, 4) box corners)
         for o in proxies:
             levels = {}
             for level in ("original", "proxy", "box"):
@@ -446,10 +560,13 @@ class ProxyIBR(Method):
                     continue
                 vbo = ctx.buffer(np.ascontiguousarray(v, np.float32).tobytes())
                 ibo = ctx.buffer(np.ascontiguousarray(f, np.uint32).tobytes())
-                vao = ctx.vertex_array(geometry, [(vbo, "3f", "in_position")], index_buffer=ibo,
-                                       index_element_size=4)
+                vaos = [ctx.vertex_array(p, [(vbo, "3f", "in_position")], index_buffer=ibo, index_element_size=4)
+                        for p in self.passes]
                 self._buffers += [vbo, ibo]
-                levels[level] = (vao, len(f))
+                lo, hi = np.min(v, axis=0), np.max(v, axis=0)
+                corners = np.array([[x, y, z, 1.0] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
+                                    for z in (lo[2], hi[2])])
+                levels[level] = (vaos, len(f), corners)
             self.vaos.append(levels)
         self.last_primitives = 0
 
@@ -461,43 +578,92 @@ class ProxyIBR(Method):
         draws = self._draws(out_pose, frame, scene_t, skip_moving=moved is not None)
         self.refs_fbo.use()
         ctx.enable(ctx.DEPTH_TEST)
-        if self.carve:
+        if self.carve_all:
             # Proxies, depth-tested, accepted fragments in front of the rest; each pixel keeps
             # where to fetch its colour.
             self.refs_fbo.clear(*_NO_PROXY, 0.0, 0.0, depth=1.0)
             ctx.enable_direct(_GL_CLIP_DISTANCE0)
             if moved is not None:
                 self._draw_points(moved, out_pose, frame)
+            prog = self.prog
             for depth_half in (-1.0, 1.0):   # accepted fragments, then the rest behind them
-                self.prog["u_fallback"].value = depth_half > 0
-                self.prog["u_depth_half"].value = depth_half
-                for vao, mvp, to_primary, to_extra, _ in draws:
-                    self.prog["u_mvp"].write(mvp)
-                    self.prog["u_to_primary"].write(to_primary)
-                    self.prog["u_to_extra"].write(to_extra)
-                    vao.render(ctx.TRIANGLES)
+                prog["u_fallback"].value = depth_half > 0
+                prog["u_depth_half"].value = depth_half
+                self._draw_proxies(0, draws)
             ctx.disable_direct(_GL_CLIP_DISTANCE0)
+        elif self.carve:
+            self._carve(draws, moved, out_pose, frame)
         else:
             self.refs_fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)   # w = 0: no proxy here
             if moved is not None:
                 ctx.enable_direct(_GL_CLIP_DISTANCE0)
                 self._draw_points(moved, out_pose, frame)
                 ctx.disable_direct(_GL_CLIP_DISTANCE0)
-            for vao, mvp, _, _, seen in draws:
+            for vaos, mvp, _, _, seen, _ in draws:
                 self.prog["u_mvp"].write(mvp)
                 self.prog["u_seen"].write(seen)
-                vao.render(ctx.TRIANGLES)
+                vaos[0].render(ctx.TRIANGLES)
             self.resolve["u_world_to_primary"].write(mat4_bytes(frame.primary_pose.view_matrix()))
             self.resolve["u_world_to_extra"].write(mat4_bytes((frame.extra_pose or frame.primary_pose).view_matrix()))
         ctx.disable(ctx.DEPTH_TEST)
         output_fbo.use()
         self.refs.use(5)
+        if self.finds_background is self.resolve:
+            self._background_rotations(out_pose, frame)
+        self.resolve_vao.render(ctx.TRIANGLE_STRIP)
+
+    def _carve(self, draws, moved, out_pose: Pose, frame) -> None:
+        """Both carving passes and the background between them (_BACKGROUND_FS): every pixel's
+        record into refs."""
+        ctx = self.ctx
+        self.refs_depth_fbo.clear(depth=1.0)   # every pixel's record is written below
+        self.refs_fbo.use()
+        ctx.enable_direct(_GL_CLIP_DISTANCE0)
+        if moved is not None:
+            self._draw_points(moved, out_pose, frame)
+        self.passes[0]["u_depth_half"].value = -1.0
+        self._draw_proxies(0, draws)   # pass 1: accepted fragments
+        ctx.disable_direct(_GL_CLIP_DISTANCE0)
+        self._background_rotations(out_pose, frame)
+        self.left.write(_LEFT_EMPTY)
+        self.left.bind_to_storage_buffer(0)
+        self.refs_fbo.depth_mask = False   # pass 2 still sees where pass 1 accepted nothing
+        self.refs_fbo.use()
+        self.background_vao.render(ctx.TRIANGLE_STRIP)
+        self.refs_fbo.depth_mask = True
+        self.refs_fbo.use()
+        ctx.memory_barrier()   # the counter's writes are incoherent until then
+        left = np.frombuffer(self.left.read(), np.uint32)
+        self.last_fallback_pixels = int(left[0])
+        if left[0] == 0:
+            return
+        x0, y0, x1, y1 = (int(x) for x in left[1:])
+        ctx.enable_direct(_GL_CLIP_DISTANCE0)
+        ctx.scissor = (x0, y0, x1 - x0 + 1, y1 - y0 + 1)
+        self.passes[1]["u_depth_half"].value = 1.0
+        self._draw_proxies(1, draws, (x0, y0, x1, y1))   # pass 2: the rest, behind
+        ctx.scissor = None
+        ctx.disable_direct(_GL_CLIP_DISTANCE0)
+
+    def _background_rotations(self, out_pose: Pose, frame) -> None:
+        prog = self.finds_background
         rot = frame.primary_pose.rotation().T @ out_pose.rotation()
-        self.resolve["u_out_to_src"].write(rot.T.astype("f4").tobytes())
+        prog["u_out_to_src"].write(rot.T.astype("f4").tobytes())
         if self.uses_extra_view and frame.extra_pose is not None:
             rot = frame.extra_pose.rotation().T @ out_pose.rotation()
-            self.resolve["u_out_to_extra"].write(rot.T.astype("f4").tobytes())
-        self.resolve_vao.render(ctx.TRIANGLE_STRIP)
+            prog["u_out_to_extra"].write(rot.T.astype("f4").tobytes())
+
+    def _draw_proxies(self, which: int, draws, box=None) -> None:
+        """The proxies of ``draws`` (see _draws) with program ``which`` of self.passes; only those
+        whose screen rectangle meets ``box`` (x0, y0, x1, y1 inclusive, window pixels) if given."""
+        prog = self.passes[which]
+        for vaos, mvp, to_primary, to_extra, _, rect in draws:
+            if box is not None and (rect[0] > box[2] or rect[2] < box[0] or rect[1] > box[3] or rect[3] < box[1]):
+                continue
+            prog["u_mvp"].write(mvp)
+            prog["u_to_primary"].write(to_primary)
+            prog["u_to_extra"].write(to_extra)
+            vaos[which].render(self.ctx.TRIANGLES)
 
     def _draw_points(self, moved, out_pose: Pose, frame) -> None:
         """The extrapolated view's moving pixels (flow_warp.Extrapolated) as points, accepted."""
@@ -524,10 +690,10 @@ class ProxyIBR(Method):
         self.points_vao.render(self.ctx.POINTS, vertices=n)
 
     def _draws(self, out_pose: Pose, frame, scene_t: float, skip_moving: bool = False) -> list:
-        """[(vao, mvp, to_primary, to_extra, seen)] of the objects to draw, nearest first (so the
-        depth test rejects most hidden fragments before they are shaded); matrices as uniform
-        bytes (seen: object -> world where the views saw it). ``skip_moving``: leave the moving
-        objects out (``flow`` draws their pixels instead)."""
+        """[(vaos, mvp, to_primary, to_extra, seen, rect)] of the objects to draw, nearest first (so
+        the depth test rejects most hidden fragments before they are shaded); matrices as uniform
+        bytes (seen: object -> world where the views saw it), rect: see _screen_rect.
+        ``skip_moving``: leave the moving objects out (``flow`` draws their pixels instead)."""
         view = out_pose.view_matrix()
         to_p = frame.primary_pose.view_matrix()
         to_e = frame.extra_pose.view_matrix() if frame.extra_pose is not None else to_p
@@ -546,12 +712,26 @@ class ProxyIBR(Method):
             model = now.get(sel.index, obj.transform)
             # A moving object is drawn where it is now, but looked up where the views saw it.
             seen = seen_motion[sel.index] @ obj.transform if sel.index in seen_motion else model
-            vao, n = levels[level]
-            draws.append((vao, mat4_bytes(vp @ model), mat4_bytes(to_p @ seen), mat4_bytes(to_e @ seen),
-                          mat4_bytes(seen)))
+            vaos, n, corners = levels[level]
+            mvp = vp @ model
+            draws.append((vaos, mat4_bytes(mvp), mat4_bytes(to_p @ seen), mat4_bytes(to_e @ seen),
+                          mat4_bytes(seen), self._screen_rect(mvp, corners)))
             tris += n
         self.last_primitives = tris
         return draws
+
+    def _screen_rect(self, mvp: np.ndarray, corners: np.ndarray) -> tuple[int, int, int, int]:
+        """(x0, y0, x1, y1), inclusive, window pixels (GL's, bottom row 0) holding every fragment
+        of a mesh whose bounding box has ``corners`` (8, 4), drawn with ``mvp``; the whole output
+        where the box reaches behind the camera."""
+        w, h = self.output.width, self.output.height
+        clip = corners @ mvp.T
+        if np.any(clip[:, 3] <= 1e-6):
+            return 0, 0, w - 1, h - 1
+        x = (clip[:, 0] / clip[:, 3] + 1.0) * (0.5 * w)
+        y = (1.0 - clip[:, 1] / clip[:, 3]) * (0.5 * h)   # the images are drawn top row first
+        return (max(int(np.floor(x.min())) - 1, 0), max(int(np.floor(y.min())) - 1, 0),
+                min(int(np.ceil(x.max())) + 1, w - 1), min(int(np.ceil(y.max())) + 1, h - 1))
 
     def _frame_motions(self, frame) -> dict:
         """index -> (4, 4) motion of the moving objects at ``frame``'s scene time, from its own
@@ -570,11 +750,13 @@ class ProxyIBR(Method):
 
     def release(self) -> None:
         for levels in self.vaos:
-            for vao, _ in levels.values():
-                vao.release()
+            for vaos, _, _ in levels.values():
+                for vao in vaos:
+                    vao.release()
         for b in self._buffers:
             b.release()
-        for r in (self.prog, self.resolve_vao, self.resolve_vbo, self.resolve,
-                  self.refs_fbo, self.refs, self.refs_depth, self.points_vao, self.points_vbo, self.points):
+        for r in (*self.passes, self.resolve_vao, self.resolve_vbo, self.resolve, self.refs_fbo, self.refs_depth_fbo,
+                  self.refs, self.refs_depth, self.points_vao, self.points_vbo, self.points, self.background_vao,
+                  self.background_vbo, self.background, self.left):
             if r is not None:
                 r.release()

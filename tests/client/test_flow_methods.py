@@ -88,3 +88,24 @@ def test_the_textures_are_restored_for_the_methods_that_show_the_frame_as_decode
     finally:
         static.release()
         flow.release()
+
+
+def test_proxy_flow_points_carve_as_when_carving_every_pixel(sim):
+    """The moved pixels drawn as points with the proxies: the default carving gives carve_all's
+    image (the path it replaced), bit for bit, colour and alpha."""
+    scene = sim.scene
+    swing = next(o for o in scene.objects if o.name == "pendulum").animation
+    t_frame = (np.pi - swing.phase) / swing.speed
+    pose = _pendulum_pose(scene, t_frame)
+    frame = sim.frame_at(t_frame, pose)
+    images = {}
+    for carve_all in (False, True):
+        m = sim.make_method("proxy", motion="flow", carve_all=carve_all)
+        try:
+            sim.target.begin()
+            m.render(pose, frame, sim.textures, t_frame + 0.2)
+            images[carve_all] = sim.target.read().copy()
+            assert m.last_points > 0
+        finally:
+            m.release()
+    np.testing.assert_array_equal(images[False], images[True])

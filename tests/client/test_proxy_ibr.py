@@ -204,3 +204,44 @@ def test_carving_lets_confirmed_surfaces_show_through_coarse_proxies(sim):
     assert score["box", True][0] > score["box", False][0] + 1.0      # measured: 14.6 against 13.0 dB
     assert score["box", False][1] > score["box", True][1] + 0.5      # the boxes' unconfirmed fragments
     assert abs(score[None, True][0] - score[None, False][0]) < 1.5
+
+
+def _image(sim, display, frame, t, **options):
+    """(rgba (h, w, 4) as the method left it, the method's pass-2 pixel count or None)."""
+    m = sim.make_method("proxy", **options)
+    try:
+        sim.target.begin()
+        m.render(display, frame, sim.textures, t)
+        return sim.target.read().copy(), getattr(m, "last_fallback_pixels", None)
+    finally:
+        m.release()
+
+
+def test_restricted_carving_gives_the_image_of_carving_every_pixel(sim):
+    """The default carving (one program per pass, the background and pass 2 only where pass 1
+    accepted nothing, pass 2 scissored to them) against carve_all (both passes over every pixel,
+    the background in the resolve: the path it replaced): equal, bit for bit, colour and alpha,
+    on room frames along a head trace and at the extremes (inside a proxy, at the poles, every
+    object as its box, facing the primary's hemisphere rim)."""
+    scene = sim.scene
+    cases = [(display, (t_render, rendered), t_disp, {})
+             for t_disp, display, t_render, rendered in
+             display_samples(scene, "pred6dof-1", 20.0, 2.0, 30.0, LatencyModel(rate_hz=30.0))[::15]]
+    origin = scene.viewer_origin
+    R = origin.rotation()
+    cases.append((Pose.make(origin.p + 0.3 * R[:, 0] - 0.2 * R[:, 2], origin.q), (0.0, origin), 0.0,
+                  {"lod_level": "box"}))
+    cases.append((Pose.make(origin.p, quat_multiply(origin.q, quat_from_axis_angle((0, 1, 0), np.pi / 2))),
+                  (0.0, origin), 0.0, {}))
+    for yaw, pitch in ((0.0, 0.0), (0.5, 1.5), (0.0, -1.5)):
+        pose = Pose.make((0.3, 1.6, -0.2), quat_from_euler([yaw, pitch, 0.0], "yxz"))
+        cases.append((pose, (0.0, pose), 0.0, {}))
+    left = []
+    for display, (t_render, rendered), t, options in cases:
+        frame = sim.frame_at(t_render, rendered)   # the textures hold the last frame made
+        restricted, n = _image(sim, display, frame, t, **options)
+        everywhere, _ = _image(sim, display, frame, t, carve_all=True, **options)
+        np.testing.assert_array_equal(restricted, everywhere)
+        left.append(n)
+    pixels = sim.output.width * sim.output.height
+    assert any(0 < n < pixels // 10 for n in left), left   # pass 2 ran, on part of the image only
