@@ -52,8 +52,10 @@ class DecodedFlow:
     samples: FlowSamples | None = None
 
 
-def encode_motion_flow(flow, moving, coder: str = DEFAULT_FLOW_CODER, scale: int = 8, **options) -> tuple[bytes, DecodedFlow]:
-    """flow (h, w, 2) float pixels, moving (h, w) bool -> (payload, what the decoder will see).
+def encode_motion_flow(flow, moving, coder: str = DEFAULT_FLOW_CODER, scale: int = 8, decoded: bool = True,
+                       **options) -> tuple[bytes, DecodedFlow | None]:
+    """flow (h, w, 2) float pixels, moving (h, w) bool -> (payload, what the decoder will see, or
+    None unless ``decoded``: the server sends the payload only).
 
     options go to the coder (``blocks``: block_log2; ``edges``: threshold, spacing_log2, q)."""
     moving = np.asarray(moving, dtype=bool)
@@ -62,17 +64,17 @@ def encode_motion_flow(flow, moving, coder: str = DEFAULT_FLOW_CODER, scale: int
         raise ValueError(f"unknown flow coder {coder!r}; choose from {', '.join(FLOW_CODERS)}")
     if not (1 <= w <= 0xFFFF and 1 <= h <= 0xFFFF):
         raise ValueError(f"view size {w}x{h} outside 1..65535")
-    flow = np.asarray(flow, dtype=np.float64)
+    flow = np.asarray(flow)
     if flow.shape != (h, w, 2):
         raise ValueError(f"flow must have shape ({h}, {w}, 2), got {flow.shape}")
-    flow = np.where(moving[..., None], np.nan_to_num(flow), 0.0)
     if not moving.any():
-        return _HEAD.pack(_NONE, w, h), _still(w, h)
-    if coder == "blocks":
-        section, dense, mov = encode_motion(flow, moving, scale, **options)
-        return _HEAD.pack(_IDS[coder], w, h) + section, DecodedFlow(coder, w, h, dense=(dense, mov))
+        return _HEAD.pack(_NONE, w, h), _still(w, h) if decoded else None
+    if coder == "blocks":   # reads the flow of moving pixels only
+        section, dense, mov = encode_motion(flow, moving, scale, decoded=decoded, **options)
+        return _HEAD.pack(_IDS[coder], w, h) + section, DecodedFlow(coder, w, h, dense=(dense, mov)) if decoded else None
+    flow = np.where(moving[..., None], np.nan_to_num(np.asarray(flow, dtype=np.float64)), 0.0)
     section, samples = encode_flow_edges(flow, moving, scale, **options)
-    return _HEAD.pack(_IDS[coder], w, h) + section, DecodedFlow(coder, w, h, samples=samples)
+    return _HEAD.pack(_IDS[coder], w, h) + section, DecodedFlow(coder, w, h, samples=samples) if decoded else None
 
 
 def _still(w, h) -> DecodedFlow:

@@ -13,4 +13,4 @@ def motion_flow_payload(produced, coder: str) -> bytes:
     """The MOTION_FLOW payload of a :class:`~pibr.server.pipeline.ProducedFrame` rendered with motion."""
     if produced.motion is None or produced.moving is None:
         raise ValueError("the frame was rendered without motion (ProducerSpec.motion_dt)")
-    return encode_motion_flow(produced.motion, produced.moving, coder)[0]
+    return encode_motion_flow(produced.motion, produced.moving, coder, decoded=False)[0]

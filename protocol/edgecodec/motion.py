@@ -138,26 +138,55 @@ def _block_any(mask, block_log2):
     return p.reshape(bh, s, bw, s).any(axis=(1, 3))
 
 
-def encode_motion(motion, moving, scale: int = 8, block_log2: int = 3) -> tuple[bytes, np.ndarray, np.ndarray]:
+@njit(cache=True, nogil=True)
+def _block_sums(motion, moving, block_log2, total, count):
+    """Per block, the float64 sum of its moving pixels' motion (NaN as 0, +-inf as +-the largest
+    float64, as numpy.nan_to_num) into total (bh, bw, 2), and how many there are into count (bh, bw).
+
+    A pass over the mask that touches the motion of moving pixels only: the frame's motion is
+    zero almost everywhere, and whole-frame float64 copies cost ~100 ms a 1088² frame."""
+    h, w = moving.shape
+    big = np.finfo(np.float64).max
+    for y in range(h):
+        i = y >> block_log2
+        for x in range(w):
+            if not moving[y, x]:
+                continue
+            j = x >> block_log2
+            for c in range(2):
+                v = np.float64(motion[y, x, c])
+                if np.isnan(v):
+                    v = 0.0
+                elif np.isinf(v):
+                    v = big if v > 0 else -big
+                total[i, j, c] += v
+            count[i, j] += 1
+
+
+def encode_motion(motion, moving, scale: int = 8, block_log2: int = 3,
+                  decoded: bool = True) -> tuple[bytes, np.ndarray | None, np.ndarray]:
     """Motion section of one frame.
 
     motion : (h, w, 2) float pixels (x right, y down); moving : (h, w) bool.
-    Returns (section bytes, b"" when nothing moves; decoded motion (h, w, 2) float32; moving mask (h, w) bool).
+    Returns (section bytes, b"" when nothing moves; decoded motion (h, w, 2) float32, None
+    unless ``decoded``; moving mask (h, w) bool).
     """
-    moving = np.asarray(moving, dtype=bool)
+    moving = np.ascontiguousarray(moving, dtype=bool)
     h, w = moving.shape
     if not (1 <= scale <= 255 and MIN_BLOCK_LOG2 <= block_log2 <= MAX_BLOCK_LOG2):
         raise ValueError(f"motion scale must be 1..255 and block_log2 {MIN_BLOCK_LOG2}..{MAX_BLOCK_LOG2}")
     if not moving.any():
-        return b"", np.zeros((h, w, 2), np.float32), moving
+        return b"", np.zeros((h, w, 2), np.float32) if decoded else None, moving
+    motion = np.asarray(motion)
+    if motion.dtype not in (np.float32, np.float64):
+        motion = motion.astype(np.float64)
+    if motion.shape != (h, w, 2):
+        raise ValueError(f"motion must have shape ({h}, {w}, 2), got {motion.shape}")
     s = 1 << block_log2
     bh, bw = (h + s - 1) // s, (w + s - 1) // s
-    mv = np.zeros((bh * s, bw * s, 2), dtype=np.float64)
-    mv[:h, :w] = np.where(moving[..., None], np.nan_to_num(np.asarray(motion, dtype=np.float64)), 0.0)
-    cnt = np.zeros((bh * s, bw * s), dtype=np.float64)
-    cnt[:h, :w] = moving
-    total = mv.reshape(bh, s, bw, s, 2).sum(axis=(1, 3))
-    n = cnt.reshape(bh, s, bw, s).sum(axis=(1, 3))
+    total = np.zeros((bh, bw, 2), dtype=np.float64)
+    n = np.zeros((bh, bw), dtype=np.int64)
+    _block_sums(np.ascontiguousarray(motion), moving, block_log2, total, n)
     blocks = n > 0
     mean = total / np.maximum(n, 1)[..., None]
     vq = np.ascontiguousarray(np.where(blocks[..., None], quantize_motion(mean, scale), 0), dtype=np.int32)
@@ -171,7 +200,7 @@ def encode_motion(motion, moving, scale: int = 8, block_log2: int = 3) -> tuple[
             break
         capacity = int(es[4]) + 16
     section = _HEAD.pack(scale, block_log2, len(mask_bytes)) + mask_bytes + vec_bytes
-    return section, _expand(vq, moving, scale, block_log2), moving
+    return section, _expand(vq, moving, scale, block_log2) if decoded else None, moving
 
 
 def _expand(vq, moving, scale, block_log2):

@@ -173,3 +173,48 @@ def test_edge_section_lengths_are_checked_before_use():
         decode_motion_flow(bytes(payload), WIDTH, HEIGHT)
     with pytest.raises(CodecError, match="edge samples in a 64x48 view"):
         decode_flow_edges(bytes([8, 5, 1]) + (10 ** 6).to_bytes(4, "little") + bytes(12), HEIGHT, WIDTH)
+
+
+def _numpy_block_means(motion, moving, block_log2):
+    """The blocks coder's per-block mean motion as first written, in whole-frame numpy."""
+    h, w = moving.shape
+    s = 1 << block_log2
+    bh, bw = -(-h // s), -(-w // s)
+    mv = np.zeros((bh * s, bw * s, 2))
+    mv[:h, :w] = np.where(moving[..., None], np.nan_to_num(np.asarray(motion, np.float64)), 0.0)
+    cnt = np.zeros((bh * s, bw * s))
+    cnt[:h, :w] = moving
+    n = cnt.reshape(bh, s, bw, s).sum(axis=(1, 3))
+    with np.errstate(over="ignore", invalid="ignore"):
+        total = mv.reshape(bh, s, bw, s, 2).sum(axis=(1, 3))
+    return total, n
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_block_sums_read_only_moving_pixels_as_the_whole_frame_numpy_did(dtype):
+    from pibr.protocol.edgecodec.motion import _block_sums
+
+    rng = np.random.default_rng(7)
+    for k in range(12):
+        h, w = (int(x) for x in rng.integers(1, 70, 2))
+        motion = (rng.standard_normal((h, w, 2)) * 10.0 ** rng.uniform(-3, 3)).astype(dtype)
+        moving = rng.random((h, w)) < rng.uniform(0.0, 1.0)
+        motion[rng.random((h, w, 2)) < 0.05] = np.nan
+        motion[rng.random((h, w, 2)) < 0.01] = np.inf
+        motion[~moving & (rng.random((h, w)) < 0.5)] = 1e6   # static pixels' values never count
+        for block_log2 in (3, 5):
+            s = 1 << block_log2
+            total = np.zeros((-(-h // s), -(-w // s), 2))
+            n = np.zeros(total.shape[:2], np.int64)
+            _block_sums(motion, moving, block_log2, total, n)
+            want_total, want_n = _numpy_block_means(motion, moving, block_log2)
+            np.testing.assert_array_equal(n, want_n)
+            np.testing.assert_array_equal(total, want_total)
+
+
+def test_the_server_gets_the_payload_without_the_decoded_flow():
+    flow, moving = moving_field()
+    for coder in FLOW_CODERS:
+        payload, decoded = encode_motion_flow(flow, moving, coder)
+        bare, none = encode_motion_flow(flow, moving, coder, decoded=False)
+        assert bare == payload and none is None and decoded is not None
