@@ -292,6 +292,19 @@ def register(sub) -> None:
     cs.add_argument("--out", default="out/bench")
     cs.set_defaults(func=cmd_bench_codec_speed)
 
+    ps = bs.add_parser("proxy-speed", help="proxy's CPU ms against the passes it replaced, --no-carve and the floor",
+                       description="CPU ms of proxy's passes in one run: the default carving, carve_all (the passes "
+                                   "it replaced: the same image), carve=False and the floor of 'pibr bench ibr', "
+                                   "interleaved frame by frame on room frames along the evaluation windows, and how "
+                                   "far the default's images are from carve_all's. Writes proxy_speed.json.")
+    ps.add_argument("--scene", default="room")
+    ps.add_argument("--sizes", type=_sizes, default=((960, 540), (1280, 720)), metavar="WxH,...",
+                    help="output sizes (default 960x540,1280x720)")
+    ps.add_argument("--frames", type=_positive_int, default=12, help="display samples (default 12)")
+    ps.add_argument("--repeats", type=_positive_int, default=3, help="renders of each sample (default 3)")
+    ps.add_argument("--out", default="out/bench")
+    ps.set_defaults(func=cmd_bench_proxy_speed)
+
     pa = bs.add_parser("pareto", help="every method and knob: client ms against DSSIM (Reinert et al.'s Figure 9)",
                        description="Runs every client method with each of its knobs (and a zero-latency oracle) on "
                                    "the scenes and head-trace windows, scores each against ground truth (DSSIM, "
@@ -684,6 +697,18 @@ def cmd_bench_codec(args) -> int:
     r = run_codec_bench(**opts)
     print_codec_table(r)
     print(f"written: {args.out}/codec.json, {args.out}/codec.png" + (f", {args.plot}" if args.plot else ""))
+    return 0
+
+
+def cmd_bench_proxy_speed(args) -> int:
+    from .proxy_speed import print_table, run
+    from .results import write_result
+
+    r = run(args.sizes, args.frames, args.repeats, args.scene)
+    print_table(r)
+    write_result(args.out, "proxy_speed.json", {"benchmark": "proxy-speed", "scene": args.scene,
+                                                 "window": "evaluation windows (speed only)", "sizes": r})
+    print(f"written: {args.out}/proxy_speed.json")
     return 0
 
 

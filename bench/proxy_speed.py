@@ -4,7 +4,7 @@ pass with the proxy pass's lookups), interleaved frame by frame on room frames a
 evaluation windows' head traces, at each output size; and how far the default's images are
 from carve_all's.
 
-    python -m pibr.bench.proxy_speed [--sizes 960x540 1280x720] [--frames 12] [--repeats 3]
+    pibr bench proxy-speed [--sizes 960x540,1280x720] [--frames 12] [--repeats 3]
 
 CPU ms of this process (``time.process_time``: the rasteriser's threads included) per display,
 median over frames and repeats; the first display of every variant is not counted (shader
@@ -12,7 +12,6 @@ compilation). Other processes on the machine change the numbers: compare within 
 """
 from __future__ import annotations
 
-import argparse
 import time
 
 import numpy as np
@@ -91,17 +90,3 @@ def print_table(result: dict) -> None:
         im = r["image_vs_carve_all"]
         print(f"  proxy vs carve_all: max |diff| {im['max_abs_diff']}/255, "
               f"{100 * im['pixels_differing_max']:.4f} % of pixels differ at most")
-
-
-def main(argv=None) -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--sizes", nargs="+", default=["960x540", "1280x720"], help="output sizes, WxH")
-    ap.add_argument("--frames", type=int, default=12)
-    ap.add_argument("--repeats", type=int, default=3)
-    args = ap.parse_args(argv)
-    sizes = [tuple(int(x) for x in s.lower().split("x")) for s in args.sizes]
-    print_table(run(sizes, args.frames, args.repeats))
-
-
-if __name__ == "__main__":
-    main()

@@ -227,3 +227,10 @@ def test_bench_realtime_passes_only_the_server_options_set():
     assert realtime_server_args(a.view_size, a.extra_view) == ("--view-size", "512x512", "--extra-view", "off")
     with pytest.raises(SystemExit):
         parse(["bench", "realtime", "--extra-view", "sometimes"])
+
+
+def test_bench_proxy_speed_takes_its_sizes():
+    a = build_parser().parse_args(["bench", "proxy-speed", "--sizes", "320x180,640x360", "--frames", "2"])
+    assert a.sizes == ((320, 180), (640, 360)) and a.frames == 2 and a.repeats == 3
+    with pytest.raises(SystemExit):
+        build_parser().parse_args(["bench", "proxy-speed", "--frames", "0"])
