@@ -73,6 +73,8 @@ from .base import FULLSCREEN_VS, Method, fullscreen_quad, output_tan_half
 from .view_warp import mat4_bytes, output_projection
 
 DEFAULT_TAU = 0.1
+#: The background pass counts and boxes the pixels left to pass 2 with storage-buffer atomics.
+_GL_FOR_RESTRICTED_CARVING = 430
 _GL_CLIP_DISTANCE0 = 0x3000
 
 _PROXY_VS = """
@@ -458,7 +460,9 @@ class ProxyIBR(Method):
         """slack_codes: depth codes of transport error forgiven before the tau test (None: the
         depth codec's ``DEPTH_SLACK_CODES``); ``carve_all``: carve as before, both passes over
         every pixel with one program and the background found in the resolve (the same image,
-        slower: the reference the tests and ``bench/proxy_speed.py`` compare with)."""
+        slower: the reference the tests and ``bench/proxy_speed.py`` compare with). A context
+        older than GL 4.3 (no storage-buffer atomics for the background pass's count) carves
+        as carve_all does."""
         super().__init__(ctx, output, config)
         if not proxies:
             from pibr.protocol.errors import ConfigError
@@ -466,7 +470,7 @@ class ProxyIBR(Method):
             raise ConfigError("the proxy method needs the scene's proxies; the server sent none")
         self.tau = tau
         self.carve = bool(carve)
-        self.carve_all = self.carve and bool(carve_all)
+        self.carve_all = self.carve and (bool(carve_all) or ctx.version_code < _GL_FOR_RESTRICTED_CARVING)
         self.objects = proxies
         self.moving = [i for i, o in enumerate(proxies) if o.moving]
         self._moving_set = set(self.moving)

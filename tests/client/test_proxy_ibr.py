@@ -245,3 +245,28 @@ def test_restricted_carving_gives_the_image_of_carving_every_pixel(sim):
         left.append(n)
     pixels = sim.output.width * sim.output.height
     assert any(0 < n < pixels // 10 for n in left), left   # pass 2 ran, on part of the image only
+
+
+class _OlderGL:
+    """The session's context as a GL 4.1 driver would report it (everything else delegated)."""
+
+    version_code = 410
+
+    def __init__(self, ctx):
+        self._ctx = ctx
+
+    def __getattr__(self, name):
+        return getattr(self._ctx, name)
+
+
+def test_a_context_without_storage_buffer_atomics_carves_every_pixel(sim):
+    """The restricted passes count pixels with GL 4.3 atomics; an older context gets carve_all's
+    passes (the same image) instead of a shader that does not compile."""
+    from pibr.client.methods import make_method
+
+    for ctx, restricted in ((sim.ctx, True), (_OlderGL(sim.ctx), False)):
+        m = make_method("proxy", ctx, sim.output, sim.session, proxies=sim.proxies, poses=sim.poses)
+        try:
+            assert m.carve_all is (not restricted)
+        finally:
+            m.release()
