@@ -170,14 +170,9 @@ def yuv420_to_rgb(yuv: np.ndarray, width: int, height: int) -> np.ndarray:
 # pass's ``(sum of 4 texels) * (255 / 4) * k`` becomes ``sum * (63.75 k)``.
 _F = np.float32
 _INV255 = _F(1.0 / 255.0)
-_LUMA_K = tuple(_F(_F(k) * _F(255.0)) for k in (0.299, 0.587, 0.114))
-_U_K = tuple(_F(_F(k) * _F(255.0 / 4.0)) for k in (-0.168736, -0.331264, 0.5))
-_V_K = tuple(_F(_F(k) * _F(255.0 / 4.0)) for k in (0.5, -0.418688, -0.081312))
-
-
-_L0, _L1, _L2 = _LUMA_K
-_U0, _U1, _U2 = _U_K
-_V0, _V1, _V2 = _V_K
+_L0, _L1, _L2 = (_F(_F(k) * _F(255.0)) for k in (0.299, 0.587, 0.114))
+_U0, _U1, _U2 = (_F(_F(k) * _F(255.0 / 4.0)) for k in (-0.168736, -0.331264, 0.5))
+_V0, _V1, _V2 = (_F(_F(k) * _F(255.0 / 4.0)) for k in (0.5, -0.418688, -0.081312))
 
 # error_model="numpy": no zero-division branch, so LLVM vectorises the loops (2-3x here);
 # without fastmath nothing is reassociated or contracted, so every lane rounds as above.

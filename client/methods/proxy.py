@@ -661,9 +661,11 @@ class ProxyIBR(Method):
         """The proxies of ``draws`` (see _draws) with program ``which`` of self.passes; only those
         whose screen rectangle meets ``box`` (x0, y0, x1, y1 inclusive, window pixels) if given."""
         prog = self.passes[which]
-        for vaos, mvp, to_primary, to_extra, _, rect in draws:
-            if box is not None and (rect[0] > box[2] or rect[2] < box[0] or rect[1] > box[3] or rect[3] < box[1]):
-                continue
+        for vaos, mvp, to_primary, to_extra, _, bounds in draws:
+            if box is not None:
+                rect = self._screen_rect(*bounds)
+                if rect[0] > box[2] or rect[2] < box[0] or rect[1] > box[3] or rect[3] < box[1]:
+                    continue
             prog["u_mvp"].write(mvp)
             prog["u_to_primary"].write(to_primary)
             prog["u_to_extra"].write(to_extra)
@@ -694,9 +696,10 @@ class ProxyIBR(Method):
         self.points_vao.render(self.ctx.POINTS, vertices=n)
 
     def _draws(self, out_pose: Pose, frame, scene_t: float, skip_moving: bool = False) -> list:
-        """[(vaos, mvp, to_primary, to_extra, seen, rect)] of the objects to draw, nearest first (so
+        """[(vaos, mvp, to_primary, to_extra, seen, bounds)] of the objects to draw, nearest first (so
         the depth test rejects most hidden fragments before they are shaded); matrices as uniform
-        bytes (seen: object -> world where the views saw it), rect: see _screen_rect.
+        bytes (seen: object -> world where the views saw it), bounds: _screen_rect's arguments,
+        for the passes that skip objects outside a box.
         ``skip_moving``: leave the moving objects out (``flow`` draws their pixels instead)."""
         view = out_pose.view_matrix()
         to_p = frame.primary_pose.view_matrix()
@@ -719,7 +722,7 @@ class ProxyIBR(Method):
             vaos, n, corners = levels[level]
             mvp = vp @ model
             draws.append((vaos, mat4_bytes(mvp), mat4_bytes(to_p @ seen), mat4_bytes(to_e @ seen),
-                          mat4_bytes(seen), self._screen_rect(mvp, corners)))
+                          mat4_bytes(seen), (mvp, corners)))
             tris += n
         self.last_primitives = tris
         return draws
