@@ -1,8 +1,9 @@
 """CPU cost of ``proxy``'s passes in one run: the default carving, ``carve_all`` (the passes it
-replaced, the same image), ``carve=False`` and the floor of ``pibr bench ibr`` (a full-screen
-pass with the proxy pass's lookups), interleaved frame by frame on room frames along the
-evaluation windows' head traces, at each output size; and how far the default's images are
-from carve_all's.
+replaced, the same image), ``carve=False``, each of those two also without culling back faces
+(``cull=False``), and the floor of ``pibr bench ibr`` (a full-screen pass with the proxy pass's
+lookups), interleaved frame by frame on room frames along the evaluation windows' head traces,
+at each output size; and how far the default's images are from carve_all's and from those
+drawn without culling.
 
     pibr bench proxy-speed [--sizes 960x540,1280x720] [--frames 12] [--repeats 3]
 
@@ -16,7 +17,8 @@ import time
 
 import numpy as np
 
-VARIANTS = {"proxy": {}, "proxy carve_all": {"carve_all": True}, "proxy no carve": {"carve": False}}
+VARIANTS = {"proxy": {}, "proxy no cull": {"cull": False}, "proxy carve_all": {"carve_all": True},
+            "proxy no carve": {"carve": False}, "no carve, no cull": {"carve": False, "cull": False}}
 
 
 def _samples(scene, frames: int, rate_hz: float = 30.0, latency_ms: float = 128.0) -> list:
@@ -48,7 +50,7 @@ def run(sizes=((960, 540), (1280, 720)), frames: int = 12, repeats: int = 3, sce
         methods = {label: sim.make_method("proxy", **options) for label, options in VARIANTS.items()}
         methods["floor"] = sim.make_method("floor")
         cpu = {label: [] for label in methods}
-        diff_max, diff_pixels, fallback = 0, [], []
+        diff_max, diff_pixels, fallback, cull_pixels = 0, [], [], []
         try:
             for i, (t_disp, display, t_render, rendered) in enumerate(samples):
                 frame = sim.frame_at(t_render, rendered)
@@ -67,6 +69,8 @@ def run(sizes=((960, 540), (1280, 720)), frames: int = 12, repeats: int = 3, sce
                 d = np.abs(images["proxy"].astype(np.int16) - images["proxy carve_all"].astype(np.int16)).max(axis=2)
                 diff_max = max(diff_max, int(d.max()))
                 diff_pixels.append(float(np.mean(d > 0)))
+                d = np.abs(images["proxy"].astype(np.int16) - images["proxy no cull"].astype(np.int16)).max(axis=2)
+                cull_pixels.append(float(np.mean(d > 0)))
                 fallback.append(methods["proxy"].last_fallback_pixels / (size[0] * size[1]))
         finally:
             for m in methods.values():
@@ -77,6 +81,8 @@ def run(sizes=((960, 540), (1280, 720)), frames: int = 12, repeats: int = 3, sce
         result[f"{size[0]}x{size[1]}"] = {
             "cpu_ms": med, "ratio_to_floor": {label: v / med["floor"] for label, v in med.items()},
             "image_vs_carve_all": {"max_abs_diff": diff_max, "pixels_differing_max": max(diff_pixels)},
+            "image_vs_no_cull": {"pixels_differing_mean": float(np.mean(cull_pixels)),
+                                 "pixels_differing_max": max(cull_pixels)},
             "pass2_pixels_mean": float(np.mean(fallback)), "frames": len(samples), "repeats": repeats}
     return result
 
@@ -90,3 +96,6 @@ def print_table(result: dict) -> None:
         im = r["image_vs_carve_all"]
         print(f"  proxy vs carve_all: max |diff| {im['max_abs_diff']}/255, "
               f"{100 * im['pixels_differing_max']:.4f} % of pixels differ at most")
+        im = r["image_vs_no_cull"]
+        print(f"  proxy vs no cull: {100 * im['pixels_differing_mean']:.3f} % of pixels differ on average, "
+              f"{100 * im['pixels_differing_max']:.3f} % at most")

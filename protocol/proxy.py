@@ -73,6 +73,67 @@ class ProxyObject:
         return {"original": self.original, "proxy": self.proxy}.get(name) or self.box_mesh()
 
 
+def is_closed(faces: np.ndarray) -> bool:
+    """Whether (m, 3) faces bound a volume: every directed edge occurs as often as its reverse
+    (no boundary, consistent orientation; non-manifold edges allowed). Winding numbers are then
+    integers away from the surface, so "inside" is well defined."""
+    f = np.asarray(faces, dtype=np.int64)
+    if len(f) == 0:
+        return False
+    e = f[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
+    n = int(f.max()) + 1
+    fwd, fwd_count = np.unique(e[:, 0] * n + e[:, 1], return_counts=True)
+    rev, rev_count = np.unique(e[:, 1] * n + e[:, 0], return_counts=True)
+    return bool(np.array_equal(fwd, rev) and np.array_equal(fwd_count, rev_count))
+
+
+def signed_volume(vertices: np.ndarray, faces: np.ndarray) -> float:
+    """Signed volume of a closed (n, 3) / (m, 3) mesh: positive when its faces wind outward
+    (counter-clockwise seen from outside)."""
+    v = np.asarray(vertices, dtype=np.float64)
+    f = np.asarray(faces, dtype=np.int64)
+    if len(f) == 0:
+        return 0.0
+    return float(np.einsum("ij,ij->i", v[f[:, 0]], np.cross(v[f[:, 1]], v[f[:, 2]])).sum() / 6.0)
+
+
+def winds_outward(vertices: np.ndarray, faces: np.ndarray) -> bool:
+    """Whether a (n, 3) / (m, 3) mesh, its vertices merged where they lie within a millionth of
+    its size of each other (meshes split them along uv seams and creases, and a seam's two ends
+    may differ by rounding), is closed and none of its connected parts is wound inward (negative
+    volume; a two-sided sheet, volume 0, is fine). Then the winding number is never negative,
+    so from any point outside the mesh's box every back face lies behind a front face of the
+    same mesh: what makes culling back faces safe."""
+    v = np.asarray(vertices, dtype=np.float64).reshape(-1, 3)
+    f = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
+    if len(f) == 0:
+        return False
+    step = 1e-6 * max(float(np.max(np.ptp(v, axis=0))), 1e-9)
+    # (two positions either side of a rounding boundary stay apart: the mesh then counts as open)
+    _, first, merged = np.unique(np.round(v / step), axis=0, return_index=True, return_inverse=True)
+    points = v[first]
+    f = merged.reshape(-1)[f]
+    f = f[(f[:, 0] != f[:, 1]) & (f[:, 1] != f[:, 2]) & (f[:, 2] != f[:, 0])]   # sliver faces merged away
+    if not is_closed(f):
+        return False
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    n = len(points)
+    edges = f[:, [0, 1, 1, 2]].reshape(-1, 2)
+    graph = coo_matrix((np.ones(len(edges), np.int8), (edges[:, 0], edges[:, 1])), shape=(n, n))
+    parts, label = connected_components(graph, directed=False)
+    part = label[f[:, 0]]
+    volume = np.bincount(part, np.einsum("ij,ij->i", points[f[:, 0]], np.cross(points[f[:, 1]], points[f[:, 2]])) / 6.0,
+                         minlength=parts)
+    lo = np.full((parts, 3), np.inf)
+    hi = np.full((parts, 3), -np.inf)
+    np.minimum.at(lo, label, points)
+    np.maximum.at(hi, label, points)
+    box = np.prod(np.maximum(hi - lo, 1e-9), axis=1)
+    return bool(np.all(volume >= -1e-6 * box) and volume.sum() > 0.0)
+
+
 def _pack_mesh(parts: list, vertices, faces) -> None:
     v = np.ascontiguousarray(vertices, dtype="<f4").reshape(-1, 3)
     f = np.ascontiguousarray(faces, dtype="<u4").reshape(-1, 3)

@@ -43,6 +43,7 @@ from typing import Callable
 import numpy as np
 
 from pibr.protocol.errors import SceneError
+from pibr.protocol.proxy import is_closed, signed_volume
 
 from .mesh_queries import closest_points_on_mesh, winding_numbers
 from .scene import Mesh
@@ -143,15 +144,6 @@ def is_watertight(faces: np.ndarray) -> bool:
     return bool(np.all(np.isin(e[:, 1] * n + e[:, 0], code)))
 
 
-def signed_volume(vertices: np.ndarray, faces: np.ndarray) -> float:
-    """Signed volume of a closed (n, 3) / (m, 3) mesh: positive when its faces wind outward."""
-    v = np.asarray(vertices, dtype=np.float64)
-    f = np.asarray(faces, dtype=np.int64)
-    if len(f) == 0:
-        return 0.0
-    return float(np.einsum("ij,ij->i", v[f[:, 0]], np.cross(v[f[:, 1]], v[f[:, 2]])).sum() / 6.0)
-
-
 # ----------------------------------------------------------------------------- pipeline stages
 
 def hull_surface(solid: np.ndarray, lo: np.ndarray, voxel: float) -> tuple[np.ndarray, np.ndarray]:
@@ -192,20 +184,6 @@ def decimate(vertices: np.ndarray, faces: np.ndarray, target: int) -> tuple[np.n
     remap = np.full(len(v), -1, dtype=np.int64)
     remap[used] = np.arange(len(used))
     return v[used], remap[f]
-
-
-def is_closed(faces: np.ndarray) -> bool:
-    """Whether (m, 3) faces bound a volume: every directed edge occurs as often as its reverse
-    (no boundary, consistent orientation; non-manifold edges allowed). Winding numbers are then
-    integers away from the surface, so "inside" is well defined."""
-    f = np.asarray(faces, dtype=np.int64)
-    if len(f) == 0:
-        return False
-    e = f[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
-    n = int(f.max()) + 1
-    fwd, fwd_count = np.unique(e[:, 0] * n + e[:, 1], return_counts=True)
-    rev, rev_count = np.unique(e[:, 1] * n + e[:, 0], return_counts=True)
-    return bool(np.array_equal(fwd, rev) and np.array_equal(fwd_count, rev_count))
 
 
 def make_manifold(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -18,6 +18,7 @@ from typing import Iterable
 import numpy as np
 
 from pibr.protocol.errors import SceneError
+from pibr.protocol.proxy import signed_volume as mesh_signed_volume
 
 from .scene import Mesh, vertex_normals
 
@@ -627,6 +628,4 @@ def leaf(length: float = 0.12, width: float = 0.05, segments: int = 4, curl: flo
 
 def signed_volume(mesh: Mesh) -> float:
     """Volume enclosed by a closed mesh: positive when its faces wind CCW seen from outside."""
-    v = mesh.vertices.astype(np.float64)
-    f = mesh.faces
-    return float(np.einsum("ij,ij->i", v[f[:, 0]], np.cross(v[f[:, 1]], v[f[:, 2]])).sum() / 6.0)
+    return mesh_signed_volume(mesh.vertices, mesh.faces)

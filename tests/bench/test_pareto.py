@@ -87,7 +87,8 @@ def test_tiny_pareto_run(tmp_path):
     v = room["variants"]
     assert set(v) == {"none", "rotation", "coarse-meshwarp s=2", "coarse-meshwarp s=4", "coarse-meshwarp s=8",
                       "coarse-meshwarp s=16", "proxy", "proxy lod 2px", "proxy lod 16px", "proxy tau 0.05",
-                      "proxy tau 0.2", "proxy, no extra view", "proxy, no carving", "proxy, static motion",
+                      "proxy tau 0.2", "proxy, no extra view", "proxy, no carving", "proxy, no culling",
+                      "proxy, static motion",
                       "proxy, oracle motion", ORACLE}
     assert v["proxy, oracle motion"]["options"] == {"motion": "oracle"}
     assert all(x["quality"]["frames"] == 3 and x["quality"]["flip_frames"] == 2 for x in v.values())

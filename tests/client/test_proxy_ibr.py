@@ -270,3 +270,39 @@ def test_a_context_without_storage_buffer_atomics_carves_every_pixel(sim):
             assert m.carve_all is (not restricted)
         finally:
             m.release()
+
+
+def test_culling_back_faces_leaves_the_nearest_fragments_as_they_were(sim):
+    """Skipping the back faces of closed, outward meshes the camera is outside of: with
+    carve=False (each pixel's nearest fragment) the image is equal bit for bit to drawing every
+    face, along a head trace and at the extremes (the camera inside the torus knot's box but
+    outside its tube, inside a proxy, every object as its box), and culling did happen."""
+    scene = sim.scene
+    cases = [(display, (t_render, rendered), t_disp, {})
+             for t_disp, display, t_render, rendered in
+             display_samples(scene, "pred6dof-1", 20.0, 2.0, 30.0, LatencyModel(rate_hz=30.0))[::15]]
+    origin = scene.viewer_origin
+    R = origin.rotation()
+    cases.append((Pose.make(origin.p + 0.3 * R[:, 0] - 0.2 * R[:, 2], origin.q), (0.0, origin), 0.0,
+                  {"lod_level": "box"}))
+    for yaw, pitch in ((0.0, 0.0), (0.5, 1.5), (2.0, -0.3)):
+        pose = Pose.make((0.3, 1.6, -0.2), quat_from_euler([yaw, pitch, 0.0], "yxz"))   # in the knot's box
+        cases.append((pose, (0.0, pose), 0.0, {}))
+    culled = []
+    for display, (t_render, rendered), t, options in cases:
+        frame = sim.frame_at(t_render, rendered)
+        images = {}
+        for cull in (True, False):
+            m = sim.make_method("proxy", carve=False, cull=cull, **options)
+            try:
+                sim.target.begin()
+                m.render(display, frame, sim.textures, t)
+                images[cull] = sim.target.read().copy()
+                if cull:
+                    culled.append(m.last_culled)
+                else:
+                    assert m.last_culled == 0
+            finally:
+                m.release()
+        np.testing.assert_array_equal(images[True], images[False])
+    assert min(culled) > 0, culled
