@@ -147,12 +147,12 @@ def add_method_knobs(parser) -> None:
                            help="gridwarp: no depth-aware hole filling")
     group.add_argument("--no-extra-view", dest="knob_extra_view", action="store_const", const=False, default=None,
                        help="proxy: ignore the transmitted extra view")
-    from .object_motion import CLIENT_MOTION_MODES
+    from .object_motion import CLIENT_MOTION_MODES, DEFAULT_MOTION
 
     group.add_argument("--motion", dest="knob_motion", choices=CLIENT_MOTION_MODES, default=None,
                        help=f"how moving objects are brought to the display time. proxy, from the transforms the "
                             f"frames carried: static (where the newest frame saw them), velocity (constant linear "
-                            f"and angular velocity), accel (second order), default velocity; flow, for proxy and "
+                            f"and angular velocity), accel (second order), default {DEFAULT_MOTION}; flow, for proxy and "
                             f"every method that re-projects the primary view (none, rotation, homography, splat, "
                             f"meshwarp, coarse-meshwarp): the moving pixels warped along the frames' motion flow "
                             f"(Pajak et al.), default static")
