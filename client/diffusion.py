@@ -798,12 +798,12 @@ _REACH = 3
 
 
 @njit(cache=True, nogil=True)
-def _diffuse_regions(codes, valid, edges, n, boxes, runs, run_start, max_work, iterations, out, done, fws, uws,
+def _diffuse_regions(codes, valid, edges, n, boxes, runs, run_start, max_work, iterations, out, skipped, fws, uws,
                      stamps, stamp_base):
     """Push-pull every region (n, boxes, runs, run_start: see :func:`_label_runs`) from its own
-    samples into ``out`` (h, w) (which also gets the samples), marking the pixels set in ``done``;
-    regions without samples or beyond the work budget are left alone. Returns how many pixels are
-    set (samples included). fws (float64) / uws (uint8): flat memory of at least
+    samples into ``out`` (h, w) (which also gets the samples); regions without samples or beyond
+    the work budget are left alone and marked in ``skipped`` (n + 1,) uint8, zero on entry.
+    Returns how many pixels are set (samples included). fws (float64) / uws (uint8): flat memory of at least
     :func:`_workspace_sizes` (h, w) elements, reused by every region; stamps: flat int32, 2 h w
     elements, none above stamp_base (see :meth:`DiffusionWorkspace.stamps`).
 
@@ -865,6 +865,7 @@ def _diffuse_regions(codes, valid, edges, n, boxes, runs, run_start, max_work, i
         x0, x1 = max(boxes[c, 2] - 1, 0), min(boxes[c, 3] + 1, w - 1)
         bh, bw = y1 - y0 + 1, x1 - x0 + 1
         if used + bh * bw > budget:
+            skipped[c] = 1
             continue
         used += bh * bw
         r0, r1 = run_start[c], run_start[c + 1]
@@ -894,6 +895,7 @@ def _diffuse_regions(codes, valid, edges, n, boxes, runs, run_start, max_work, i
                     own[y, xx] = sc
                     n_samples += 1
         if n_samples == 0 or n_unknown == 0:
+            skipped[c] = n_unknown > 0
             continue
         # row spans reaching _REACH beyond the region, inside the box
         for y in range(y0, y1 + 1):
@@ -1042,18 +1044,38 @@ def _diffuse_regions(codes, valid, edges, n, boxes, runs, run_start, max_work, i
             else:
                 _half_sweep_runs(uo, ue, vo, runs, r0, r1, 1, y0, y1, x0, x1)
                 _half_sweep_runs(ue, uo, ve, runs, r0, r1, 0, y0, y1, x0, x1)
+        # the region's unknown pixels into out, pixel pairs (2 k, 2 k + 1) from the k-th element of
+        # both colours in one branch-free pass (x + y even is ue)
         for r in range(r0, r1):
             y, a, b = np.uint64(runs[r, 0]), np.uint64(runs[r, 1]), np.uint64(runs[r, 2])
-            for x in range(a + ((a + y) & one), b + one, two):  # x + y even
+            even_first = (y & one) == 0
+            first = ue if even_first else uo    # holds the even columns of row y
+            second = uo if even_first else ue   # the odd ones
+            x = a
+            if x & one:
                 if not valid[y, x]:
-                    out[y, x] = ue[y, x >> one]
-                    done[y, x] = 1
-            for x in range(a + ((a + y + one) & one), b + one, two):
-                if not valid[y, x]:
-                    out[y, x] = uo[y, x >> one]
-                    done[y, x] = 1
+                    out[y, x] = second[y, x >> one]
+                x += one
+            for k in range(x >> one, (b + one) >> one):
+                x = k + k
+                out[y, x] = out[y, x] if valid[y, x] else first[y, k]
+                out[y, x + one] = out[y, x + one] if valid[y, x + one] else second[y, k]
+            if (b & one) == 0 and b >= a + (a & one) and not valid[y, b]:
+                out[y, b] = first[y, b >> one]
         n_done += n_unknown
     return n_done
+
+
+@njit(cache=True, nogil=True)
+def _mark_skipped(runs, run_start, skipped, valid, missing):
+    """missing (h, w) uint8 = 1 at the unknown pixels of the regions marked in ``skipped``."""
+    for c in range(1, len(skipped)):
+        if skipped[c]:
+            for r in range(run_start[c], run_start[c + 1]):
+                y = runs[r, 0]
+                for x in range(runs[r, 1], runs[r, 2] + 1):
+                    if not valid[y, x]:
+                        missing[y, x] = 1
 
 
 def _check(samples: DecodedSamples):
@@ -1132,11 +1154,12 @@ def diffuse(samples: DecodedSamples, max_work: float = 16.0, iterations: int = D
     runs = iws[:6 * max_runs].reshape((2 * max_runs, 3))
     n, boxes, _, run_start = _label_runs(edges, runs, iws[6 * max_runs:7 * max_runs])
     out = np.empty(edges.shape, dtype=np.float32)
-    done = np.zeros(edges.shape, dtype=np.uint8)
+    skipped = np.zeros(n + 1, dtype=np.uint8)
     n_done = _diffuse_regions(codes, valid, edges, n, boxes, runs, run_start, float(max_work), int(iterations), out,
-                              done, fws, uws, *workspace.stamps(h, w, n))
-    if n_done < out.size:  # regions without samples or over the work budget
-        missing = ~(done.view(bool) | samples.valid)
+                              skipped, fws, uws, *workspace.stamps(h, w, n))
+    if n_done < out.size:  # regions without samples or over the work budget, or edge pixels without a sample
+        missing = samples.edges & ~samples.valid
+        _mark_skipped(runs, run_start, skipped, valid, missing.view(np.uint8))
         out[missing] = push_pull_fast(samples.codes, samples.valid, iterations)[missing]
     return out
 

@@ -360,12 +360,15 @@ def _check_size(width, height):
 
 @njit(cache=True, nogil=True)
 def _assemble_kernel(edges, values, off, regular, rows, cols, codes, valid):
+    """codes / valid (h, w), written whole: the edges' values (0 elsewhere), then the regular samples."""
     h, w = edges.shape
-    for y in range(h):
-        for x in range(w):
-            if edges[y, x]:
-                codes[y, x] = values[off + y, off + x]
-                valid[y, x] = True
+    uoff = np.uint64(off)
+    for y in range(np.uint64(h)):
+        # branch-free on unsigned indices, so the loop vectorises (signed ones are wrap-around tested)
+        for x in range(np.uint64(w)):
+            e = edges[y, x]
+            codes[y, x] = values[y + uoff, x + uoff] if e else 0
+            valid[y, x] = e
     for i in range(len(rows)):
         for j in range(len(cols)):
             y, x = rows[i], cols[j]
@@ -379,8 +382,8 @@ def _assemble(edges, signs, values, regular, rows, cols, bits, min_code, q, moti
     """The DecodedSamples of decoded parts; values (h + 2 pad, w + 2 pad): the edges' values
     with a border of ``values_pad`` (the value coder's padded image, read without a copy)."""
     h, w = edges.shape
-    codes = np.zeros((h, w), dtype=np.uint16)
-    valid = np.zeros((h, w), dtype=bool)
+    codes = np.empty((h, w), dtype=np.uint16)   # written whole by the kernel
+    valid = np.empty((h, w), dtype=bool)
     edges = np.ascontiguousarray(edges, dtype=bool)
     _assemble_kernel(edges, np.ascontiguousarray(values), values_pad, np.ascontiguousarray(regular), rows, cols,
                      codes, valid)
