@@ -94,12 +94,12 @@ vec3 shade(vec3 world_pos, vec3 normal, vec2 uv, vec4 vcolor) {
 """ % "\n".join(terms)
 
 
-#: The fragment shader's per-object switches (TEXTURED, MOVING) are compiled in as constants, one
-#: program per combination an object needs: llvmpipe runs the body of a branch on a uniform for
-#: every fragment (masked), so untextured objects paid for a texture lookup and static ones for
-#: two projections. ``Renderer(specialise=False)`` keeps one program with uniform switches.
-_SPECIALISED = "#define TEXTURED %s\n#define MOVING %s\n"
-_UNIFORM_SWITCHES = "#define TEXTURED u_has_texture\n#define MOVING u_moving\n"
+#: The fragment shader's per-object switch (TEXTURED) is compiled in as a constant, one program
+#: per kind an object needs: llvmpipe runs the body of a branch on a uniform for every fragment
+#: (masked), so untextured objects paid for a texture lookup. ``Renderer(specialise=False)`` keeps
+#: one program with a uniform switch.
+_SPECIALISED = "#define TEXTURED %s\n"
+_UNIFORM_SWITCHES = "#define TEXTURED u_has_texture\n"
 
 _FRAGMENT = """
 #version 410
@@ -112,10 +112,6 @@ in vec2 v_uv;
 in vec4 v_color;
 layout(location = 0) out vec4 f_color;
 layout(location = 1) out float f_dist;
-layout(location = 2) out vec4 f_motion;   // (dx, dy) pixels, moving flag, object index
-uniform bool u_moving;
-uniform float u_object_index;             // the object's index in the scene (moving objects' pixels)
-uniform vec2 u_half_px;                   // pixels per unit of t' (wide views)
 %(shading)s
 %(projection)s
 #ifdef PEEL
@@ -147,7 +143,6 @@ void main() {
     if (seen_by_primary(v_cam)) {
         f_color = vec4(u_sky_color, 1.0);          // as an empty pixel: codes smoothly
         f_dist = -1.0;
-        f_motion = vec4(0.0);
         gl_FragDepth = PEELED_DEPTH;
         return;
     }
@@ -157,12 +152,24 @@ void main() {
 #endif
     f_color = vec4(shade(v_world, v_normal, v_uv, v_color), 1.0);
     f_dist = length(v_cam);
-    // Motion the camera does not explain: where this surface point was one server frame ago,
-    // seen from the current camera. Rows grow downwards, t'_y upwards.
-    f_motion = vec4(0.0);
-    if (MOVING)
-        f_motion = vec4((wa_project(v_cam).xy - wa_project(v_prev_cam).xy) * vec2(1.0, -1.0) * u_half_px, 1.0,
-                        u_object_index);
+}
+"""
+
+# Moving objects' motion, drawn after every object's colour and distance into the motion attachment
+# (a framebuffer of its own on the same depth buffer), where the depth test finds their visible
+# fragments (see Renderer._draw_motion): the motion the camera does not explain, where this surface
+# point was one server frame ago, seen from the current camera (rows grow downwards, t'_y upwards).
+_MOTION_FRAGMENT = """
+#version 410
+in vec3 v_cam;
+in vec3 v_prev_cam;
+layout(location = 0) out vec4 f_motion;   // (dx, dy) pixels, object index, moving flag (1)
+uniform float u_object_index;             // the object's index in the scene
+uniform vec2 u_half_px;                   // pixels per unit of t' (wide views)
+%(projection)s
+void main() {
+    f_motion = vec4((wa_project(v_cam).xy - wa_project(v_prev_cam).xy) * vec2(1.0, -1.0) * u_half_px,
+                    u_object_index, 1.0);
 }
 """
 
@@ -475,13 +482,13 @@ _HALF_TO_FLOAT = np.arange(1 << 16, dtype=np.uint32).astype(np.uint16).view(np.f
 
 @njit(cache=True, nogil=True)
 def _moving_motion(raw, half_to_float, motion, moving):
-    """raw (h, w, 4) uint16 half floats (dx, dy, moving flag, index) -> motion (h, w, 2) float32,
+    """raw (h, w, 4) uint16 half floats (dx, dy, index, moving flag) -> motion (h, w, 2) float32,
     0 where the flag is not above 0.5, and moving (h, w) bool."""
     h, w = moving.shape
     for j in range(h):
         for i in range(w):
             # flag > 0.5 on the bits: above 0x3800 (0.5), up to 0x7c00 (+inf; NaN and negatives above)
-            m = 0x3800 < raw[j, i, 2] <= 0x7C00
+            m = 0x3800 < raw[j, i, 3] <= 0x7C00
             moving[j, i] = m
             if m:
                 motion[j, i, 0] = half_to_float[raw[j, i, 0]]
@@ -493,19 +500,25 @@ def _moving_motion(raw, half_to_float, motion, moving):
 
 class RenderTarget:
     """Colour (RGBA8) + radial distance (R32F, 0 = sky) + depth buffer of ``width`` x ``height``;
-    with ``motion``, also the motion of moving objects (RGBA16F: dx, dy pixels, moving flag)."""
+    with ``motion``, also the motion of moving objects (RGBA16F: dx, dy pixels, object index,
+    moving flag), in a framebuffer of its own on the same depth buffer (Renderer._draw_motion)."""
 
     def __init__(self, ctx, width: int, height: int, motion: bool = False):
         self.ctx, self.width, self.height = ctx, width, height
         self.color = ctx.texture((width, height), 4)
         self.distance = ctx.texture((width, height), 1, dtype="f4")
         self.motion = ctx.texture((width, height), 4, dtype="f2") if motion else None
-        attachments = [t for t in (self.color, self.distance, self.motion) if t is not None]
-        for t in attachments:
-            t.filter = (ctx.NEAREST, ctx.NEAREST)
-            t.repeat_x = t.repeat_y = False
+        for t in (self.color, self.distance, self.motion):
+            if t is not None:
+                t.filter = (ctx.NEAREST, ctx.NEAREST)
+                t.repeat_x = t.repeat_y = False
         self.depth = ctx.depth_renderbuffer((width, height))
-        self.fbo = ctx.framebuffer(color_attachments=attachments, depth_attachment=self.depth)
+        self.fbo = ctx.framebuffer(color_attachments=[self.color, self.distance], depth_attachment=self.depth)
+        self.motion_fbo = self.all_fbo = None   # all_fbo: the three, for a pass that writes all at once
+        if motion:
+            self.motion_fbo = ctx.framebuffer(color_attachments=[self.motion], depth_attachment=self.depth)
+            self.all_fbo = ctx.framebuffer(color_attachments=[self.color, self.distance, self.motion],
+                                           depth_attachment=self.depth)
 
     def read_color(self) -> np.ndarray:
         """(height, width, 3) uint8, row 0 on top."""
@@ -537,14 +550,14 @@ class RenderTarget:
 
     def read_motion(self) -> tuple[np.ndarray, np.ndarray]:
         """(motion (height, width, 2) float32 pixels, moving (height, width) bool)."""
-        data = self.fbo.read(components=4, attachment=2, dtype="f2", alignment=1)
+        data = self.motion_fbo.read(components=4, dtype="f2", alignment=1)
         m = np.frombuffer(data, np.float16).reshape(self.height, self.width, 4).astype(np.float32)
-        return np.ascontiguousarray(m[:, :, :2]), m[:, :, 2] > 0.5
+        return np.ascontiguousarray(m[:, :, :2]), m[:, :, 3] > 0.5
 
     def read_moving_motion(self) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`read_motion` with the motion zeroed where nothing moves: (motion (height, width, 2)
         float32, moving (height, width) bool), new arrays. One pass over the raw half floats."""
-        data = self.fbo.read(components=4, attachment=2, dtype="f2", alignment=1)
+        data = self.motion_fbo.read(components=4, dtype="f2", alignment=1)
         raw = np.frombuffer(data, np.uint16).reshape(self.height, self.width, 4)
         motion = np.empty((self.height, self.width, 2), np.float32)
         moving = np.empty((self.height, self.width), np.bool_)
@@ -553,12 +566,12 @@ class RenderTarget:
 
     def read_moving_index(self) -> np.ndarray:
         """(height, width) int32: the scene index of the moving object each pixel shows, -1 elsewhere."""
-        data = self.fbo.read(components=4, attachment=2, dtype="f2", alignment=1)
+        data = self.motion_fbo.read(components=4, dtype="f2", alignment=1)
         m = np.frombuffer(data, np.float16).reshape(self.height, self.width, 4).astype(np.float32)
-        return np.where(m[:, :, 2] > 0.5, np.rint(m[:, :, 3]), -1).astype(np.int32)
+        return np.where(m[:, :, 3] > 0.5, np.rint(m[:, :, 2]), -1).astype(np.int32)
 
     def release(self) -> None:
-        for r in (self.fbo, self.color, self.distance, self.depth, self.motion):
+        for r in (self.fbo, self.motion_fbo, self.all_fbo, self.color, self.distance, self.depth, self.motion):
             if r is not None:
                 r.release()
 
@@ -583,7 +596,7 @@ class Renderer:
         self.max_edge_angle = np.radians(max_edge_angle_deg)
         self.max_edge_angle_deg = float(max_edge_angle_deg)
         self.tess_max_level = tess_max_level
-        #: one program per pass and object kind (textured, moving): see _SPECIALISED
+        #: one program per pass and object kind (textured): see _SPECIALISED; moving: the motion pass
         self.specialise = specialise
         self.tess_max_screen_edge = tess_max_screen_edge
         shading = shading_glsl(scene.lights)
@@ -591,6 +604,7 @@ class Renderer:
                                              "projection": PROJECTION_GLSL}
                           for name, defines in (("plain", ""), ("peel", "#define PEEL\n"),
                                                 ("mark", "#define PEEL\n#define PEEL_MARK\n"))}
+        self._fragment["motion"] = _MOTION_FRAGMENT % {"projection": PROJECTION_GLSL}
         #: pass name -> (vertex, tess control, tess evaluation shader, fragment variant); compiled when
         #: first drawn, per (pass, textured, moving) key (see :meth:`_program`)
         cube_vs = cube_faces.CUBE_VS % {"uniforms": _COMMON_VS_UNIFORMS}
@@ -602,6 +616,8 @@ class Renderer:
                         "tess_peel": (_TESS_VS, _TESS_TCS, _TESS_TES, "peel"),
                         "tess_peel_mark": (_TESS_VS, _TESS_TCS, _TESS_TES, "mark"),
                         "cube": (cube_vs, None, None, "plain")}
+        for name in ("perspective", "vertex", "tess", "cube"):   # the moving objects' motion (_draw_motion)
+            self._passes[name + "_motion"] = self._passes[name][:3] + ("motion",)
         self.programs: dict = {}   # (pass, textured, moving) -> program; (pass, None, None) unspecialised
         resample = ctx.program(vertex_shader=cube_faces.RESAMPLE_VS,
                                fragment_shader=cube_faces.RESAMPLE_FS % {"projection": PROJECTION_GLSL})
@@ -645,11 +661,11 @@ class Renderer:
     def _program_keys(self, projection: str) -> set:
         """Program keys of a primary view with motion and a marked peeled view in ``projection``."""
         if not self.specialise:
-            return {(projection, None, None), (projection + "_peel_mark", None, None)}
+            return {(projection, None, None), (projection + "_motion", None, None),
+                    (projection + "_peel_mark", None, None)}
         kinds = {g.texture is not None for g in self.objects}
-        moving = {g.texture is not None for g in self.objects if g.obj.is_dynamic}
-        return ({(projection, k, False) for k in kinds} | {(projection, k, True) for k in moving}
-                | {(projection + "_peel_mark", k, False) for k in kinds})
+        motion = {(projection + "_motion", False, True)} if any(g.obj.is_dynamic for g in self.objects) else set()
+        return {(projection, k, False) for k in kinds} | motion | {(projection + "_peel_mark", k, False) for k in kinds}
 
     def _tessellate(self, obj, angle_deg: float) -> list:
         """[(band distance, mesh)]: the object split for eyes anywhere in the viewing region (band 0),
@@ -705,7 +721,7 @@ class Renderer:
         if textured is None:
             defines = _UNIFORM_SWITCHES
         else:
-            defines = _SPECIALISED % ("true" if textured else "false", "true" if moving else "false")
+            defines = _SPECIALISED % ("true" if textured else "false")
         prog = self.ctx.program(vertex_shader=vs, tess_control_shader=tcs, tess_evaluation_shader=tes,
                                 fragment_shader=self._fragment[variant].replace("@SWITCHES@", defines))
         if tcs is not None:
@@ -730,64 +746,116 @@ class Renderer:
 
     def _draw(self, prog_name: str, view: np.ndarray, eye: np.ndarray, t: float, extra_uniforms: dict,
               motion_dt: float | None = None, cull: bool = False, edge_deg: float | None = None,
-              planes: np.ndarray = HEMISPHERE):
+              planes: np.ndarray = HEMISPHERE, target: RenderTarget | None = None):
+        """Every object's colour and distance into the bound framebuffer (``target``'s when given);
+        with ``motion_dt`` and a target with motion, then the moving objects' motion
+        (:meth:`_draw_motion`)."""
         uniforms = {"u_eye": tuple(float(x) for x in eye), **extra_uniforms}
         ready: dict = {}   # key -> (program, its uniform names) with this draw's uniforms set
         layer = 0
         for g in self.objects:
-            moving = motion_dt is not None and g.obj.is_dynamic
-            key = (prog_name, g.texture is not None, moving) if self.specialise else (prog_name, None, None)
-            if key not in ready:
-                prog = self._program(key)
-                members = set(prog)  # the compiler drops uniforms a shader does not use
-                for name, value in uniforms.items():
-                    if name in members:
-                        prog[name].write(np.ascontiguousarray(value, dtype=np.float32).tobytes()) \
-                            if isinstance(value, np.ndarray) else setattr(prog[name], "value", value)
-                ready[key] = (prog, members)
-            prog, members = ready[key]
-            if g.obj.layer != layer:   # decals: in front of the coplanar surfaces they lie on
-                layer = g.obj.layer
-                self.ctx.polygon_offset = (0.0, -DECAL_OFFSET_UNITS * layer)
-            model = g.obj.world_matrix(t)
-            mv = view @ model
-            prev_mv = view @ g.obj.world_matrix(t - motion_dt) if moving else mv
-            values = {
-                "u_model": model.T.astype(np.float32),
-                "u_model_view": mv.T.astype(np.float32),
-                "u_prev_model_view": prev_mv.T.astype(np.float32),
-                "u_normal_matrix": np.linalg.inv(model[:3, :3]).astype(np.float32),  # (M^-1)^T, column-major
-                "u_base_color": np.array(g.obj.material.base_color, np.float32),
-            }
-            for name, value in values.items():
-                if name in members:
-                    prog[name].write(value.tobytes())
-            if g.texture is not None:
-                g.texture.use(0)
-            if "u_has_texture" in members:
-                prog["u_has_texture"].value = g.texture is not None
-            if "u_moving" in members:
-                prog["u_moving"].value = moving
-            if moving and "u_object_index" in members:
-                prog["u_object_index"].value = float(g.index)
-            if prog_name.startswith("vertex"):
-                self._render_mesh(self._tessellated(g, edge_deg, eye, t), key, prog, self.ctx.TRIANGLES, mv, cull)
-            elif prog_name.startswith("tess"):
-                self._render_mesh(g.original, key, prog, self.ctx.PATCHES, mv, cull)
-            elif prog_name == "cube":
-                self._render_mesh(g.original, key, prog, self.ctx.TRIANGLES, mv, True, planes)
-            else:
-                g.original.vao(key, prog).render(self.ctx.TRIANGLES)
+            key = (prog_name, g.texture is not None, False) if self.specialise else (prog_name, None, None)
+            layer = self._draw_object(g, key, ready, uniforms, view, eye, t, None, layer, prog_name, cull,
+                                      edge_deg, planes)
         if layer:
             self.ctx.polygon_offset = (0.0, 0.0)
+        if motion_dt is not None and target is not None and target.motion is not None:
+            self._draw_motion(prog_name, view, eye, t, uniforms, motion_dt, cull, edge_deg, planes, target)
+
+    def _draw_motion(self, prog_name, view, eye, t, uniforms, motion_dt, cull, edge_deg, planes, target) -> None:
+        """The moving objects' motion into ``target``'s motion attachment (cleared to 0: not moving),
+        after :meth:`_draw` wrote every object's depth. They are drawn again with the same vertex
+        shader, so at the same depths, bit for bit; the depth test for equality passes where one is
+        the nearest surface, and blending keeps the first fragment that lands on a pixel, as the
+        main pass's depth test does among fragments of equal depth (src * (1 - dst alpha) + dst,
+        exact: the flag in alpha is 0 until written, then 1). Out of the main pass, whose every
+        fragment would otherwise write half floats, zero but on moving objects: about a sixth of
+        the primary view's cost."""
+        moving = [g for g in self.objects if g.obj.is_dynamic]
+        if not moving:
+            return
+        ctx = self.ctx
+        viewport = ctx.viewport
+        target.motion_fbo.use()
+        ctx.viewport = viewport
+        target.motion_fbo.depth_mask = False
+        ctx.depth_func = "=="
+        ctx.enable(ctx.BLEND)
+        ctx.blend_func = ctx.ONE_MINUS_DST_ALPHA, ctx.ONE
+        ready: dict = {}
+        layer = 0
+        name = prog_name + "_motion"
+        try:
+            for g in moving:
+                key = (name, False, True) if self.specialise else (name, None, None)
+                layer = self._draw_object(g, key, ready, uniforms, view, eye, t, motion_dt, layer, prog_name, cull,
+                                          edge_deg, planes)
+        finally:
+            if layer:
+                ctx.polygon_offset = (0.0, 0.0)
+            ctx.disable(ctx.BLEND)
+            ctx.blend_func = ctx.DEFAULT_BLENDING
+            ctx.depth_func = "<"
+            target.motion_fbo.depth_mask = True
+            target.fbo.use()
+            ctx.viewport = viewport
+
+    def _draw_object(self, g: "_GPUObject", key: tuple, ready: dict, uniforms: dict, view, eye, t: float,
+                     motion_dt: float | None, layer: int, prog_name: str, cull: bool, edge_deg, planes) -> int:
+        """One object with program ``key`` (``ready`` caches the programs whose draw uniforms are
+        set); ``motion_dt``: its motion over that many seconds (the motion pass). Returns the
+        decal layer now set."""
+        moving = motion_dt is not None
+        if key not in ready:
+            prog = self._program(key)
+            members = set(prog)  # the compiler drops uniforms a shader does not use
+            for name, value in uniforms.items():
+                if name in members:
+                    prog[name].write(np.ascontiguousarray(value, dtype=np.float32).tobytes()) \
+                        if isinstance(value, np.ndarray) else setattr(prog[name], "value", value)
+            ready[key] = (prog, members)
+        prog, members = ready[key]
+        if g.obj.layer != layer:   # decals: in front of the coplanar surfaces they lie on
+            layer = g.obj.layer
+            self.ctx.polygon_offset = (0.0, -DECAL_OFFSET_UNITS * layer)
+        model = g.obj.world_matrix(t)
+        mv = view @ model
+        prev_mv = view @ g.obj.world_matrix(t - motion_dt) if moving else mv
+        values = {
+            "u_model": model.T.astype(np.float32),
+            "u_model_view": mv.T.astype(np.float32),
+            "u_prev_model_view": prev_mv.T.astype(np.float32),
+            "u_normal_matrix": np.linalg.inv(model[:3, :3]).astype(np.float32),  # (M^-1)^T, column-major
+            "u_base_color": np.array(g.obj.material.base_color, np.float32),
+        }
+        for name, value in values.items():
+            if name in members:
+                prog[name].write(value.tobytes())
+        if g.texture is not None and not moving:
+            g.texture.use(0)
+        if "u_has_texture" in members:
+            prog["u_has_texture"].value = g.texture is not None
+        if moving and "u_object_index" in members:
+            prog["u_object_index"].value = float(g.index)
+        if prog_name.startswith("vertex"):
+            self._render_mesh(self._tessellated(g, edge_deg, eye, t), key, prog, self.ctx.TRIANGLES, mv, cull)
+        elif prog_name.startswith("tess"):
+            self._render_mesh(g.original, key, prog, self.ctx.PATCHES, mv, cull)
+        elif prog_name == "cube":
+            self._render_mesh(g.original, key, prog, self.ctx.TRIANGLES, mv, True, planes)
+        else:
+            g.original.vao(key, prog).render(self.ctx.TRIANGLES)
+        return layer
 
     def _begin(self, target: RenderTarget) -> None:
         ctx = self.ctx
+        if target.motion_fbo is not None:
+            target.motion_fbo.clear(0.0, 0.0, 0.0, 0.0)   # not moving
         target.fbo.use()
         ctx.viewport = (0, 0, target.width, target.height)
         ctx.enable_only(ctx.DEPTH_TEST)
         target.fbo.clear(*self.scene.sky_color[:3], 1.0, depth=1.0)
-        # clear() sets every attachment to the same value; distance and motion must read 0.
+        # clear() sets every attachment to the same value; distance must read 0.
         n = len(target.fbo.color_attachments)
         target.fbo.color_mask = [(False, False, False, False)] + [(True, True, True, True)] * (n - 1)
         target.fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
@@ -838,7 +906,7 @@ class Renderer:
             self._mip_nearest.use(0)
         try:
             self._draw(name, pose.view_matrix(), pose.p, t, uniforms, motion_dt, cull=self.cull,
-                       edge_deg=max_edge_deg)
+                       edge_deg=max_edge_deg, target=target)
         finally:  # shaders that never write gl_ClipDistance must not run with it enabled
             self.ctx.disable_direct(GL_CLIP_DISTANCE0)
             self._mip_nearest.clear(0)
@@ -861,9 +929,9 @@ class Renderer:
             ctx.viewport = (x, y, w, h)
             self._draw("cube", view, pose.p, t, {"u_face": cube_faces.face_matrix(name, near, far).T,
                                                  "u_half_px": (target.width / 2.0, target.height / 2.0)},
-                       motion_dt, planes=cube_faces.face_planes(name, near))
+                       motion_dt, planes=cube_faces.face_planes(name, near), target=cube)
         self._mip_nearest.clear(0)
-        target.fbo.use()
+        (target.fbo if target.all_fbo is None else target.all_fbo).use()   # the resample writes motion too
         ctx.viewport = (0, 0, target.width, target.height)
         ctx.disable(ctx.DEPTH_TEST)
         cube.color.use(0)
@@ -882,7 +950,7 @@ class Renderer:
         self._begin(target)
         proj = perspective_matrix(fov_x_deg, target.width / target.height, self.scene.near, self.scene.far)
         self._draw("perspective", pose.view_matrix(), pose.p, t, {"u_projection": proj.T},
-                   motion_dt=0.0 if target.motion is not None else None)
+                   motion_dt=0.0 if target.motion is not None else None, target=target)
 
     def release(self) -> None:
         for g in self.objects:
