@@ -49,7 +49,12 @@ so pass 2 is scissored to the box around those pixels and skipped where there ar
 ``carve_all`` keeps the previous passes (one program for both, pass 2 over every pixel, the
 background in the resolve): the images are equal bit for bit (tests), at 0.76-0.78x its CPU
 at 960x540 and 0.65-0.68x at 1280x720 (bench/proxy_speed.py, two runs; in the first 140
-against 180 CPU-ms, 5.2x against 6.7x the floor; 222 against 341, 3.6x against 5.5x). Tried and slower here: first testing each pixel's nearest fragment
+against 180 CPU-ms, 5.2x against 6.7x the floor; 222 against 341, 3.6x against 5.5x). The
+background pass writes its pixels' records in the proxy passes' format, so every record is 8
+bytes (RG32F; it had written 16 for its uv in full precision): 0.87x the CPU at 960x540 and
+0.86x at 1280x720 in one interleaved run, the images within 2/255 on 0.004 % of pixels (the
+records' uv precision; carve_all rounds its background through a record, so the two still agree
+bit for bit). Tried and slower here: first testing each pixel's nearest fragment
 (a trivial-shader pass, then a full-screen test) and carving only where it fails: the two
 extra full-screen and geometry passes cost more than the shading they save; scissoring the
 carving passes per cell of a grid: every extra draw of an object repeats its vertex work.
@@ -149,6 +154,33 @@ bool background(out vec4 rect, out vec2 uv, out float alpha) {
 }
 """
 
+_RECORD_GLSL = """
+// A pixel's record, two floats: where to fetch its colour (uv in [0, 1]^2) and from which view
+// (0 primary, 1 extra, 2 none: black; 3, the clear value: no proxy fragment here), in the
+// integer parts: u + 2 view, v + 2 accepted. 8 bytes, not 16, to clear and write; the uv keep
+// 2^-22 of precision, a quarter of a thousandth of a pixel.
+vec2 record(vec2 uv, float view, bool accepted) { return vec2(uv.x + 2.0 * view, uv.y + (accepted ? 2.0 : 0.0)); }
+// -> a record's view; its uv and alpha (1: accepted) into uv, alpha.
+float read_record(vec2 ref, out vec2 uv, out float alpha) {
+    float view = floor(0.5 * ref.x);
+    uv = vec2(ref.x - 2.0 * view, ref.y >= 2.0 ? ref.y - 2.0 : ref.y);
+    alpha = ref.y >= 2.0 ? 1.0 : 0.0;
+    return view;
+}
+"""
+
+# The background of a pixel (see background()) as a record: its view, the uv there, accepted
+# where a view vouches for it, black (view 2) where nothing can be shown.
+_BACKGROUND_RECORD_GLSL = """
+vec2 background_record() {
+    vec4 rect;
+    vec2 uv;
+    float alpha;
+    if (!background(rect, uv, alpha)) return record(vec2(0.0), 2.0, false);
+    return record(uv, rect == u_extra_color ? 1.0 : 0.0, alpha != 0.0);
+}
+"""
+
 # Colour is fetched once per pixel, after the depth test picked the fragment, from the one view
 # and place the pixel's record (or, where no proxy was drawn, its background) chose.
 _RESOLVE_FS = """
@@ -156,20 +188,16 @@ _RESOLVE_FS = """
 %(frame)s
 uniform sampler2D u_refs;
 %(background)s
+""" + _RECORD_GLSL + _BACKGROUND_RECORD_GLSL + """
 out vec4 f_color;
 void main() {
-    vec2 ref = texelFetch(u_refs, ivec2(gl_FragCoord.xy), 0).xy;
-    float view = floor(0.5 * ref.x);
-    vec2 uv = vec2(ref.x - 2.0 * view, ref.y >= 2.0 ? ref.y - 2.0 : ref.y);
-    float alpha = ref.y >= 2.0 ? 1.0 : 0.0;
+    vec2 uv;
+    float alpha;
+    precise vec2 ref = texelFetch(u_refs, ivec2(gl_FragCoord.xy), 0).xy;
+    if (ref.x >= 6.0) ref = background_record();   // no proxy fragment: the background, as a record
+    float view = read_record(ref, uv, alpha);
     vec4 rect = view == 0.0 ? u_primary_color : u_extra_color;
-    if (view == 3.0) {
-        if (!background(rect, uv, alpha)) { f_color = vec4(0.0); return; }
-    } else if (view == 2.0) {
-        f_color = vec4(0.0);
-        return;
-    }
-    f_color = vec4(atlas_rgb(rect, uv), alpha);
+    f_color = view >= 2.0 ? vec4(0.0) : vec4(atlas_rgb(rect, uv), alpha);
 }
 """
 
@@ -199,11 +227,6 @@ float view_error(vec3 c, bool extra, out vec2 uv, out bool sky, out bool past) {
 """
 
 _ACCEPT_GLSL = """
-// A pixel's record, two floats: where to fetch its colour (uv in [0, 1]^2) and from which view
-// (0 primary, 1 extra, 2 none: black; 3, the clear value: no proxy fragment here), in the
-// integer parts: u + 2 view, v + 2 accepted. 8 bytes, not 16, to clear and write; the uv keep
-// 2^-22 of precision, a quarter of a thousandth of a pixel.
-vec2 record(vec2 uv, float view, bool accepted) { return vec2(uv.x + 2.0 * view, uv.y + (accepted ? 2.0 : 0.0)); }
 // Whether a view vouches for the proxy point at p (primary camera space) = e (extra camera
 // space); if so, its record.
 bool accepted(vec3 p, vec3 e, out vec2 ref) {
@@ -229,16 +252,16 @@ bool accepted(vec3 p, vec3 e, out vec2 ref) {
 # that rules out early depth tests, and every overlapping fragment would run the shader. One
 # program per pass (%(main)s): this rasteriser runs both sides of every branch, even of a
 # uniform one, so a program that could do either pass would pay for both in each.
-_PROXY_FS = "#version 410\n%(frame)s\n" + _VIEW_ERROR_GLSL + _ACCEPT_GLSL + """
+_PROXY_FS = "#version 410\n%(frame)s\n" + _VIEW_ERROR_GLSL + _RECORD_GLSL + _ACCEPT_GLSL + """
 in vec3 v_p;
 in vec3 v_e;
-out vec4 f_ref;   // the pixel's record, see record() (zw: 0, see _BACKGROUND_FS)
+out vec2 f_ref;   // the pixel's record, see record()
 // Pass 1, accepted fragments only, depth in [0, 0.5): fragments behind an accepted one already
 // drawn fail the depth test before the shader runs (objects are drawn nearest first).
 void accept() {
     vec2 ref;
     if (!accepted(v_p, v_e, ref)) discard;
-    f_ref = vec4(ref, 0.0, 0.0);
+    f_ref = ref;
 }
 
 // Pass 2, depth in [0.5, 1]: only pixels where no fragment was accepted still pass the depth
@@ -252,7 +275,7 @@ void fallback() {
     if (sky_p) discard;   // the primary sees nothing there: carve, let the sky show
     float e_e = NO_MATCH;
     if (u_has_extra && !past_p) e_e = view_error(v_e, true, uv_e, sky_e, past_e);
-    f_ref = vec4((e_e < e_p) ? record(uv_e, 1.0, false) : record(uv_p, v_p.z <= 0.0 ? 0.0 : 2.0, false), 0.0, 0.0);
+    f_ref = (e_e < e_p) ? record(uv_e, 1.0, false) : record(uv_p, v_p.z <= 0.0 ? 0.0 : 2.0, false);
 }
 %(main)s
 
@@ -263,8 +286,8 @@ _EITHER_MAIN = "uniform bool u_fallback;\nvoid main() { if (u_fallback) fallback
 
 
 # After pass 1, the pixels where it accepted no fragment, at depth 1 still (the quad lies at
-# 0.75): their record is the background's, (6, kind, uv) with kind 0 primary, 1 extra, 2 primary
-# with alpha 0, 3 black, unless pass 2 finds a proxy fragment there; and they are counted, with
+# 0.75): their record is the background's (a record like the proxy passes', so every record is 8
+# bytes), unless pass 2 finds a proxy fragment there; and they are counted, with
 # their bounding box, so that pass 2 is scissored to them, or skipped. Only these pixels run the
 # background's lookups, not all (the resolve after it does one lookup per pixel), and pass 2
 # costs its rasterisation even where every fragment fails the depth test.
@@ -274,18 +297,13 @@ in vec2 in_pos;
 void main() { gl_Position = vec4(in_pos, 0.5, 1.0); }
 """
 
-_BACKGROUND_FS = "#version 430\n%(frame)s\n%(background)s\n" + """
+_BACKGROUND_FS = "#version 430\n%(frame)s\n%(background)s\n" + _RECORD_GLSL + _BACKGROUND_RECORD_GLSL + """
 // the depth test before the shader, although it writes the counters (it would run the shader first)
 layout(early_fragment_tests) in;
 layout(std430, binding = 0) buffer Left { uint n_left; uint box[4]; };   // box: min x, min y, max x, max y
-out vec4 f_ref;
+out vec2 f_ref;
 void main() {
-    vec4 rect;
-    vec2 uv;
-    float alpha;
-    float kind = 3.0;
-    if (background(rect, uv, alpha)) kind = alpha == 0.0 ? 2.0 : (rect == u_extra_color ? 1.0 : 0.0);
-    f_ref = vec4(6.0, kind, uv);
+    f_ref = background_record();
     uvec2 px = uvec2(gl_FragCoord.xy);
     atomicAdd(n_left, 1u);
     atomicMin(box[0], px.x);
@@ -304,21 +322,14 @@ _RECORD_RESOLVE_FS = """
 uniform sampler2D u_refs;
 uniform vec4 u_primary_color;
 uniform vec4 u_extra_color;
+""" + _RECORD_GLSL + """
 out vec4 f_color;
 void main() {
-    vec4 ref = texelFetch(u_refs, ivec2(gl_FragCoord.xy), 0);
-    float view = floor(0.5 * ref.x);
-    vec2 uv = vec2(ref.x - 2.0 * view, ref.y >= 2.0 ? ref.y - 2.0 : ref.y);
-    float alpha = ref.y >= 2.0 ? 1.0 : 0.0;
+    vec2 uv;
+    float alpha;
+    float view = read_record(texelFetch(u_refs, ivec2(gl_FragCoord.xy), 0).xy, uv, alpha);
     vec4 rect = view == 0.0 ? u_primary_color : u_extra_color;
-    bool black = view == 2.0;
-    if (view == 3.0) {   // the background's record
-        uv = ref.zw;
-        rect = ref.y == 1.0 ? u_extra_color : u_primary_color;
-        alpha = ref.y < 2.0 ? 1.0 : 0.0;
-        black = ref.y == 3.0;
-    }
-    f_color = black ? vec4(0.0) : vec4(atlas_rgb(rect, uv), alpha);
+    f_color = view >= 2.0 ? vec4(0.0) : vec4(atlas_rgb(rect, uv), alpha);
 }
 """
 
@@ -518,8 +529,7 @@ class ProxyIBR(Method):
             self.background = ctx.program(vertex_shader=_BACKGROUND_VS, fragment_shader=_BACKGROUND_FS % glsl)
             self.background_vbo, self.background_vao = fullscreen_quad(ctx, self.background)
             self.left = ctx.buffer(_LEFT_EMPTY)   # the Left block of _BACKGROUND_FS
-            # records as carve_all's, or the background's (see _BACKGROUND_FS)
-            self.refs = ctx.texture(size, 4, dtype="f4")
+            self.refs = ctx.texture(size, 2, dtype="f4")   # records, see record() in _PROXY_FS
             tests = self.passes
         self.prog = self.passes[0]
         # the program that finds a pixel's background
