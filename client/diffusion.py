@@ -841,15 +841,19 @@ def _diffuse_regions(codes, valid, edges, n, boxes, runs, run_start, max_work, i
     cm_pool = uws[nu + ns:nu + ns + nc]
     ve = uws[nu + ns + nc:nu + ns + nc + h * wh].reshape((h, wh))
     vo = uws[nu + ns + nc + h * wh:nu + ns + nc + 2 * h * wh].reshape((h, wh))
-    for y in range(h):
-        for x in range(w):
+    # unsigned and branch-free (both colours of a row in one pass), so the loops vectorise
+    uone = np.uint64(1)
+    for y in range(np.uint64(h)):
+        for x in range(np.uint64(w)):
             out[y, x] = codes[y, x]
-            if valid[y, x]:
-                n_done += 1
-        for x in range(y & 1, w, 2):
-            ve[y, x >> 1] = valid[y, x]
-        for x in range(1 - (y & 1), w, 2):
-            vo[y, x >> 1] = valid[y, x]
+            n_done += valid[y, x] != 0
+        first = ve if (y & uone) == 0 else vo
+        second = vo if (y & uone) == 0 else ve
+        for k in range(np.uint64(w) >> uone):
+            first[y, k] = valid[y, k + k]
+            second[y, k] = valid[y, k + k + uone]
+        if np.uint64(w) & uone:
+            first[y, np.uint64(w) >> uone] = valid[y, np.uint64(w) - uone]
     own = stamps[:h * w].reshape((h, w))  # == sc: a sample of region c
     qm = stamps[h * w:2 * h * w].reshape((h, w))  # == sc: a quincunx value of region c
     span_a = np.empty(h, dtype=np.int64)
