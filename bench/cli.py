@@ -294,10 +294,12 @@ def register(sub) -> None:
 
     ps = bs.add_parser("proxy-speed", help="proxy's CPU ms against the passes it replaced, --no-carve and the floor",
                        description="CPU ms of proxy's passes in one run: the default carving, carve_all (the passes "
-                                   "it replaced: the same image), carve=False, the default and carve=False drawing "
-                                   "every back face (cull=False), and the floor of 'pibr bench ibr', interleaved "
-                                   "frame by frame on room frames along the evaluation windows, and how far the "
-                                   "default's images are from carve_all's and cull=False's. Writes proxy_speed.json.")
+                                   "it replaced: the same image), both without inpainting (--no-inpaint), carve=False, "
+                                   "the default and carve=False drawing every back face (cull=False), and the floor "
+                                   "of 'pibr bench ibr', interleaved frame by frame on room frames along the "
+                                   "evaluation windows, and how far the default's images are from carve_all's and "
+                                   "cull=False's (and the two without inpainting from each other). Writes "
+                                   "proxy_speed.json.")
     ps.add_argument("--scene", default="room")
     ps.add_argument("--sizes", type=_sizes, default=((960, 540), (1280, 720)), metavar="WxH,...",
                     help="output sizes (default 960x540,1280x720)")

@@ -69,6 +69,7 @@ def default_variants(methods=None) -> list[Variant]:
         *(Variant(f"proxy tau {t:g}", "proxy", {"tau": t}) for t in (0.05, 0.2)),
         Variant("proxy, no extra view", "proxy", {"extra_view": False}),
         Variant("proxy, no carving", "proxy", {"carve": False}),
+        Variant("proxy, no inpainting", "proxy", {"inpaint": False}),
         Variant("proxy, no culling", "proxy", {"cull": False}),
     ]
     known = set(method_names())

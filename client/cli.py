@@ -159,6 +159,10 @@ def add_method_knobs(parser) -> None:
     group.add_argument("--no-carve", dest="knob_carve", action="store_const", const=False, default=None,
                        help="proxy: test only the nearest proxy fragment of each pixel (one cheaper pass; proxy "
                             "surfaces no view confirms then hide what lies behind them)")
+    group.add_argument("--no-inpaint", dest="knob_inpaint", action="store_const", const=False, default=None,
+                       help="proxy: where no view confirms any proxy fragment, show the background along the ray "
+                            "(sky, or the primary view rotated) instead of the nearest fragment coloured from the "
+                            "view with the lower error: one geometry pass fewer")
 
 
 def method_knobs(args) -> dict:

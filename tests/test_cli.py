@@ -155,8 +155,8 @@ def test_method_knobs_reach_the_client_config():
     from pibr.client.cli import method_knobs
 
     args = build_parser().parse_args(["client", "--method", "coarse-meshwarp,homography,proxy", "--coarse-step", "8",
-                                      "--plane-distance", "3.5", "--no-extra-view"])
-    assert method_knobs(args) == {"step": 8, "plane_distance": 3.5, "extra_view": False}
+                                      "--plane-distance", "3.5", "--no-extra-view", "--no-inpaint"])
+    assert method_knobs(args) == {"step": 8, "plane_distance": 3.5, "extra_view": False, "inpaint": False}
     assert method_knobs(build_parser().parse_args(["client"])) == {}
 
 

@@ -217,12 +217,14 @@ def _image(sim, display, frame, t, **options):
         m.release()
 
 
-def test_restricted_carving_gives_the_image_of_carving_every_pixel(sim):
+@pytest.mark.parametrize("inpaint", [True, False])
+def test_restricted_carving_gives_the_image_of_carving_every_pixel(sim, inpaint):
     """The default carving (one program per pass, the background and pass 2 only where pass 1
     accepted nothing, pass 2 scissored to them) against carve_all (both passes over every pixel,
     the background in the resolve: the path it replaced): equal, bit for bit, colour and alpha,
     on room frames along a head trace and at the extremes (inside a proxy, at the poles, every
-    object as its box, facing the primary's hemisphere rim)."""
+    object as its box, facing the primary's hemisphere rim); also both without inpainting (no
+    pass 2), where pass 2 would only have changed the pixels it was left."""
     scene = sim.scene
     cases = [(display, (t_render, rendered), t_disp, {})
              for t_disp, display, t_render, rendered in
@@ -236,15 +238,30 @@ def test_restricted_carving_gives_the_image_of_carving_every_pixel(sim):
     for yaw, pitch in ((0.0, 0.0), (0.5, 1.5), (0.0, -1.5)):
         pose = Pose.make((0.3, 1.6, -0.2), quat_from_euler([yaw, pitch, 0.0], "yxz"))
         cases.append((pose, (0.0, pose), 0.0, {}))
-    left = []
+    left, changed = [], []
     for display, (t_render, rendered), t, options in cases:
         frame = sim.frame_at(t_render, rendered)   # the textures hold the last frame made
-        restricted, n = _image(sim, display, frame, t, **options)
-        everywhere, _ = _image(sim, display, frame, t, carve_all=True, **options)
+        restricted, n = _image(sim, display, frame, t, inpaint=inpaint, **options)
+        everywhere, _ = _image(sim, display, frame, t, carve_all=True, inpaint=inpaint, **options)
         np.testing.assert_array_equal(restricted, everywhere)
+        if not inpaint:
+            inpainted, n = _image(sim, display, frame, t, **options)
+            differ = int(np.count_nonzero(np.any(inpainted != restricted, axis=-1)))
+            assert differ <= n
+            changed.append(differ)
         left.append(n)
     pixels = sim.output.width * sim.output.height
     assert any(0 < n < pixels // 10 for n in left), left   # pass 2 ran, on part of the image only
+    if not inpaint:
+        assert any(changed), changed   # ... and it mattered there
+
+
+def test_no_inpainting_needs_carving(sim):
+    from pibr.client.methods import make_method
+    from pibr.protocol.errors import ConfigError
+
+    with pytest.raises(ConfigError, match="no-inpaint skips carving's second pass; it needs carving"):
+        make_method("proxy", sim.ctx, sim.output, sim.session, proxies=sim.proxies, carve=False, inpaint=False)
 
 
 class _OlderGL:
