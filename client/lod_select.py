@@ -55,40 +55,38 @@ class LodSelector:
             scale = float(np.cbrt(abs(np.linalg.det(o.transform[:3, :3])))) or 1.0
             lengths = [mean_edge_length(*o.level(level)) * scale for level in ("original", "proxy")]
             self.thresholds.append([L * self.focal_px / target_px for L in lengths])
-        self._corners = []
-        for o in objects:
-            lo, hi = o.bounds
-            self._corners.append(np.array([[x, y, z, 1.0] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
-                                           for z in (lo[2], hi[2])]))
-
-    def _visible(self, cam: np.ndarray, near: float) -> bool:
-        """Conservative: False only when all 8 box corners are outside one frustum plane."""
-        x, y, z = cam[:, 0], cam[:, 1], -cam[:, 2]
-        if np.all(z < near):
-            return False
-        if np.all(x > self.tan_x * z) or np.all(x < -self.tan_x * z):
-            return False
-        if np.all(y > self.tan_y * z) or np.all(y < -self.tan_y * z):
-            return False
-        return True
+        #: (n, 8, 4) box corners of every object, object space and (at rest) world space, homogeneous
+        self._corners = np.array([[[x, y, z, 1.0] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])]
+                                  for lo, hi in (o.bounds for o in objects)]).reshape(len(objects), 8, 4)
+        self._rest_world = np.stack([c @ o.transform.T for c, o in zip(self._corners, objects)]) if objects else \
+            np.zeros((0, 8, 4))
+        self._limits = np.array([t for t in self.thresholds]).reshape(len(objects), 2)
 
     def select(self, pose: Pose, near: float = 0.0, placed: dict | None = None) -> list[Selection]:
         """What to draw at ``pose``; ``placed`` maps an object index to its (4, 4) object-to-world
-        transform where it is not at rest (moving objects), the others use their rest transform."""
-        view = pose.view_matrix()
-        placed = placed or {}
+        transform where it is not at rest (moving objects), the others use their rest transform.
+        All objects at once: a frustum test of their box corners (conservative: culled only when
+        all 8 lie outside one plane) and the distance from the eye to their world box."""
+        world = self._rest_world
+        if placed:
+            world = world.copy()
+            for i, m in placed.items():
+                world[i] = self._corners[i] @ m.T
+        cam = world @ pose.view_matrix().T
+        x, y, z = cam[:, :, 0], cam[:, :, 1], -cam[:, :, 2]
+        visible = np.ones(len(world), dtype=bool)
+        if self.cull:
+            visible = ~(np.all(z < near, axis=1)
+                        | np.all(x > self.tan_x * z, axis=1) | np.all(x < -self.tan_x * z, axis=1)
+                        | np.all(y > self.tan_y * z, axis=1) | np.all(y < -self.tan_y * z, axis=1))
+        lo, hi = world[:, :, :3].min(axis=1), world[:, :, :3].max(axis=1)
+        d = np.linalg.norm(np.maximum(0.0, np.maximum(lo - pose.p, pose.p - hi)), axis=1)
         out = []
-        for i, o in enumerate(self.objects):
-            world = self._corners[i] @ placed.get(i, o.transform).T
-            cam = world @ view.T
-            if self.cull and not self._visible(cam[:, :3], near):
-                continue
-            lo, hi = world[:, :3].min(0), world[:, :3].max(0)
-            d = float(np.linalg.norm(np.maximum(0.0, np.maximum(lo - pose.p, pose.p - hi))))
+        for i in np.flatnonzero(visible).tolist():
             if self.force_level is not None:
                 level = self.force_level
             else:
-                t_orig, t_proxy = self.thresholds[i]
-                level = "original" if d < t_orig else "proxy" if d < t_proxy else "box"
-            out.append(Selection(i, level, d))
+                t_orig, t_proxy = self._limits[i]
+                level = "original" if d[i] < t_orig else "proxy" if d[i] < t_proxy else "box"
+            out.append(Selection(i, level, float(d[i])))
         return out
