@@ -210,9 +210,12 @@ def _half_sweep(t, o, f, h, w, p0):
                 v = 0.5 * (o[y, k - 1 + p] + o[y, k + p])
                 t[y, k] = t[y, k] if f[y, k] else v
             continue
-        for k in range(k_first, k_last + 1):
-            v = 0.25 * (o[y - 1, k] + o[y + 1, k] + o[y, k - 1 + p] + o[y, k + p])
-            t[y, k] = t[y, k] if f[y, k] else v
+        # unsigned indices: numba tests signed ones for wrap-around on every access, which keeps
+        # the loop from being vectorised (k - 1 + p >= 0 since k >= 1 - p)
+        uy, up, one = np.uint64(y), np.uint64(p), np.uint64(1)
+        for k in range(np.uint64(k_first), np.uint64(k_last + 1)):
+            v = 0.25 * (o[uy - one, k] + o[uy + one, k] + o[uy, k + up - one] + o[uy, k + up])
+            t[uy, k] = t[uy, k] if f[uy, k] else v
         if p == 0 and not f[y, 0]:  # x = 0: the 1-D equation along the border column
             t[y, 0] = 0.5 * (o[y - 1, 0] + o[y + 1, 0])
         if ((w - 1 - p) & 1) == 0:  # x = w - 1 has this colour
@@ -245,23 +248,31 @@ def _smooth_nb(u, m, iterations, sf=None, su=None):
     black = sf[n:2 * n].reshape((h, wh))
     fred = su[:n].reshape((h, wh))
     fblack = su[n:2 * n].reshape((h, wh))
-    for y in range(h):
-        pr = y & 1
-        for k in range((w - pr + 1) >> 1):
-            red[y, k] = u[y, 2 * k + pr]
-            fred[y, k] = 1 if m[y, 2 * k + pr] else 0
-        for k in range((w - 1 + pr + 1) >> 1):
-            black[y, k] = u[y, 2 * k + 1 - pr]
-            fblack[y, k] = 1 if m[y, 2 * k + 1 - pr] else 0
+    # in and out of the compacted colours a pixel pair (2 k, 2 k + 1) at a time, unsigned: the even
+    # column goes to red in even rows, to black in odd ones
+    one, uw = np.uint64(1), np.uint64(w)
+    for y in range(np.uint64(h)):
+        even_row = (y & one) == 0
+        first, second = (red, black) if even_row else (black, red)
+        ffirst, fsecond = (fred, fblack) if even_row else (fblack, fred)
+        for k in range(uw >> one):
+            first[y, k] = u[y, k + k]
+            ffirst[y, k] = 1 if m[y, k + k] else 0
+            second[y, k] = u[y, k + k + one]
+            fsecond[y, k] = 1 if m[y, k + k + one] else 0
+        if uw & one:
+            first[y, uw >> one] = u[y, uw - one]
+            ffirst[y, uw >> one] = 1 if m[y, uw - one] else 0
     for _ in range(iterations):
         _half_sweep(red, black, fred, h, w, 0)
         _half_sweep(black, red, fblack, h, w, 1)
-    for y in range(h):
-        pr = y & 1
-        for k in range((w - pr + 1) >> 1):
-            u[y, 2 * k + pr] = red[y, k]
-        for k in range((w - 1 + pr + 1) >> 1):
-            u[y, 2 * k + 1 - pr] = black[y, k]
+    for y in range(np.uint64(h)):
+        first, second = (red, black) if (y & one) == 0 else (black, red)
+        for k in range(uw >> one):
+            u[y, k + k] = first[y, k]
+            u[y, k + k + one] = second[y, k]
+        if uw & one:
+            u[y, uw - one] = first[y, uw >> one]
 
 
 @njit(cache=True, nogil=True)
@@ -407,10 +418,9 @@ def _push_pull_pooled(v, m, iterations, fixed, fpool, upool, sf, su):
         ch, cw = (h + 1) // 2, (w + 1) // 2
         out = fpool[fo:fo + hw].reshape((h, w))
         n_valid = 0
-        for y in range(h):
-            for x in range(w):
-                if mm[y, x]:
-                    n_valid += 1
+        for y in range(np.uint64(h)):
+            for x in range(np.uint64(w)):
+                n_valid += mm[y, x] != 0
         if n_valid == hw or (h == 1 and w == 1):  # the coarsest level
             for y in range(h):
                 for x in range(w):
@@ -487,10 +497,9 @@ def _push_pull_pooled(v, m, iterations, fixed, fpool, upool, sf, su):
             vv = fpool[lfo[l - 1] + 2 * lh[l - 1] * lw[l - 1]:lfo[l - 1] + 2 * lh[l - 1] * lw[l - 1] + hw].reshape((h, w))
             mm = upool[luo[l - 1] + lh[l - 1] * lw[l - 1]:luo[l - 1] + lh[l - 1] * lw[l - 1] + hw].reshape((h, w))
             fx = mm
-        for y in range(0, h, 2):
-            for x in range(0, w, 2):
-                if not qm[y, x]:
-                    q[y, x] = coarse[y // 2, x // 2]
+        for y in range(np.uint64(0), np.uint64(h), two):
+            for x in range(np.uint64(0), np.uint64(w), two):
+                q[y, x] = q[y, x] if qm[y, x] else coarse[y >> one, x >> one]
         for y in range(1, h, 2):
             if y + 1 >= h:
                 for x in range(1, w, 2):
