@@ -957,8 +957,9 @@ def _diffuse_regions(codes, valid, edges, n, boxes, runs, run_start, max_work, i
         ch, cw = (bh + 1) // 2, (bw + 1) // 2
         cv = cv_pool[:ch * cw].reshape((ch, cw))
         cm = cm_pool[:ch * cw].reshape((ch, cw))
-        cv[:, :] = 0.0
-        cm[:, :] = 0
+        for i in range(np.uint64(ch * cw)):   # one flat loop over the pools' front (a memset)
+            cv_pool[i] = 0.0
+            cm_pool[i] = 0
         for y in range(uy0, uy1 + one, two):
             sa, sb = np.uint64(span_a[y]), np.uint64(span_b[y])
             first = sa + ((sa - ux0) & one)
