@@ -87,7 +87,7 @@ def test_tiny_pareto_run(tmp_path):
     v = room["variants"]
     assert set(v) == {"none", "rotation", "coarse-meshwarp s=2", "coarse-meshwarp s=4", "coarse-meshwarp s=8",
                       "coarse-meshwarp s=16", "proxy", "proxy lod 2px", "proxy lod 16px", "proxy tau 0.05",
-                      "proxy tau 0.2", "proxy, no extra view", "proxy, no carving", "proxy, no culling",
+                      "proxy tau 0.2", "proxy, no extra view", "proxy, no carving", "proxy, no inpainting", "proxy, no culling",
                       "proxy, static motion",
                       "proxy, oracle motion", ORACLE}
     assert v["proxy, oracle motion"]["options"] == {"motion": "oracle"}
