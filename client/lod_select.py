@@ -50,17 +50,18 @@ class LodSelector:
         self.tan_x = math.tan(math.radians(output.fov_deg) / 2)
         self.tan_y = self.tan_x * output.height / output.width
         self.focal_px = output.width / 2 / self.tan_x
-        self.thresholds = []  # per object: distance below which each of original, proxy is used
+        thresholds = []
         for o in objects:
             scale = float(np.cbrt(abs(np.linalg.det(o.transform[:3, :3])))) or 1.0
             lengths = [mean_edge_length(*o.level(level)) * scale for level in ("original", "proxy")]
-            self.thresholds.append([L * self.focal_px / target_px for L in lengths])
+            thresholds.append([L * self.focal_px / target_px for L in lengths])
+        #: (n, 2): per object the distance below which its original mesh, then its proxy, is used
+        self.thresholds = np.array(thresholds, dtype=np.float64).reshape(len(objects), 2)
         #: (n, 8, 4) box corners of every object, object space and (at rest) world space, homogeneous
         self._corners = np.array([[[x, y, z, 1.0] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])]
                                   for lo, hi in (o.bounds for o in objects)]).reshape(len(objects), 8, 4)
         self._rest_world = np.stack([c @ o.transform.T for c, o in zip(self._corners, objects)]) if objects else \
             np.zeros((0, 8, 4))
-        self._limits = np.array([t for t in self.thresholds]).reshape(len(objects), 2)
 
     def select(self, pose: Pose, near: float = 0.0, placed: dict | None = None) -> list[Selection]:
         """What to draw at ``pose``; ``placed`` maps an object index to its (4, 4) object-to-world
@@ -86,7 +87,7 @@ class LodSelector:
             if self.force_level is not None:
                 level = self.force_level
             else:
-                t_orig, t_proxy = self._limits[i]
+                t_orig, t_proxy = self.thresholds[i]
                 level = "original" if d[i] < t_orig else "proxy" if d[i] < t_proxy else "box"
             out.append(Selection(i, level, float(d[i])))
         return out

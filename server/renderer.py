@@ -517,6 +517,7 @@ class RenderTarget:
         self.motion_fbo = self.all_fbo = None   # all_fbo: the three, for a pass that writes all at once
         if motion:
             self.motion_fbo = ctx.framebuffer(color_attachments=[self.motion], depth_attachment=self.depth)
+            self.motion_fbo.depth_mask = False   # it only tests the main pass's depth (and its clear keeps it)
             self.all_fbo = ctx.framebuffer(color_attachments=[self.color, self.distance, self.motion],
                                            depth_attachment=self.depth)
 
@@ -712,11 +713,12 @@ class Renderer:
 
     def _program(self, key: tuple):
         """The program of ``key`` = (pass, textured, moving), or (pass, None, None) for the one
-        with uniform switches; compiled on first use."""
+        with uniform switches; compiled on first use. (moving is True for the motion passes only,
+        which their names already say; it keeps the keys of one shape.)"""
         prog = self.programs.get(key)
         if prog is not None:
             return prog
-        name, textured, moving = key
+        name, textured, _ = key
         vs, tcs, tes, variant = self._passes[name]
         if textured is None:
             defines = _UNIFORM_SWITCHES
@@ -778,7 +780,6 @@ class Renderer:
         viewport = ctx.viewport
         target.motion_fbo.use()
         ctx.viewport = viewport
-        target.motion_fbo.depth_mask = False
         ctx.depth_func = "=="
         ctx.enable(ctx.BLEND)
         ctx.blend_func = ctx.ONE_MINUS_DST_ALPHA, ctx.ONE
@@ -796,7 +797,6 @@ class Renderer:
             ctx.disable(ctx.BLEND)
             ctx.blend_func = ctx.DEFAULT_BLENDING
             ctx.depth_func = "<"
-            target.motion_fbo.depth_mask = True
             target.fbo.use()
             ctx.viewport = viewport
 
