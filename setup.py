@@ -15,6 +15,7 @@ from setuptools import setup
 PACKAGE_ROOTS = {
     "pibr": "cli",
     "pibr.protocol": "protocol",
+    "pibr.common": "common",
     "pibr.scenes": "scenes",
     "pibr.server": "server",
     "pibr.client": "client",

@@ -8,7 +8,7 @@ from pibr.client.cli import parse_methods
 
 
 def _size(text: str) -> tuple[int, int]:
-    from pibr.protocol.address import parse_size
+    from pibr.common.address import parse_size
     from pibr.protocol.errors import ConfigError
 
     try:

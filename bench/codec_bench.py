@@ -158,8 +158,9 @@ def run_codec_bench(scene_spec="room", windows=None, window_s=2.0, fps=10.0, vie
     from pibr.protocol.atlas import build_layout
     from pibr.protocol.depth import h264_quantizer
     from pibr.protocol.errors import ConfigError
-    from pibr.protocol.gl import create_context
-    from pibr.protocol.trace import load_trace, placement
+    from pibr.common.gl import create_context
+    from pibr.common.traces.loading import load_trace
+    from pibr.common.traces.placement import placement
     from pibr.scenes.registry import load_scene
     from pibr.server.depth_stream import EDGE_BITS, EdgeDepthStream, edge_quantizer
     from pibr.server.pipeline import FrameProducer, ProducerSpec
@@ -305,7 +306,9 @@ def end_to_end(scene_spec="room", windows=None, totals_kbps=DEFAULT_TOTALS_KBPS,
     A codec that leaves the colour less than :data:`MIN_COLOUR_KBPS` is marked infeasible."""
     from pibr.scenes.registry import load_scene
 
-    from .coverage import LatencyModel, display_samples
+    from pibr.common.link import SessionSchedule
+    from pibr.common.replay import display_samples
+
     from .depth_codecs import ViewDepthStreams
     from .ibr_bench import Simulation, evaluate_methods, load_proxies, summarize
     from .windows import EVALUATION_WINDOWS, Window, windows_json
@@ -313,7 +316,7 @@ def end_to_end(scene_spec="room", windows=None, totals_kbps=DEFAULT_TOTALS_KBPS,
     windows = tuple(windows or (Window(EVALUATION_WINDOWS[0].trace, EVALUATION_WINDOWS[0].start_s, 2.0),))
     scene = load_scene(scene_spec)
     proxies, _ = load_proxies(scene, progress)
-    latency = LatencyModel(rate_hz=rate_hz, up_ms=latency_ms / 2, down_ms=latency_ms / 2)
+    schedule = SessionSchedule.round_trip(rate_hz, latency_ms)
 
     def sim(colour_kbps, codec, depth_kbps=0.0):
         if codec == "h264-8bit-atlas":
@@ -338,7 +341,7 @@ def end_to_end(scene_spec="room", windows=None, totals_kbps=DEFAULT_TOTALS_KBPS,
         probes.append("h264-8bit-atlas")
     per_window = []
     for win in windows:
-        samples = display_samples(scene, win.trace, win.start_s, win.duration_s, rate_hz, latency)[::stride]
+        samples = display_samples(scene, win.trace, win.start_s, win.duration_s, schedule)[::stride]
         depth_kbps, motion_kbps = {"h264-8bit-atlas": 0.0}, {}
         # the depth streams' rate (and a moving scene's object poses and motion flow), before colour
         for codec in probes:

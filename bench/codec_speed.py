@@ -30,8 +30,9 @@ def render_frames(path: str, scene_spec: str, windows, fps: float, view_size, pr
     """Render the primary view's distance (n, h, w) float32 and poses along ``windows`` into ``path`` (.npz)."""
     from pibr.protocol.atlas import build_layout
     from pibr.protocol.depth import h264_quantizer
-    from pibr.protocol.gl import create_context
-    from pibr.protocol.trace import load_trace, placement
+    from pibr.common.gl import create_context
+    from pibr.common.traces.loading import load_trace
+    from pibr.common.traces.placement import placement
     from pibr.scenes.registry import load_scene
     from pibr.server.pipeline import FrameProducer, ProducerSpec
     from pibr.server.renderer import Renderer

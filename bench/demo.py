@@ -22,8 +22,8 @@ DEFAULT_METHODS = ("none", "rotation", "proxy")
 def check_inputs(scene: str, trace: str, start_s: float, duration_s: float) -> None:
     """Fail in one line, before any process starts, on what the children would refuse: an unknown
     scene or trace, a window outside the trace, no OpenGL on this machine."""
-    from pibr.protocol.gl import create_context
-    from pibr.protocol.trace import load_trace
+    from pibr.common.gl import create_context
+    from pibr.common.traces.loading import load_trace
     from pibr.scenes.registry import check_scene_spec
 
     check_scene_spec(scene)

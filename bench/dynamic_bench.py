@@ -35,7 +35,9 @@ import time
 
 import numpy as np
 
-from .coverage import LatencyModel, display_samples
+from pibr.common.link import SessionSchedule
+from pibr.common.replay import display_samples
+
 from .metrics import masked_metrics
 from .results import write_result
 from .windows import Window, windows_json
@@ -107,13 +109,13 @@ def event_probes(scene, kinds=("reversal", "stop"), after: float = 1.5) -> list[
     return out
 
 
-def _event_samples(probe, rate_hz: float, latency: LatencyModel, stride: int = 1) -> list:
+def _event_samples(probe, rate_hz: float, schedule: SessionSchedule, stride: int = 1) -> list:
     tick = 1.0 / rate_hz
     n0, n1 = int(math.ceil((probe["t"] - EVENT_BEFORE) / tick)), int(math.floor((probe["t"] + EVENT_AFTER) / tick))
     out = []
     for n in range(n0, n1 + 1):
         t_us = int(round(n * tick * 1e6))
-        render_us, _ = latency.frame_for(t_us)
+        render_us, _ = schedule.frame_for(t_us)
         out.append((t_us / 1e6, probe["pose"], render_us / 1e6, probe["pose"]))
     return out[::stride]
 
@@ -212,19 +214,19 @@ def measure_scene(scene, windows, latencies, rate_hz, stride, view_size, out_siz
             return {"moving": ids >= 0}
 
         # warm-up: shader compilation and the kernels' first calls count against no method
-        first = display_samples(scene, windows[0].trace, windows[0].start_s, 0.2, rate_hz, LatencyModel(rate_hz=rate_hz))
+        first = display_samples(scene, windows[0].trace, windows[0].start_s, 0.2, SessionSchedule.round_trip(rate_hz))
         show(first[-1], moving_mask)
         sim.flow_decode_ms.clear()
         sim.flow_prepare_ms.clear()
         made.clear()
         flow_stats.clear()
         for latency_ms in latencies:
-            latency = LatencyModel(rate_hz=rate_hz, up_ms=latency_ms / 2, down_ms=latency_ms / 2)
+            schedule = SessionSchedule.round_trip(rate_hz, latency_ms)
             series = _Series()
             poses0, flows0 = len(sim.pose_bytes), len(sim.flow_bytes)
             decode0, prepare0 = len(sim.flow_decode_ms), len(sim.flow_prepare_ms)
             for w in windows:
-                for sample in display_samples(scene, w.trace, w.start_s, w.duration_s, rate_hz, latency)[::stride]:
+                for sample in display_samples(scene, w.trace, w.start_s, w.duration_s, schedule)[::stride]:
                     for label, values in show(sample, moving_mask).items():
                         series.add(label, **values)
                     if bar is not None:
@@ -251,11 +253,11 @@ def measure_scene(scene, windows, latencies, rate_hz, stride, view_size, out_siz
             result["latency"][f"{latency_ms:g}"] = {"pose_bits_per_frame": pose_bits, "flow_bits_per_frame": flow_bits,
                                                      "methods": per}
         # error over time around reversals and stops: a fixed pose looking at the object
-        latency = LatencyModel(rate_hz=rate_hz, up_ms=event_latency_ms / 2, down_ms=event_latency_ms / 2)
+        schedule = SessionSchedule.round_trip(rate_hz, event_latency_ms)
         for probe in event_probes(scene):
             series = _Series()
             times = []
-            for sample in _event_samples(probe, rate_hz, latency, event_stride):
+            for sample in _event_samples(probe, rate_hz, schedule, event_stride):
                 index = probe["index"]
                 for label, values in show(sample, lambda ids: {"object": ids == index}).items():
                     series.add(label, **values)
@@ -283,11 +285,11 @@ def sample_count(scene, windows, latencies, rate_hz, stride, event_stride=1) -> 
     """Displayed samples a run scores on ``scene`` (for a progress bar)."""
     n = 0
     for latency_ms in latencies:
-        latency = LatencyModel(rate_hz=rate_hz, up_ms=latency_ms / 2, down_ms=latency_ms / 2)
-        n += sum(len(display_samples(scene, w.trace, w.start_s, w.duration_s, rate_hz, latency)[::stride])
+        schedule = SessionSchedule.round_trip(rate_hz, latency_ms)
+        n += sum(len(display_samples(scene, w.trace, w.start_s, w.duration_s, schedule)[::stride])
                  for w in windows)
-    latency = LatencyModel(rate_hz=rate_hz)
-    return n + sum(len(_event_samples(p, rate_hz, latency, event_stride)) for p in event_probes(scene))
+    schedule = SessionSchedule.round_trip(rate_hz)
+    return n + sum(len(_event_samples(p, rate_hz, schedule, event_stride)) for p in event_probes(scene))
 
 
 def run_dynamic_bench(scenes=DEFAULT_SCENES, windows=DEFAULT_WINDOWS, latencies=DEFAULT_LATENCIES, rate_hz=30.0,

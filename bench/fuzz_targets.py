@@ -490,8 +490,8 @@ class TraceTarget(Target):
     def build(self) -> None:
         from importlib import resources
 
-        from pibr.protocol.trace import write_canonical_csv
-        from pibr.protocol.trace_synth import synthesize
+        from pibr.common.traces.canonical import write_canonical_csv
+        from pibr.common.traces.synthesis import synthesize
 
         trace = synthesize("mixed", 0.3, rate_hz=60.0, seed=3)
         with tempfile.TemporaryDirectory() as tmp:
@@ -521,8 +521,9 @@ class TraceTarget(Target):
             f.write(self.canonical_bytes)
 
     def run(self, kind, data) -> None:
-        from pibr.protocol.trace import load_trace, read_canonical_csv, write_canonical_csv
-        from pibr.protocol.trace_import import import_csv, import_pred6dof, parse_columns
+        from pibr.common.traces.canonical import read_canonical_csv, write_canonical_csv
+        from pibr.common.traces.loading import load_trace
+        from pibr.common.traces.importers import import_csv, import_pred6dof, parse_columns
 
         if kind == "columns":
             trace = import_csv(self.fixed, parse_columns(data.decode("utf-8", "surrogateescape")))

@@ -13,7 +13,7 @@ class GroundTruth:
     """
 
     def __init__(self, scene, width: int, height: int, fov_deg: float, ctx=None):
-        from pibr.protocol.gl import create_context
+        from pibr.common.gl import create_context
         from pibr.server.renderer import Renderer, RenderTarget
 
         self._own_ctx = ctx is None

@@ -1,7 +1,7 @@
 """``pibr bench ibr``: the client methods' quality against ground truth and their speed.
 
 Quality runs the real pipeline in one process on the virtual clock's schedule
-(``coverage.LatencyModel``, the same arithmetic the processes follow, checked by the
+(``pibr.common.link.SessionSchedule``, the same arithmetic the processes follow, checked by the
 integration test): the server's renderer, packer and libx264 encoder make each frame, the
 client's H.264 decoder, textures and methods re-render every displayed tick, and the ground
 truth renderer scores it. No sockets, so nothing but the methods differs between them.
@@ -20,9 +20,10 @@ import time
 
 import numpy as np
 
+from pibr.common.link import SessionSchedule
+from pibr.common.replay import display_samples
 from pibr.protocol.messages import Frame, Hello, OutputConfig, PayloadKind
 
-from .coverage import LatencyModel, display_samples
 from .metrics import dssim, nearly_uniform, psnr, ssim
 from .results import write_result
 
@@ -89,7 +90,7 @@ class Simulation:
         from pibr.client.frame_textures import FrameTextures
         from pibr.client.output_target import OutputTarget
         from pibr.client.video import H264Decoder
-        from pibr.protocol.gl import create_context
+        from pibr.common.gl import create_context
         from pibr.server.config import ServerConfig
         from pibr.server.depth_stream import EdgeSettings
         from pibr.server.pipeline import FrameProducer
@@ -429,11 +430,11 @@ def run_ibr_bench(scene_spec="room", windows=None, latency_ms=128.0, rate_hz=30.
     windows = tuple(windows or EVALUATION_WINDOWS)
     scene = load_scene(scene_spec)
     proxies, bundle = load_proxies(scene, progress)
-    latency = LatencyModel(rate_hz=rate_hz, up_ms=latency_ms / 2, down_ms=latency_ms / 2)
+    schedule = SessionSchedule.round_trip(rate_hz, latency_ms)
     result = {"scene": scene.name, "windows": windows_json(windows, "reporting"), "latency_ms": latency_ms,
               "rate_hz": rate_hz, "output": list(out_size), "view_size": list(view_size), "stride": stride,
               "proxies": bundle.info(1 << 20) | {"build_s": bundle.seconds}, "quality": {}, "lod": {}, "speed": {}}
-    samples = {w.label: display_samples(scene, w.trace, w.start_s, w.duration_s, rate_hz, latency)[::stride]
+    samples = {w.label: display_samples(scene, w.trace, w.start_s, w.duration_s, schedule)[::stride]
                for w in windows}
     traces = list(samples)
     quality_variants = {"none": ("none", {}), "rotation": ("rotation", {}), "proxy": ("proxy", {})}

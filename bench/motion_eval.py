@@ -1,7 +1,7 @@
 """Moving objects under ``proxy``'s extrapolations: quality over the frame and over the moving
 objects' pixels, against ground truth, in one process (``ibr_bench.Simulation``).
 
-Per displayed tick of each window, on the virtual clock's schedule (``coverage.LatencyModel``):
+Per displayed tick of each window, on the virtual clock's schedule (``pibr.common.link.SessionSchedule``):
 the server's frame as the client has it, then ``proxy`` with each ``motion`` mode
 (client/object_motion.py; ``oracle`` evaluates the scene's animation, which only a benchmark
 has). The moving objects' pixels are those showing a moving object in the ground truth at the
@@ -17,7 +17,9 @@ import time
 
 import numpy as np
 
-from .coverage import LatencyModel, display_samples
+from pibr.common.link import SessionSchedule
+from pibr.common.replay import display_samples
+
 from .metrics import masked_metrics
 
 MODES = ("static", "velocity", "accel", "oracle")
@@ -45,15 +47,14 @@ def measure_motion(scene, windows, modes=MODES, latency_ms: float = 128.0, rate_
 
     if proxies is None:
         proxies, _ = load_proxies(scene, progress=False)
-    latency = LatencyModel(rate_hz=rate_hz, up_ms=latency_ms / 2, down_ms=latency_ms / 2)
+    schedule = SessionSchedule.round_trip(rate_hz, latency_ms)
     sim = Simulation(scene, view_size, out_size, proxies=proxies, depth_codec=depth_codec)
     truth = RenderTarget(sim.ctx, *out_size, motion=True)
     rows = {m: {} for m in modes}
     try:
         methods = {m: sim.make_method("proxy", motion=m) for m in modes}
         for window in windows:
-            samples = display_samples(scene, window.trace, window.start_s, window.duration_s, rate_hz,
-                                      latency)[::stride]
+            samples = display_samples(scene, window.trace, window.start_s, window.duration_s, schedule)[::stride]
             for t_disp, display, t_render, rendered in samples:
                 frame = sim.frame_at(t_render, rendered)
                 sim.renderer.render_perspective(truth, display, frame.scene_t_us / 1e6, sim.output.fov_deg)

@@ -21,7 +21,10 @@ import sys
 
 import numpy as np
 
-from .coverage import CoverageProbe, LatencyModel, display_samples
+from pibr.common.link import SessionSchedule
+from pibr.common.replay import display_samples
+from pibr.server.coverage import CoverageProbe
+
 from .results import write_result
 
 
@@ -114,13 +117,13 @@ def search_offset(scene_spec="room", windows=None, latency_ms=128.0, rate_hz=30.
     if method not in ("exhaustive", "coarse-to-fine"):
         raise ValueError("method must be 'exhaustive' or 'coarse-to-fine'")
     scene = load_scene(scene_spec)
-    latency = LatencyModel(rate_hz=rate_hz, up_ms=latency_ms / 2, down_ms=latency_ms / 2)
+    schedule = SessionSchedule.round_trip(rate_hz, latency_ms)
     from .windows import TUNING_WINDOWS, windows_json
 
     windows = tuple(windows or TUNING_WINDOWS)     # a search fits a default: tuning windows only
     samples = []
     for w in windows:
-        s = display_samples(scene, w.trace, w.start_s, w.duration_s, rate_hz, latency)
+        s = display_samples(scene, w.trace, w.start_s, w.duration_s, schedule)
         stride = max(1, len(s) // frames_per_window)
         samples += s[::stride][:frames_per_window]
     axes = [list(forward), list(up), list(tilt)]

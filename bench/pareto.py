@@ -30,7 +30,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .coverage import LatencyModel, camera_rays, display_samples, displayed_points, uncovered
+from pibr.common.link import SessionSchedule
+from pibr.common.replay import display_samples
+from pibr.server.coverage import camera_rays, displayed_points, uncovered
+
 from .metrics import frame_metrics, nearly_uniform, pixels_per_degree
 from .results import write_result
 from .windows import EVALUATION_WINDOWS, describe_windows, windows_json
@@ -164,8 +167,8 @@ def measure_scene(scene, variants, windows, latency_ms=128.0, rate_hz=30.0, stri
     variants = [*variants, *motion_variants(variants, scene)]
     with_proxies = any(v.method == "proxy" for v in variants)
     proxies, bundle = load_proxies(scene, progress=False) if with_proxies else (None, None)
-    latency = LatencyModel(rate_hz=rate_hz, up_ms=latency_ms / 2, down_ms=latency_ms / 2)
-    samples = {w.label: display_samples(scene, w.trace, w.start_s, w.duration_s, rate_hz, latency)[::stride]
+    schedule = SessionSchedule.round_trip(rate_hz, latency_ms)
+    samples = {w.label: display_samples(scene, w.trace, w.start_s, w.duration_s, schedule)[::stride]
                for w in windows}
     oracle_rate = rate_hz / stride
     quality = _Quality()
@@ -279,14 +282,14 @@ def run_pareto_bench(scenes=("room",), methods=None, windows=EVALUATION_WINDOWS,
 
     variants = default_variants(methods)
     loaded = [load_scene(s) for s in scenes]
-    latency = LatencyModel(rate_hz=rate_hz, up_ms=latency_ms / 2, down_ms=latency_ms / 2)
+    schedule = SessionSchedule.round_trip(rate_hz, latency_ms)
     bar = None
     if progress:
         from tqdm import tqdm
 
         total = 0
         for scene in loaded:
-            total += sum(len(display_samples(scene, w.trace, w.start_s, w.duration_s, rate_hz, latency)[::stride])
+            total += sum(len(display_samples(scene, w.trace, w.start_s, w.duration_s, schedule)[::stride])
                          for w in windows)
             total += speed_frames * len(speed_sizes)
         bar = tqdm(total=total, unit="frame", desc="bench pareto", file=sys.stderr, leave=False, disable=None)

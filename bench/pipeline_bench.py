@@ -16,7 +16,8 @@ from .results import write_result
 
 
 def _poses(scene, trace_spec: str, count: int, fps: float, start_s: float = 10.0):
-    from pibr.protocol.trace import load_trace, placement
+    from pibr.common.traces.loading import load_trace
+    from pibr.common.traces.placement import placement
 
     trace = load_trace(trace_spec)
     start = min(start_s, max(0.0, trace.duration - count / fps))
@@ -59,7 +60,7 @@ def bench_server(scene_spec="room", trace="pred6dof-1", frames=40, view_size=(10
     1 % off (or sky on one side only). ``cube_scale``: face size of projection "cube" as a
     fraction of the view width (server/cube_faces.py).
     """
-    from pibr.protocol.gl import create_context
+    from pibr.common.gl import create_context
     from pibr.scenes.registry import load_scene
     from pibr.server.pipeline import FrameProducer
     from pibr.server.renderer import MAX_EDGE_ANGLE_DEG, RenderTarget, Renderer
@@ -173,7 +174,7 @@ def bench_client(scene_spec="room", trace="pred6dof-1", frames=40, view_size=(10
     from pibr.client.methods import make_method
     from pibr.client.output_target import OutputTarget
     from pibr.client.video import H264Decoder
-    from pibr.protocol.gl import create_context
+    from pibr.common.gl import create_context
     from pibr.scenes.registry import load_scene
     from pibr.server.pipeline import FrameProducer
     from pibr.server.renderer import Renderer

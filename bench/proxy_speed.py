@@ -25,14 +25,16 @@ VARIANTS = {"proxy": {}, "proxy no cull": {"cull": False}, "proxy carve_all": {"
 
 def _samples(scene, frames: int, rate_hz: float = 30.0, latency_ms: float = 128.0) -> list:
     """``frames`` display samples spread evenly over the evaluation windows."""
-    from .coverage import LatencyModel, display_samples
+    from pibr.common.link import SessionSchedule
+    from pibr.common.replay import display_samples
+
     from .windows import EVALUATION_WINDOWS
 
-    latency = LatencyModel(rate_hz=rate_hz, up_ms=latency_ms / 2, down_ms=latency_ms / 2)
+    schedule = SessionSchedule.round_trip(rate_hz, latency_ms)
     per = -(-frames // len(EVALUATION_WINDOWS))
     out = []
     for w in EVALUATION_WINDOWS:
-        s = display_samples(scene, w.trace, w.start_s, w.duration_s, rate_hz, latency)
+        s = display_samples(scene, w.trace, w.start_s, w.duration_s, schedule)
         out += s[:: max(1, len(s) // per)][:per]
     return out[:frames]
 

@@ -77,11 +77,13 @@ def run_split_bench(out_dir="out/bench", traces=("synth-walk", "synth-look"), st
                     progress=True) -> dict:
     from pibr.scenes.registry import load_scene
 
-    from .coverage import LatencyModel, display_samples
+    from pibr.common.link import SessionSchedule
+    from pibr.common.replay import display_samples
+
     from .ibr_bench import Simulation, evaluate_methods, load_proxies, summarize
 
     specs = write_atrium(os.path.join(out_dir, "atrium"))
-    latency = LatencyModel(rate_hz=rate_hz, up_ms=latency_ms / 2, down_ms=latency_ms / 2)
+    schedule = SessionSchedule.round_trip(rate_hz, latency_ms)
     result = {"traces": list(traces), "start_s": start_s, "duration_s": duration_s, "latency_ms": latency_ms,
               "output": list(out_size), "variants": {}}
     bar = None
@@ -95,7 +97,7 @@ def run_split_bench(out_dir="out/bench", traces=("synth-walk", "synth-look"), st
         sim = Simulation(scene, view_size, out_size, proxies=proxies)
         try:
             for tr in traces:
-                samples = display_samples(scene, tr, start_s, duration_s, rate_hz, latency)[::stride]
+                samples = display_samples(scene, tr, start_s, duration_s, schedule)[::stride]
                 if progress and bar is None:
                     from tqdm import tqdm
 

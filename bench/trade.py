@@ -5,7 +5,7 @@ One sweep per knob, every point on the same display ticks of the same head-trace
 * **stream knobs** (a new server stream per point): colour bitrate, x264 preset, keyframe
   interval, primary view size, the extra view's size, server frame rate, and the network:
   round-trip latency, jitter, a bandwidth cap. Every server frame is rendered, encoded and
-  decoded in order, on the schedule of :class:`~pibr.bench.coverage.LinkSchedule` (the relay's
+  decoded in order, on the schedule of :class:`~pibr.common.link.SessionSchedule` (the relay's
   link model per direction: jitter from a seeded generator, frames queueing behind each other
   under a cap, the real clock's limit of frames in flight);
 * **client knobs** (the default stream, shown again): the proxy's tau and depth slack, and the
@@ -31,9 +31,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from pibr.common.link import LinkParams, SessionSchedule
+from pibr.common.replay import trace_poses
 from pibr.protocol.errors import ConfigError
+from pibr.server.config import DEFAULT_MAX_IN_FLIGHT
+from pibr.server.coverage import camera_rays
 
-from .coverage import LinkSchedule, camera_rays, trace_poses
 from .metrics import nearly_uniform, pixels_per_degree
 from .pareto import Variant, _display_timed, _geometric_holes, _metrics_job
 from .results import write_result
@@ -226,8 +229,6 @@ def _client_variants(knobs, methods, defaults, values_of) -> list[tuple[str, str
 def measure_point(scene, point: StreamPoint, windows, methods, extra_variants, proxies_by_lod, gt: _GroundTruth,
                   ctx, rate_hz, stride, out_size, flip_every, seed, pool, bar=None) -> dict:
     """One stream point on every window: figures per method label (and the stream's own)."""
-    from pibr.protocol.link import LinkParams
-
     from .ibr_bench import Simulation
 
     default_lod = next(iter(proxies_by_lod))
@@ -255,8 +256,9 @@ def measure_point(scene, point: StreamPoint, windows, methods, extra_variants, p
         for w in windows:
             ticks, pose_at = trace_poses(scene, w.trace, w.start_s, w.duration_s, rate_hz)
             half = point.latency_ms / 2
-            schedule = LinkSchedule(rate_hz, point.fps, LinkParams(half, point.jitter_ms),
-                                    LinkParams(half, point.jitter_ms, point.cap_kbps), seed=seed)
+            schedule = SessionSchedule(rate_hz, point.fps, LinkParams(half, point.jitter_ms),
+                                       LinkParams(half, point.jitter_ms, point.cap_kbps), seed=seed,
+                                       max_in_flight=DEFAULT_MAX_IN_FLIGHT)
             sim.restart_stream()
             in_flight = collections.deque()
             shown = shown_distances = None
@@ -336,7 +338,7 @@ def run_trade_bench(scenes=("room",), knobs=tuple(KNOBS), windows=EVALUATION_WIN
     about 0.5 CPU-s each at 1024² on this machine); ``stream``: the default StreamPoint (None: the
     server's defaults); ``values``: knob name -> values swept instead of :data:`KNOBS`' (the
     default is always added)."""
-    from pibr.protocol.gl import create_context
+    from pibr.common.gl import create_context
     from pibr.scenes.registry import load_scene
 
     from .windows import overlapping_tuning

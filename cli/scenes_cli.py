@@ -30,7 +30,7 @@ def register(subparsers) -> None:
 
 
 def _size(text: str) -> tuple[int, int]:
-    from pibr.protocol.address import parse_size
+    from pibr.common.address import parse_size
     from pibr.protocol.errors import ConfigError
 
     try:
@@ -64,7 +64,7 @@ def plan_for(spec: str, output=(960, 540), fov_deg: float = 90.0, bandwidth_kbps
     """The plan a server with these settings makes for ``spec`` and a client with this output and
     bandwidth that asks for proxies, as JSON (what the client's session.json records)."""
     from pibr.protocol.errors import ConfigError, MalformedMessage
-    from pibr.protocol.gl import create_context
+    from pibr.common.gl import create_context
     from pibr.protocol.messages import Hello, OutputConfig
     from pibr.scenes.lod_cache import lods_for_scene
     from pibr.scenes.registry import load_scene

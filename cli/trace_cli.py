@@ -115,7 +115,7 @@ def register(subparsers) -> None:
 
 
 def run_convert(args) -> int:
-    from pibr.protocol.trace import write_canonical_csv
+    from pibr.common.traces.canonical import write_canonical_csv
 
     trace = read_input(args)
     if args.rate is not None:
@@ -142,8 +142,8 @@ def run_show(args) -> int:
 
 
 def run_synth(args) -> int:
-    from pibr.protocol.trace import write_canonical_csv
-    from pibr.protocol.trace_synth import synthesize
+    from pibr.common.traces.canonical import write_canonical_csv
+    from pibr.common.traces.synthesis import synthesize
 
     trace = synthesize(args.kind, args.duration, rate_hz=args.rate, seed=args.seed,
                        walk_speed=args.walk_speed, turn_speed_deg=args.turn_speed,
@@ -155,7 +155,7 @@ def run_synth(args) -> int:
 
 
 def run_list(args) -> int:
-    from pibr.protocol.trace import builtin_traces
+    from pibr.common.traces.loading import builtin_traces
 
     traces = builtin_traces()
     width = max(len(n) for n in traces)
@@ -171,8 +171,8 @@ def run_list(args) -> int:
 
 def read_input(args):
     """The trace the import options describe (format, columns, axes, recentring)."""
-    from pibr.protocol.trace import detect_format, load_trace
-    from pibr.protocol.trace_import import import_csv, import_pred6dof, parse_columns
+    from pibr.common.traces.loading import detect_format, load_trace
+    from pibr.common.traces.importers import import_csv, import_pred6dof, parse_columns
 
     fmt = "csv" if args.format == "auto" and args.columns else args.format
     if fmt == "csv":

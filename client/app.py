@@ -34,7 +34,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from pibr.protocol.errors import ConfigError, MalformedMessage, UnexpectedMessage
-from pibr.protocol.gl import GLThread
+from pibr.common.gl import GLThread
 from pibr.protocol.messages import (FRAMES_DECODED, MAX_BANDWIDTH_KBPS, Clock, Frame, Hello, OutputConfig,
                                     PayloadKind, PoseMsg, ProxyChunk, Stats)
 from pibr.protocol.pose import Pose
@@ -101,7 +101,7 @@ class ClientConfig:
         if not (0 <= self.bandwidth_kbps <= MAX_BANDWIDTH_KBPS):
             raise ConfigError(f"bandwidth must be in 0..{MAX_BANDWIDTH_KBPS:g} kbit/s (0: not stated), "
                               f"got {self.bandwidth_kbps}")
-        from pibr.protocol.trace import ANCHORS
+        from pibr.common.traces.placement import ANCHORS
 
         if self.anchor not in ANCHORS:
             raise ConfigError(f"anchor must be one of {', '.join(ANCHORS)}, got {self.anchor!r}")
@@ -222,7 +222,7 @@ class Client:
     # ------------------------------------------------------------------ set-up
 
     def _trace_poses(self):
-        from pibr.protocol.trace import load_trace
+        from pibr.common.traces.loading import load_trace
 
         trace = load_trace(self.cfg.trace)
         start, end = trace.window(self.cfg.start_s, self.cfg.duration_s)
@@ -233,7 +233,7 @@ class Client:
     def _pose_at(self, trace, t_s: float) -> Pose:
         local = trace.pose_at(self.cfg.start_s + min(max(t_s, 0.0), self._duration))
         if self._placement is None:
-            from pibr.protocol.trace import placement
+            from pibr.common.traces.placement import placement
 
             self._placement = placement(trace, self.cfg.start_s, self.session.viewer_origin, self.cfg.anchor)
         return self._placement.compose(local)

@@ -5,11 +5,11 @@ import argparse
 import asyncio
 import sys
 
-from pibr.protocol.address import parse_host_port
+from pibr.common.address import parse_host_port
 
 
 def _size(text: str) -> tuple[int, int]:
-    from pibr.protocol.address import parse_size
+    from pibr.common.address import parse_size
     from pibr.protocol.errors import ConfigError
 
     try:

@@ -1,37 +1,26 @@
-"""Head traces: timed camera poses, their canonical CSV form, resampling and built-in recordings.
+"""The head-trace type: timed camera poses, resampled for replay.
 
 Conventions (DESIGN.md, Contracts): metres and seconds, right-handed, +Y up, a camera looks
-along -Z, orientations are camera-to-world unit quaternions (w, x, y, z). The canonical CSV
-has the header ``t,px,py,pz,qw,qx,qy,qz`` with ``t`` in seconds from the start. Replay
-resamples to the output rate: linear position, SLERP orientation.
+along -Z, orientations are camera-to-world unit quaternions (w, x, y, z), ``t`` in seconds
+from the start. Replay resamples to the output rate: linear position, SLERP orientation.
 
-Other file formats are converted once, at the edge, by :mod:`pibr.protocol.trace_import`;
-:func:`load_trace` picks the reader from a file's header line.
+Reading and writing trace files (the canonical ``t,px,py,pz,qw,qx,qy,qz`` CSV and other
+formats), the built-in recordings, synthetic traces and placing a trace in a scene are not
+part of the contract: :mod:`pibr.common.traces`.
 """
 from __future__ import annotations
 
 import math
-import os
-import re
 from dataclasses import dataclass, field
-from importlib import resources
-from pathlib import Path
-from typing import Iterator
 
 import numpy as np
 
 from .errors import TraceError
-from .pose import MIN_QUAT_NORM, Pose, quat_angle, quat_multiply, quat_normalize, quat_slerp, quat_to_matrix
+from .pose import Pose, quat_angle, quat_multiply, quat_normalize, quat_slerp, quat_to_matrix
 
-CANONICAL_COLUMNS = ("t", "px", "py", "pz", "qw", "qx", "qy", "qz")
-CANONICAL_HEADER = ",".join(CANONICAL_COLUMNS)
-
-#: Header of the pred6dof / HoloLens recordings (Unity, left-handed, .NET ticks).
-PRED6DOF_COLUMNS = ("timestamp", "x", "y", "z", "qx", "qy", "qz", "qw")
-
-#: Limits on what a trace file controls (TraceError past them): a longer span or farther
-#: positions mean a wrong unit, not a head; integer timestamps (ticks, ns since an epoch) are
-#: 64-bit; resampling makes at most MAX_SAMPLES samples.
+#: Limits on what a trace controls (TraceError past them): a longer span or farther positions
+#: mean a wrong unit, not a head; integer timestamps (ticks, ns since an epoch) are 64-bit;
+#: resampling makes at most MAX_SAMPLES samples.
 MAX_DURATION_S = 1e6
 MAX_POSITION_M = 1e8
 MAX_SAMPLES = 10_000_000
@@ -41,14 +30,6 @@ TIMESTAMP_RANGE = (-2**63, 2**63 - 1)
 _UNIT_TOLERANCE = 1e-12
 #: How far from unit length a HeadTrace orientation may be (rounding of stored files).
 _UNIT_CHECK = 1e-6
-
-_BUILTIN_DIR = "traces/pred6dof"
-_BUILTINS = {
-    "pred6dof-1": ("1.csv", "real HoloLens head motion, walking around a virtual object, 77.7 s, "
-                            "~60 Hz uneven (pred6dof 1.csv)"),
-    "pred6dof-2": ("2.csv", "real HoloLens head motion, walking around a virtual object, 72.4 s, "
-                            "~60 Hz uneven (pred6dof 2.csv)"),
-}
 
 
 @dataclass(eq=False)
@@ -303,205 +284,3 @@ def yaw_pitch(orientations) -> np.ndarray:
     yaw = np.unwrap(np.arctan2(-forward[..., 0], -forward[..., 2]))
     pitch = np.arcsin(np.clip(forward[..., 1], -1.0, 1.0))
     return np.stack([yaw, pitch], axis=-1)
-
-
-def row_error(path, line: int, problem: str) -> TraceError:
-    """The error for one bad line of a trace file: names the file and the 1-based line."""
-    return TraceError(f"{path}: line {line}: {problem}")
-
-
-def iter_lines(path) -> Iterator[tuple[int, str]]:
-    """(1-based line number, stripped text) of every non-blank line of a text file."""
-    try:
-        with open(path, encoding="utf-8-sig") as f:
-            for number, line in enumerate(f, start=1):
-                text = line.strip()
-                if text:
-                    yield number, text
-    except FileNotFoundError as exc:
-        raise TraceError(f"{path}: no such trace file") from exc
-    except UnicodeDecodeError as exc:
-        raise TraceError(f"{path}: not a text (UTF-8) file: {exc}") from exc
-    except OSError as exc:
-        raise TraceError(f"{path}: cannot read: {exc.strerror or exc}") from exc
-
-
-def parse_number(path, line: int, column: str, text: str) -> float:
-    """A finite float from one CSV field, or a line-numbered TraceError."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise row_error(path, line, f"column {column!r}: {text!r} is not a number") from None
-    if math.isnan(value):
-        raise row_error(path, line, f"column {column!r} is NaN")
-    if math.isinf(value):
-        raise row_error(path, line, f"column {column!r} is infinite")
-    return value
-
-
-def check_quaternion(path, line: int, q) -> None:
-    """Raise a line-numbered TraceError for a (near) zero quaternion (w, x, y, z)."""
-    if math.sqrt(sum(c * c for c in q)) < MIN_QUAT_NORM:
-        raise row_error(path, line, f"zero quaternion {tuple(q)} names no rotation")
-
-
-def header_fields(text: str, delimiter: str | None = ",") -> list[str]:
-    """Field names of a header line, stripped of whitespace and quotes."""
-    return [f.strip().strip("\"'").strip() for f in text.split(delimiter)]
-
-
-# --------------------------------------------------------------------------------- canonical CSV
-
-
-def read_canonical_csv(path, name: str | None = None) -> HeadTrace:
-    """Read a canonical ``t,px,py,pz,qw,qx,qy,qz`` file. Times are re-based to start at 0 and
-    quaternions normalised. Any bad row raises TraceError naming the file and line."""
-    name = name or Path(path).stem
-    lines = iter_lines(path)
-    first = next(lines, None)
-    if first is None:
-        raise TraceError(f"{path}: empty file, expected the header {CANONICAL_HEADER!r}")
-    line, text = first
-    if header_fields(text) != list(CANONICAL_COLUMNS):
-        raise row_error(path, line, f"header must be exactly {CANONICAL_HEADER!r}, got {text!r}")
-    times, rows = [], []
-    last_time, last_line = None, None
-    for line, text in lines:
-        fields = text.split(",")
-        if len(fields) != len(CANONICAL_COLUMNS):
-            raise row_error(path, line, f"expected {len(CANONICAL_COLUMNS)} columns "
-                                        f"({CANONICAL_HEADER}), got {len(fields)}")
-        values = [parse_number(path, line, c, f) for c, f in zip(CANONICAL_COLUMNS, fields)]
-        check_quaternion(path, line, values[4:])
-        t = values[0]
-        if last_time is not None and t <= last_time:
-            if t == last_time:
-                raise row_error(path, line, f"duplicate timestamp t={t!r} (same as line {last_line})")
-            raise row_error(path, line, f"time is not increasing: t={t!r} after t={last_time!r} "
-                                        f"on line {last_line}")
-        last_time, last_line = t, line
-        times.append(t)
-        rows.append(values[1:])
-    if not rows:
-        raise TraceError(f"{path}: no samples after the header")
-    data = np.array(rows, dtype=np.float64)
-    return HeadTrace.from_samples(np.array(times), data[:, :3], data[:, 3:], name)
-
-
-def write_canonical_csv(trace: HeadTrace, path) -> None:
-    """Write ``trace`` as canonical CSV; floats are written exactly (shortest round-trip form)."""
-    table = np.column_stack([trace.t, trace.positions, trace.orientations])
-    out = [CANONICAL_HEADER]
-    out.extend(",".join(map(repr, row)) for row in table.tolist())
-    try:
-        with open(path, "w", encoding="utf-8", newline="\n") as f:
-            f.write("\n".join(out) + "\n")
-    except OSError as exc:
-        raise TraceError(f"{path}: cannot write: {exc.strerror or exc}") from exc
-
-
-# --------------------------------------------------------------------------------- loading
-
-
-def builtin_traces() -> dict[str, str]:
-    """Built-in trace name -> one-line description."""
-    return {name: description for name, (_, description) in _BUILTINS.items()}
-
-
-def detect_format(path) -> str:
-    """'canonical' or 'pred6dof' from a file's header line; TraceError for anything else."""
-    first = next(iter_lines(path), None)
-    if first is None:
-        raise TraceError(f"{path}: empty file")
-    line, text = first
-    names = header_fields(text)
-    if names == list(CANONICAL_COLUMNS):
-        return "canonical"
-    from .trace_import import split_fields
-
-    if set(PRED6DOF_COLUMNS) <= {f.lower() for f in split_fields(text, "auto")}:
-        return "pred6dof"   # extra columns (velocities, ...) are ignored by the importer
-    raise TraceError(
-        f"{path}: line {line}: unrecognised trace header {text!r}; expected {CANONICAL_HEADER!r} "
-        f"(canonical) or one with {','.join(PRED6DOF_COLUMNS)!r} (pred6dof/HoloLens). For other CSV files "
-        "name the columns: pibr trace convert IN OUT --format csv --columns t=...,px=...")
-
-
-#: How a trace window is placed in a scene (:func:`placement`).
-ANCHORS = ("start", "origin", "none")
-
-
-def heading(q) -> float:
-    """Yaw in radians of a camera orientation (w, x, y, z): the angle about +Y from -Z to the
-    direction it looks, projected on the floor (0 looking along -Z, +pi/2 along -X)."""
-    f = quat_to_matrix(q) @ np.array([0.0, 0.0, -1.0])
-    return math.atan2(-f[0], -f[2])
-
-
-def placement(trace: HeadTrace, start_s: float, origin: Pose, anchor: str = "start") -> Pose:
-    """Where a trace window goes in a scene: the world pose at trace time t is
-    ``placement(...).compose(trace.pose_at(t))``.
-
-    anchor 'start' : the window's first pose (at ``start_s``) is put at the scene's viewer
-        ``origin``: its position there, its heading turned to the origin's (about +Y, so the
-        trace's up stays up), its pitch and roll kept. Any window of any trace then starts
-        where the scene's author put the viewer, facing where they meant.
-    anchor 'origin' : the trace's own origin at the viewer origin (its coordinates taken as
-        relative to it), as recorded around a point of interest.
-    anchor 'none' : the trace is already in the scene's coordinates.
-    """
-    if anchor == "none":
-        return Pose.identity()
-    if anchor == "origin":
-        return origin
-    if anchor != "start":
-        raise TraceError(f"unknown anchor {anchor!r}; expected one of {', '.join(ANCHORS)}")
-    first = trace.pose_at(start_s)
-
-    def on_floor(p, q) -> Pose:   # position and heading only
-        h = heading(q)
-        return Pose.make(p, [math.cos(h / 2), 0.0, math.sin(h / 2), 0.0])
-    return on_floor(origin.p, origin.q).compose(on_floor(first.p, first.q).inverse())
-
-
-#: ``synth-KIND`` or ``synth-KIND-seedN``: a synthetic trace (protocol/trace_synth.py) by name.
-_SYNTHETIC_NAME = re.compile(r"synth-(walk|look|turns|mixed)(?:-seed(\d{1,9}))?")
-SYNTHETIC_DURATION_S = 60.0
-
-
-def load_trace(spec, format: str = "auto") -> HeadTrace:
-    """A head trace from a file path, a built-in name (see :func:`builtin_traces`) or a synthetic
-    one by name: ``synth-walk``, ``synth-look``, ``synth-turns``, ``synth-mixed``, optionally
-    with ``-seedN`` (60 s at 120 Hz, the same trace every time).
-
-    format : 'auto' (from the header line), 'canonical' or 'pred6dof'
-    """
-    from . import trace_import  # imports this module; deferred to keep the import order simple
-
-    if format not in ("auto", "canonical", "pred6dof"):
-        raise TraceError(f"unknown trace format {format!r}; expected auto, canonical or pred6dof")
-    path = Path(os.fspath(spec))
-    if not path.is_file():
-        key = str(spec)
-        synthetic = _SYNTHETIC_NAME.fullmatch(key)
-        if synthetic:
-            from .trace_synth import synthesize
-
-            trace = synthesize(synthetic.group(1), SYNTHETIC_DURATION_S, seed=int(synthetic.group(2) or 0))
-            trace.name = key
-            return trace
-        if key not in _BUILTINS:
-            raise TraceError(f"{key!r} is neither a trace file nor a built-in trace "
-                             f"(built-in: {', '.join(_BUILTINS)}; synthetic: synth-KIND[-seedN], KIND one of "
-                             "walk, look, turns, mixed)")
-        filename = _BUILTINS[key][0]
-        ref = resources.files("pibr.protocol.data").joinpath(_BUILTIN_DIR, filename)
-        with resources.as_file(ref) as builtin_path:
-            trace = trace_import.import_pred6dof(builtin_path)
-        trace.name = key
-        return trace
-    if format == "auto":
-        format = detect_format(path)
-    if format == "canonical":
-        return read_canonical_csv(path)
-    return trace_import.import_pred6dof(path)

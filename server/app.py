@@ -16,7 +16,7 @@ from collections import deque
 import numpy as np
 
 from pibr.protocol.errors import ConfigError, SceneError
-from pibr.protocol.gl import GLThread
+from pibr.common.gl import GLThread
 from pibr.protocol.messages import Hello
 
 from .config import ServerConfig

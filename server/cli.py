@@ -5,7 +5,7 @@ import argparse
 import asyncio
 import sys
 
-from pibr.protocol.address import parse_host_port
+from pibr.common.address import parse_host_port
 from pibr.protocol.motion_flow import DEFAULT_FLOW_CODER, FLOW_CODERS
 
 from .config import DEFAULT_PORT
@@ -13,7 +13,7 @@ from .relay import DEFAULT_BUFFER_BYTES, DEFAULT_MAX_CONNECTIONS
 
 
 def _size(text: str) -> tuple[int, int]:
-    from pibr.protocol.address import parse_size
+    from pibr.common.address import parse_size
     from pibr.protocol.errors import ConfigError
 
     try:
@@ -212,7 +212,7 @@ def cmd_serve(args) -> int:
 
 def cmd_relay(args) -> int:
     from pibr.protocol.errors import ConfigError
-    from pibr.protocol.link import LinkParams
+    from pibr.common.link import LinkParams
 
     from .relay import RelayConfig, run_relay
 

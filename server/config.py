@@ -23,6 +23,9 @@ MIN_EDGE_DEG, MAX_EDGE_DEG = 1.0, 30.0
 extra_offset_pose = dual_view_offset  # the server's name for it
 
 
+#: Real clock: frames a session sends ahead of what its client reports decoded (server/session.py).
+DEFAULT_MAX_IN_FLIGHT = 3
+
 #: Reinert et al.'s offset: 1.5 m forward, 1.8 m up, tilted 15 degrees down.
 PAPER_EXTRA_OFFSET = (1.5, 1.8, 15.0)
 
@@ -54,7 +57,7 @@ class ServerConfig:
     idle_timeout_s: float = 15.0        # real clock: longest wait for the client's next pose or clock
     idle_timeout_virtual_s: float = 30.0  # virtual clock: the same (a client may work long per tick)
     max_clock_lead_s: float = 10.0      # virtual clock: how far a client's clock may run ahead of the frames
-    max_in_flight: int = 3              # real clock: frames sent ahead of what the client has decoded
+    max_in_flight: int = DEFAULT_MAX_IN_FLIGHT              # real clock: frames sent ahead of what the client has decoded
     token: str | None = None            # every Hello must carry it; required to listen off loopback
     tls_cert: str | None = None         # PEM certificate chain: serve TLS (with tls_key)
     tls_key: str | None = None          # PEM key, unencrypted

@@ -10,15 +10,11 @@ the server's default).
 
 The server measures with it whether a scene's extra view buys coverage (scene_plan.py); the
 benchmarks (bench/coverage.py and others) use the same machinery, so both count holes alike.
-
-Frames follow the system's virtual-clock schedule (protocol/session.py): at display time t
-the client shows the newest server frame usable by then, rendered from the newest pose
-that had reached the server.
+Which frame a displayed pose sees comes from the session's schedule (pibr.common.replay).
 """
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 
@@ -27,26 +23,6 @@ from pibr.protocol.projection import FORWARD
 
 #: Relative distance tolerance of the coverage test (as depth peeling's, see renderer.py).
 COVERAGE_TOLERANCE = 0.03
-
-
-@dataclass(frozen=True)
-class LatencyModel:
-    """The virtual clock's schedule without a network in between (integer microseconds)."""
-
-    rate_hz: float = 60.0
-    server_fps: float = 10.0
-    up_ms: float = 64.0
-    down_ms: float = 64.0
-    server_delay_ms: float = 20.0
-
-    def frame_for(self, t_us: int) -> tuple[int, int]:
-        """-> (render time, client time of the pose used) of the frame shown at display time t."""
-        interval = int(round(1e6 / self.server_fps))
-        tick = int(round(1e6 / self.rate_hz))
-        up, down, delay = (int(round(x * 1000)) for x in (self.up_ms, self.down_ms, self.server_delay_ms))
-        render = ((t_us - delay - down) // interval) * interval
-        pose_t = ((render - up) // tick) * tick
-        return render, pose_t
 
 
 def project_to_view(points: np.ndarray, view_pose: Pose):
@@ -128,7 +104,7 @@ class CoverageProbe:
                  tolerance=COVERAGE_TOLERANCE, ctx=None, mark_peeled: bool = True, renderer=None):
         """``renderer``: a :class:`~pibr.server.renderer.Renderer` of ``scene`` on ``ctx`` to share (the
         server's); it stays its owner's to release. None: the probe makes its own."""
-        from pibr.protocol.gl import create_context
+        from pibr.common.gl import create_context
         from pibr.server.renderer import PEEL_TOLERANCE, RenderTarget, Renderer
 
         self._own = ctx is None
@@ -196,41 +172,3 @@ class CoverageProbe:
                 t.release()
         if self._own:
             self.ctx.release()
-
-
-def display_samples(scene, trace_spec: str, start_s: float, duration_s: float | None, rate_hz: float,
-                    latency: LatencyModel, stride: int = 1, anchor: str = "start"):
-    """[(display time s, display pose, render time s, render pose)] along a trace window,
-    placed in the scene as the client places it (``protocol.trace.placement``)."""
-    from pibr.protocol.trace import load_trace
-
-    return trace_samples(scene, load_trace(trace_spec), start_s, duration_s, rate_hz, latency, stride, anchor)
-
-
-def trace_ticks(scene, trace, start_s: float, duration_s: float | None, rate_hz: float, anchor: str = "start"):
-    """-> (tick us [n], pose_at): the display ticks of a window of a loaded
-    :class:`~pibr.protocol.trace.HeadTrace` and the viewer's pose at a client time (us from the
-    window's start; earlier times clamp to its start), placed in the scene as the client places
-    it (``protocol.trace.placement``)."""
-    from pibr.protocol.trace import placement
-
-    _, end = trace.window(start_s, duration_s)
-    n = max(1, int(math.floor((end - start_s) * rate_hz + 1e-9)))
-    tick_us = int(round(1e6 / rate_hz))
-    origin = placement(trace, start_s, scene.viewer_origin, anchor)
-
-    def pose_at(t_us: int) -> Pose:
-        return origin.compose(trace.pose_at(start_s + max(t_us, 0) / 1e6))
-
-    return [i * tick_us for i in range(n)], pose_at
-
-
-def trace_samples(scene, trace, start_s: float, duration_s: float | None, rate_hz: float,
-                  latency: LatencyModel, stride: int = 1, anchor: str = "start"):
-    """:func:`display_samples` of a loaded :class:`~pibr.protocol.trace.HeadTrace`."""
-    ticks, pose_at = trace_ticks(scene, trace, start_s, duration_s, rate_hz, anchor)
-    out = []
-    for t_us in ticks[::stride]:
-        render_us, pose_us = latency.frame_for(t_us)
-        out.append((t_us / 1e6, pose_at(t_us), render_us / 1e6, pose_at(pose_us)))
-    return out

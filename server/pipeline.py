@@ -1,6 +1,6 @@
 """One session's frame production on the GL thread: render the views, read back, pack.
 
-A :class:`FrameProducer` lives on the server's GL thread (protocol/gl.py); the session
+A :class:`FrameProducer` lives on the server's GL thread (pibr.common.gl); the session
 calls ``await gl.run(producer.produce, pose, t)`` and hands the returned yuv420p buffer to
 its encoder in a worker thread. Renderers are shared by every session showing the same
 scene; render targets belong to the producer. The atlas is packed on the CPU after one

@@ -2,7 +2,7 @@
 
 For each client connection the relay reads the client's ``Hello`` (within
 ``hello_timeout_s``), then opens one upstream connection and pumps frames both ways through
-a :class:`~pibr.protocol.link.LinkModel` per direction. The Hello tells it the session's
+a :class:`~pibr.common.link.LinkModel` per direction. The Hello tells it the session's
 clock:
 
 * **virtual**: frames are forwarded at once, their header ``vtime_us`` rewritten to the
@@ -47,7 +47,7 @@ from pibr.protocol.access import check_listen_access, token_matches
 from pibr.protocol.connection import Connection
 from pibr.protocol.errors import AccessDenied, ConfigError, ProtocolError, TLSError, UnexpectedMessage
 from pibr.protocol.framing import DEFAULT_MAX_MESSAGE_SIZE, HEADER_SIZE, FrameReader, RawFrame, encode_frame
-from pibr.protocol.link import LinkModel, LinkParams
+from pibr.common.link import LinkModel, LinkParams
 from pibr.protocol.messages import Clock, Error, Hello, ProxyChunk, Welcome, parse_message
 from pibr.protocol.tls import ClientTLS, check_server_files
 

@@ -578,7 +578,7 @@ class RenderTarget:
 
 
 class Renderer:
-    """Draws one scene. Create and use on the GL thread (see protocol/gl.py)."""
+    """Draws one scene. Create and use on the GL thread (see pibr.common.gl)."""
 
     def __init__(self, ctx, scene: Scene, projection: str = DEFAULT_PROJECTION,
                  max_edge_angle_deg: float = MAX_EDGE_ANGLE_DEG, tess_max_level: int = 64,

@@ -102,7 +102,7 @@ class ScenePlan:
 @dataclass(frozen=True)
 class CoverageSettings:
     """Where and how the extra view's coverage is measured: a synthetic trace of every motion kind
-    (walking, looking around, quick turns; protocol/trace_synth.py) placed at the viewer origin, the
+    (walking, looking around, quick turns; pibr.common.traces.synthesis) placed at the viewer origin, the
     system's default latency, small views (coverage is a share of pixels, not a detail measure)."""
 
     trace_kind: str = "mixed"
@@ -136,17 +136,16 @@ def scene_digest(scene) -> str:
 
 def coverage_samples(scene, settings: CoverageSettings):
     """[(display time, display pose, render time, render pose)]: the synthetic trace's viewpoints."""
-    from pibr.protocol.trace_synth import synthesize
-
-    from .coverage import LatencyModel, trace_samples
+    from pibr.common.link import SessionSchedule
+    from pibr.common.replay import trace_samples
+    from pibr.common.traces.synthesis import synthesize
 
     trace = synthesize(settings.trace_kind, settings.duration_s, seed=settings.seed)
     rate_hz = 30.0
-    latency = LatencyModel(rate_hz=rate_hz, server_fps=settings.server_fps, up_ms=settings.round_trip_ms / 2,
-                           down_ms=settings.round_trip_ms / 2)
+    schedule = SessionSchedule.round_trip(rate_hz, settings.round_trip_ms, settings.server_fps)
     stride = max(1, int(round(settings.sample_every_s * rate_hz)))
     # from one frame interval on: the first frames would show the viewer origin's pose itself
-    return [s for s in trace_samples(scene, trace, 0.0, settings.duration_s, rate_hz, latency, stride) if s[2] > 0]
+    return [s for s in trace_samples(scene, trace, 0.0, settings.duration_s, schedule, stride) if s[2] > 0]
 
 
 def measure_extra_view(ctx, scene, offset: Pose, projection: str = "vertex",

@@ -7,7 +7,7 @@ import pytest
 @pytest.fixture(scope="session")
 def gl_ctx():
     from pibr.protocol.errors import GLUnavailable
-    from pibr.protocol.gl import create_context
+    from pibr.common.gl import create_context
 
     try:
         ctx = create_context()

@@ -4,7 +4,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 
-from pibr.protocol.link import LinkParams
+from pibr.common.link import LinkParams
 from pibr.protocol.messages import Clock, Frame, PoseMsg
 from pibr.server.app import Server
 from pibr.server.config import ServerConfig

@@ -24,9 +24,9 @@ def test_server_relay_client_processes(tmp_path):
                  on_progress=lambda done, total: progress.append((done, total)), timeout=600)
     assert progress and progress[-1] == (60, 60)
     # The benchmarks' model of the schedule predicts exactly what the processes did.
-    from pibr.bench.coverage import LatencyModel
+    from pibr.common.link import SessionSchedule
 
-    model = LatencyModel(rate_hz=30.0, server_fps=10.0, up_ms=64, down_ms=64, server_delay_ms=20)
+    model = SessionSchedule.round_trip(30.0, 128.0, server_fps=10.0, server_delay_ms=20)
     for m in ("none", "rotation"):
         rows = read_records(os.path.join(out, f"{m}.records.csv"))
         assert len(rows) == 60

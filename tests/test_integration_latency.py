@@ -14,11 +14,10 @@ import time
 
 import pytest
 
-from pibr.bench.coverage import LatencyModel
 from pibr.bench.evaluate import evaluate_run, read_session
 from pibr.bench.processes import PibrProcess, run_through_relay
 from pibr.client.recorder import read_records
-from pibr.protocol.link import LinkModel, LinkParams
+from pibr.common.link import LinkModel, LinkParams, SessionSchedule
 
 pytestmark = [pytest.mark.integration, pytest.mark.gl]
 
@@ -148,8 +147,8 @@ def test_virtual_proxy_with_h264_depth_follows_the_modelled_schedule(virtual_run
     out = virtual_runs["h264"]
     info = read_session(out)
     assert info["session"]["depth_codec"] == "h264"
-    model = LatencyModel(rate_hz=RATE_HZ, server_fps=SERVER_FPS, up_ms=UP_MS, down_ms=DOWN_MS,
-                         server_delay_ms=SERVER_DELAY_MS)
+    model = SessionSchedule(RATE_HZ, SERVER_FPS, LinkParams(UP_MS), LinkParams(DOWN_MS),
+                            server_delay_ms=SERVER_DELAY_MS)
     transit_us = (SERVER_DELAY_MS + DOWN_MS) * 1000
     first = _first_render_us(UP_MS * 1000)
     last_tick_us = (TICKS - 1) * TICK_US

@@ -56,7 +56,7 @@ def wheel(tmp_path_factory) -> str:
 
 
 def test_top_level_folders_are_the_documented_packages():
-    assert _mapped_folders() == {"bench": "pibr.bench", "cli": "pibr", "client": "pibr.client",
+    assert _mapped_folders() == {"bench": "pibr.bench", "cli": "pibr", "client": "pibr.client", "common": "pibr.common",
                                  "protocol": "pibr.protocol", "scenes": "pibr.scenes", "server": "pibr.server"}
     # No folder named like the package at the root: it would shadow the installed one for
     # every `python -m pibr` started there.
@@ -70,7 +70,7 @@ def test_wheel_holds_every_package_and_data_file(wheel):
     assert "pibr/client/methods/__init__.py" in packages and "pibr/protocol/edgecodec/__init__.py" in packages
     assert not expected - names, f"missing from the wheel: {sorted(expected - names)}"
     # The shipped data (built-in traces, the real asset) is in, and nothing of the build's own.
-    assert "pibr/protocol/data/traces/pred6dof/1.csv" in names
+    assert "pibr/common/traces/data/pred6dof/1.csv" in names
     assert "pibr/scenes/data/assets/spot_triangulated.obj" in names
     assert not [n for n in names if "__pycache__" in n or n.endswith(".pyc") or n.startswith("tests/")]
     entry_points = next(n for n in names if n.endswith(".dist-info/entry_points.txt"))

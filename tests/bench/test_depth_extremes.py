@@ -129,7 +129,7 @@ def test_rendered_10_km_wall_behind_a_1_cm_speck():
     comes out up to 85 % too far.)"""
     from pibr.protocol.atlas import build_layout
     from pibr.protocol.depth import h264_quantizer
-    from pibr.protocol.gl import create_context
+    from pibr.common.gl import create_context
     from pibr.protocol.projection import pixel_centers, unproject
     from pibr.scenes.primitives import box
     from pibr.scenes.scene import Scene, SceneObject

@@ -4,8 +4,10 @@ import math
 import numpy as np
 import pytest
 
-from pibr.bench.coverage import (VARIANTS, CoverageProbe, LatencyModel, display_samples, matches_view,
-                                 measure_coverage)
+from pibr.bench.coverage import VARIANTS, measure_coverage
+from pibr.common.link import SessionSchedule
+from pibr.common.replay import display_samples
+from pibr.server.coverage import CoverageProbe, matches_view
 from pibr.bench.offset_search import OffsetObjective, coarse_to_fine, exhaustive, parse_range
 from pibr.protocol.pose import Pose, quat_from_euler
 from pibr.protocol.projection import unproject, pixel_centers
@@ -85,8 +87,7 @@ def test_peeling_without_offset_is_a_second_depth_layer(room_probe):
 
 
 def test_adding_a_view_never_adds_holes(room_probe):
-    latency = LatencyModel(rate_hz=30.0)
-    samples = display_samples(room_probe.scene, "pred6dof-2", 20.0, 1.0, 30.0, latency)[::6]
+    samples = display_samples(room_probe.scene, "pred6dof-2", 20.0, 1.0, SessionSchedule.round_trip(30.0))[::6]
     offset = extra_offset_pose(*PAPER_EXTRA_OFFSET)
     res = measure_coverage(room_probe, samples, offset)
     for v in VARIANTS[1:]:
@@ -149,7 +150,7 @@ def test_a_peeled_view_vouches_for_sky_but_not_for_what_it_peeled(room_probe):
 
 
 def test_latency_model_schedule():
-    m = LatencyModel(rate_hz=30.0, server_fps=10.0, up_ms=64, down_ms=64, server_delay_ms=20)
+    m = SessionSchedule.round_trip(30.0, 128.0, server_fps=10.0, server_delay_ms=20)
     render, pose_t = m.frame_for(300_000)
     assert render == 200_000                      # 200 + 20 + 64 <= 300 < 300 + 84
     assert pose_t == 133_332                      # newest 30 Hz tick with t + 64 ms <= 200 ms
@@ -166,8 +167,7 @@ def test_coarse_to_fine_finds_the_exhaustive_optimum():
     scene = load_scene("room")
     probe = CoverageProbe(scene, (128, 128), (64, 36))
     try:
-        latency = LatencyModel(rate_hz=30.0)
-        samples = display_samples(scene, "pred6dof-1", 12.0, 2.0, 30.0, latency)[::20]
+        samples = display_samples(scene, "pred6dof-1", 12.0, 2.0, SessionSchedule.round_trip(30.0))[::20]
         f = OffsetObjective(probe, samples)
         axes = [parse_range("-1:2:0.5"), parse_range("0:1.8:0.6"), [-20.0, 0.0, 20.0]]
         full = exhaustive(f, axes)

@@ -8,7 +8,7 @@ from pibr.bench.metrics import nearly_uniform
 from pibr.bench.pareto import ORACLE, default_variants, pareto_front, run_pareto_bench
 from pibr.bench.windows import EVALUATION_WINDOWS, TUNING_WINDOWS, Window, overlapping_tuning, parse_windows
 from pibr.protocol.errors import ConfigError
-from pibr.protocol.trace import load_trace
+from pibr.common.traces.loading import load_trace
 
 
 def test_evaluation_windows_are_disjoint_from_tuning_and_inside_their_traces():

@@ -2,7 +2,8 @@
 import numpy as np
 import pytest
 
-from pibr.bench.coverage import LatencyModel, display_samples
+from pibr.common.link import SessionSchedule
+from pibr.common.replay import display_samples
 from pibr.bench.ibr_bench import Simulation, load_proxies
 from pibr.bench.metrics import dssim, psnr, ssim
 from pibr.client.lod_select import LodSelector
@@ -77,7 +78,7 @@ def test_proxy_beats_rotation_when_the_head_moves(sim):
     """On every frame the head has moved since (t > 0), proxy's DSSIM is lower than rotation's,
     and on average well below: measured 0.027 against 0.067 over these six frames."""
     scene = sim.scene
-    samples = display_samples(scene, "pred6dof-1", 20.0, 2.0, 30.0, LatencyModel(rate_hz=30.0))[::10]
+    samples = display_samples(scene, "pred6dof-1", 20.0, 2.0, SessionSchedule.round_trip(30.0))[::10]
     scores = {"rotation": [], "proxy": []}
     for t_disp, display, t_render, rendered in samples:
         gt = sim.ground_truth(display, t_disp)
@@ -228,7 +229,7 @@ def test_restricted_carving_gives_the_image_of_carving_every_pixel(sim, inpaint)
     scene = sim.scene
     cases = [(display, (t_render, rendered), t_disp, {})
              for t_disp, display, t_render, rendered in
-             display_samples(scene, "pred6dof-1", 20.0, 2.0, 30.0, LatencyModel(rate_hz=30.0))[::15]]
+             display_samples(scene, "pred6dof-1", 20.0, 2.0, SessionSchedule.round_trip(30.0))[::15]]
     origin = scene.viewer_origin
     R = origin.rotation()
     cases.append((Pose.make(origin.p + 0.3 * R[:, 0] - 0.2 * R[:, 2], origin.q), (0.0, origin), 0.0,
@@ -297,7 +298,7 @@ def test_culling_back_faces_leaves_the_nearest_fragments_as_they_were(sim):
     scene = sim.scene
     cases = [(display, (t_render, rendered), t_disp, {})
              for t_disp, display, t_render, rendered in
-             display_samples(scene, "pred6dof-1", 20.0, 2.0, 30.0, LatencyModel(rate_hz=30.0))[::15]]
+             display_samples(scene, "pred6dof-1", 20.0, 2.0, SessionSchedule.round_trip(30.0))[::15]]
     origin = scene.viewer_origin
     R = origin.rotation()
     cases.append((Pose.make(origin.p + 0.3 * R[:, 0] - 0.2 * R[:, 2], origin.q), (0.0, origin), 0.0,

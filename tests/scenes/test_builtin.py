@@ -381,7 +381,7 @@ def test_tiling_textures_wrap_seamlessly(name):
 
 @pytest.mark.gl
 def test_courtyard_is_mostly_sky_with_geometry_all_round():
-    from pibr.bench.coverage import CoverageProbe
+    from pibr.server.coverage import CoverageProbe
     from pibr.protocol.pose import Pose, quat_from_axis_angle
 
     scene = BUILTIN_SCENES["courtyard"][1]()

@@ -6,7 +6,7 @@ import pytest
 
 from pibr.client.connection import ClientConnection
 from pibr.protocol.connection import Connection
-from pibr.protocol.link import LinkParams
+from pibr.common.link import LinkParams
 from pibr.protocol.messages import Error, Hello, OutputConfig
 from pibr.server.config import ServerConfig
 from pibr.server.relay import Relay, RelayConfig

@@ -11,7 +11,7 @@ import pytest
 from pibr.client.connection import ClientConnection
 from pibr.protocol.errors import AccessDenied, ConfigError, RemoteError, TLSError
 from pibr.protocol.framing import HEADER_SIZE, encode_frame
-from pibr.protocol.link import LinkParams
+from pibr.common.link import LinkParams
 from pibr.protocol.messages import Clock, Error, Frame, Hello, PoseMsg, Welcome
 from pibr.protocol.tls import ClientTLS, certificate_fingerprint, open_connection, server_context
 from pibr.server.relay import Relay, RelayConfig

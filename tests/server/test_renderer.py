@@ -46,7 +46,7 @@ def test_chunk_boxes_contain_their_faces_and_runs_keep_order():
 @pytest.mark.gl
 def test_culling_changes_no_pixel():
     """Primary (with motion) and peeled extra view, with and without culling: identical bytes."""
-    from pibr.protocol.gl import create_context
+    from pibr.common.gl import create_context
     from pibr.server.renderer import RenderTarget, Renderer
 
     scene = load_scene("room")
@@ -83,7 +83,7 @@ def test_culling_changes_no_pixel():
 def test_lod_copy_keeps_every_edge_within_the_angle_from_the_eye():
     """The copy drawn for an eye spans at most the edge angle per edge, seen from that eye, and gets
     coarser (fewer triangles) as the eye moves away."""
-    from pibr.protocol.gl import create_context
+    from pibr.common.gl import create_context
     from pibr.scenes.scene import Scene, SceneObject
     from pibr.server.renderer import Renderer
 
@@ -142,7 +142,7 @@ _PEEL_BY_FETCHES = """    vec3 t = wa_project(p);
 @pytest.mark.parametrize("mark_peeled", [True, False])
 def test_peeling_by_gather_equals_peeling_by_four_fetches(monkeypatch, mark_peeled):
     import pibr.server.renderer as R
-    from pibr.protocol.gl import create_context
+    from pibr.common.gl import create_context
 
     start = R._FRAGMENT.index("    vec3 t = wa_project(p);\n    // the 2x2")
     end = R._FRAGMENT.index("}\n#endif", start) + 1
@@ -203,7 +203,7 @@ def test_cube_projection_matches_the_vertex_projection():
     """Projection "cube" resamples five perspective faces into the same wide-angle image: colour,
     distance and motion agree with the vertex projection up to resampling blur at silhouettes."""
     from pibr.bench.metrics import psnr
-    from pibr.protocol.gl import create_context
+    from pibr.common.gl import create_context
     from pibr.server.renderer import RenderTarget, Renderer
 
     scene = load_scene("room")
@@ -236,7 +236,7 @@ def test_cube_projection_matches_the_vertex_projection():
 @pytest.mark.gl
 def test_wide_views_sample_the_nearest_mip_and_leave_perspective_views_trilinear():
     from pibr.bench.metrics import psnr
-    from pibr.protocol.gl import create_context
+    from pibr.common.gl import create_context
     from pibr.server.renderer import RenderTarget, Renderer
 
     scene = load_scene("room")
@@ -267,7 +267,7 @@ def test_wide_views_sample_the_nearest_mip_and_leave_perspective_views_trilinear
 @pytest.fixture
 def ctx():
     """A context of the test's own, as the tests above make (no state shared with other tests)."""
-    from pibr.protocol.gl import create_context
+    from pibr.common.gl import create_context
 
     ctx = create_context()
     yield ctx

@@ -9,8 +9,9 @@ import pytest
 
 from pibr.protocol.errors import TraceError
 from pibr.protocol.pose import Pose, quat_from_axis_angle, quat_rotate
-from pibr.protocol.trace import detect_format, load_trace, read_canonical_csv
-from pibr.protocol.trace_import import axis_conversion, convert_axes, import_csv, import_pred6dof, parse_columns
+from pibr.common.traces.canonical import read_canonical_csv
+from pibr.common.traces.loading import detect_format, load_trace
+from pibr.common.traces.importers import axis_conversion, convert_axes, import_csv, import_pred6dof, parse_columns
 
 
 def write(path, text: str):
@@ -189,7 +190,7 @@ def test_trace_show_prints_what_was_assumed(tmp_path, capsys):
 
 
 def test_a_late_window_starts_at_the_viewer_origin_facing_its_way():
-    from pibr.protocol.trace import heading, placement
+    from pibr.common.traces.placement import heading, placement
 
     trace = load_trace("pred6dof-1")
     origin = Pose.make([2.0, 1.6, -1.0], quat_from_axis_angle([0, 1, 0], math.radians(40)))
@@ -260,7 +261,7 @@ def test_columns_option_with_a_huge_index_is_a_trace_error_on_the_command_line(t
 
 
 def test_span_positions_and_resampling_are_bounded(tmp_path):
-    from pibr.protocol.trace import MAX_DURATION_S, MAX_POSITION_M, MAX_SAMPLES, HeadTrace
+    from pibr.protocol.trace import HeadTrace, MAX_DURATION_S, MAX_POSITION_M, MAX_SAMPLES
 
     ticks = int(MAX_DURATION_S * 1e7) + 10
     path = write(tmp_path / "p.csv", PRED_HEADER + f"0,0,0,0,0,0,0,1\n{ticks},0,0,0,0,0,0,1\n")

@@ -1,7 +1,7 @@
 """Text forms every process's command line shares: ``HOST:PORT`` addresses and ``WxH`` sizes."""
 from __future__ import annotations
 
-from .errors import ConfigError
+from pibr.protocol.errors import ConfigError
 
 
 def parse_host_port(text: str, default_host: str = "127.0.0.1") -> tuple[str, int]:

@@ -28,12 +28,16 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import TraceError
-from .pose import quat_conjugate, quat_from_euler, quat_from_matrix, quat_multiply, quat_rotate
-from .trace import (PRED6DOF_COLUMNS, TIMESTAMP_RANGE, HeadTrace, check_quaternion, header_fields, iter_lines,
-                    parse_number, row_error)
+from pibr.protocol.errors import TraceError
+from pibr.protocol.pose import quat_conjugate, quat_from_euler, quat_from_matrix, quat_multiply, quat_rotate
+from pibr.protocol.trace import TIMESTAMP_RANGE, HeadTrace
+
+from .lines import check_quaternion, iter_lines, parse_number, row_error, split_fields
 
 log = logging.getLogger(__name__)
+
+#: Header of the pred6dof / HoloLens recordings (Unity, left-handed, .NET ticks).
+PRED6DOF_COLUMNS = ("timestamp", "x", "y", "z", "qx", "qy", "qz", "qw")
 
 #: Seconds per unit of each supported timestamp unit.
 TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9, "ticks": 1e-7}
@@ -107,15 +111,6 @@ def _describe_axes(handedness: str, up: str, forward: str | None) -> dict:
     text = f"{handedness}-handed, +{up.strip().lower().lstrip('+')} up, head looking along {forward} at identity"
     return {"axes": text + (" (converted to pibr's: right-handed, +Y up, looking along -Z)" if changed
                             else " (pibr's own)")}
-
-
-def split_fields(text: str, delimiter: str | None) -> list[str]:
-    """Fields of one line. ``delimiter`` 'auto': commas if the line has any, else semicolons,
-    else tabs, else any whitespace (so a header and its rows may use different ones); None:
-    any whitespace; otherwise that string."""
-    if delimiter == "auto":
-        delimiter = next((d for d in (",", ";", "\t") if d in text), None)
-    return [f.strip().strip("\"'").strip() for f in text.split(delimiter)]
 
 
 def import_pred6dof(path, time_unit: str | None = None) -> HeadTrace:

@@ -14,16 +14,17 @@ from hypothesis import strategies as st
 from pibr.protocol.errors import ConfigError, TraceError
 from pibr.protocol.pose import (left_handed_to_right_handed, quat_angle, quat_from_axis_angle,
                                 quat_normalize, quat_rotate, quat_to_matrix)
-from pibr.protocol.trace import (CANONICAL_HEADER, HeadTrace, builtin_traces, load_trace,
-                                 read_canonical_csv, write_canonical_csv, yaw_pitch)
-from pibr.protocol.trace_import import import_csv, import_pred6dof, parse_columns
-from pibr.protocol.trace_synth import synthesize
+from pibr.common.traces.canonical import CANONICAL_HEADER, read_canonical_csv, write_canonical_csv
+from pibr.common.traces.loading import builtin_traces, load_trace
+from pibr.protocol.trace import HeadTrace, yaw_pitch
+from pibr.common.traces.importers import import_csv, import_pred6dof, parse_columns
+from pibr.common.traces.synthesis import synthesize
 
 PRED6DOF_HEADER = "timestamp,x,y,z,qx,qy,qz,qw"
 
 
 def builtin_file(name: str):
-    return resources.files("pibr.protocol.data").joinpath("traces", "pred6dof", name)
+    return resources.files("pibr.common.traces").joinpath("data", "pred6dof", name)
 
 
 def random_trace(n=50, seed=0) -> HeadTrace:

@@ -5,8 +5,6 @@ moderngl on a headless EGL context (Mesa llvmpipe here, a GPU where there is one
 context belongs to the thread that made it current, so each user gets a :class:`GLThread`:
 a single worker thread that creates the context and runs every GL call, keeping GL work off
 the asyncio event loop (``await gl.run(fn, ...)``).
-
-Shared here because both ends need it and ``protocol`` is the only package both import.
 """
 from __future__ import annotations
 
@@ -16,7 +14,7 @@ import logging
 import os
 import threading
 
-from .errors import GLUnavailable
+from pibr.protocol.errors import GLUnavailable
 
 log = logging.getLogger(__name__)
 

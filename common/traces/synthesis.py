@@ -20,9 +20,9 @@ import math
 
 import numpy as np
 
-from .errors import ConfigError
-from .pose import quat_angle, quat_from_euler, quat_multiply, quat_slerp
-from .trace import HeadTrace
+from pibr.protocol.errors import ConfigError
+from pibr.protocol.pose import quat_angle, quat_from_euler, quat_multiply, quat_slerp
+from pibr.protocol.trace import HeadTrace
 
 KINDS = ("walk", "look", "turns", "mixed")
 

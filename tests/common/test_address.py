@@ -1,7 +1,7 @@
 """Command-line text forms shared by every process: HOST:PORT and WxH."""
 import pytest
 
-from pibr.protocol.address import MAX_SIZE, parse_host_port, parse_size
+from pibr.common.address import MAX_SIZE, parse_host_port, parse_size
 from pibr.protocol.errors import ConfigError
 
 
