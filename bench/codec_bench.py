@@ -153,21 +153,21 @@ def run_codec_bench(scene_spec="room", windows=None, window_s=2.0, fps=10.0, vie
     """The rate-distortion curves (module docstring) on the first ``window_s`` seconds of each
     window, the end-to-end comparison on the first ``e2e_windows`` of them, the extremes table.
     Writes ``codec.json`` and ``codec.png`` (and ``plot_path`` if given) under ``out_dir``."""
-    from pibr.client.depth_stream import EdgeDepthStreamDecoder
+    from pibr.client.depth_decoders import EdgeDepthStreamDecoder
     from pibr.client.video import H264Decoder
-    from pibr.protocol.atlas import build_layout
-    from pibr.protocol.depth import h264_quantizer
+    from pibr.protocol.depth_codecs import h264_quantizer
+    from pibr.protocol.messages import Hello
     from pibr.protocol.errors import ConfigError
     from pibr.common.gl import create_context
     from pibr.common.traces.loading import load_trace
     from pibr.common.traces.placement import placement
     from pibr.scenes.registry import load_scene
-    from pibr.server.depth_stream import EDGE_BITS, EdgeDepthStream, edge_quantizer
-    from pibr.server.pipeline import FrameProducer, ProducerSpec
-    from pibr.server.renderer import Renderer
-    from pibr.server.video import H264Encoder
+    from pibr.protocol.depth_codecs import EDGE_BITS, edge_quantizer
+    from pibr.server.depth_encoders import EdgeDepthStream
+    from pibr.server.pipeline import SessionPipeline
 
     from .depth_codecs import make_pair, probe_h264_10bit
+    from .simulation import bench_server_config
     from .windows import EVALUATION_WINDOWS, Window, windows_json
 
     windows = tuple(Window(w.trace, w.start_s, min(w.duration_s, window_s)) for w in (windows or EVALUATION_WINDOWS))
@@ -184,10 +184,11 @@ def run_codec_bench(scene_spec="room", windows=None, window_s=2.0, fps=10.0, vie
     q12 = edge_quantizer(near, far, EDGE_BITS)
     ten_bit = probe_h264_10bit()
     h264_codecs = ("h264-8bit", "h264-10bit") if ten_bit["available"] else ("h264-8bit",)
-    with_depth = build_layout((w, h), None, depth_in_atlas=True)
     ctx = create_context()
-    renderer = Renderer(ctx, scene)
-    producer = FrameProducer(ctx, renderer, ProducerSpec((w, h), with_depth, q8, keep_distance=True))
+    # the primary view alone, depth in the atlas beside the colour (h264-8bit-atlas), float distances kept
+    pipeline = SessionPipeline(bench_server_config(view_size, extra_view="off", fps=fps), scene, Hello(),
+                               deterministic=True, keep_distance=True).open(ctx)
+    with_depth = pipeline.spec.layout
     edge_pts = {t: _Point("edge", {"threshold": t}) for t in thresholds}
     variant_pts = {"edge-intra": _Point("edge-intra", {"threshold": 3.5, "temporal": False}),
                    "edge-raster": _Point("edge-raster", {"threshold": 3.5, "passes": 1}),
@@ -209,7 +210,7 @@ def run_codec_bench(scene_spec="room", windows=None, window_s=2.0, fps=10.0, vie
             frames = []
             for k in range(int(win.duration_s * fps)):
                 pose = origin.compose(trace.pose_at(min(start_s + k / fps, trace.duration)))
-                p = producer.produce(pose, k / fps)
+                p = pipeline.produce(pose, k / fps)
                 frames.append((pose, p.distances["primary"].copy(), p.yuv.copy()))
             label = win.label
 
@@ -243,7 +244,7 @@ def run_codec_bench(scene_spec="room", windows=None, window_s=2.0, fps=10.0, vie
                             dec.quantizer.quantize(r)), back))
                     pt.add(label, 8 * len(payload), disparity_error(r, back, near), e_ms, d_ms, **extra)
             for T, pt in atlas_pts.items():
-                enc = H264Encoder(with_depth.width, with_depth.height, fps, T, 30, deterministic=True)
+                enc = pipeline.new_video_encoder(kbps=T)
                 dec = H264Decoder(with_depth.width, with_depth.height)
                 x, y, rw, rh = with_depth.rect("primary.depth")
                 for _, r, yuv in frames:
@@ -256,8 +257,7 @@ def run_codec_bench(scene_spec="room", windows=None, window_s=2.0, fps=10.0, vie
     finally:
         if bar is not None:
             bar.close()
-        producer.release()
-        renderer.release()
+        pipeline.release()
         ctx.release()
 
     def curve(points):
@@ -310,7 +310,9 @@ def end_to_end(scene_spec="room", windows=None, totals_kbps=DEFAULT_TOTALS_KBPS,
     from pibr.common.replay import display_samples
 
     from .depth_codecs import ViewDepthStreams
-    from .ibr_bench import Simulation, evaluate_methods, load_proxies, summarize
+    from pibr.server.depth_encoders import EdgeSettings
+
+    from .simulation import Simulation, bench_server_config, evaluate_methods, load_proxies, summarize
     from .windows import EVALUATION_WINDOWS, Window, windows_json
 
     windows = tuple(windows or (Window(EVALUATION_WINDOWS[0].trace, EVALUATION_WINDOWS[0].start_s, 2.0),))
@@ -319,15 +321,17 @@ def end_to_end(scene_spec="room", windows=None, totals_kbps=DEFAULT_TOTALS_KBPS,
     schedule = SessionSchedule.round_trip(rate_hz, latency_ms)
 
     def sim(colour_kbps, codec, depth_kbps=0.0):
+        def server(depth_codec, **settings):
+            return bench_server_config(view_size, depth_codec=depth_codec, bitrate_kbps=colour_kbps, **settings)
+
         if codec == "h264-8bit-atlas":
-            return Simulation(scene, view_size, out_size, proxies=proxies, depth_codec="h264",
-                              bitrate_kbps=colour_kbps)
+            return Simulation(scene, server("h264"), out_size, proxies=proxies)
         if codec in ("edge", "edge-rc"):
-            return Simulation(scene, view_size, out_size, proxies=proxies, depth_codec="edge",
-                              bitrate_kbps=colour_kbps, edge_kbps=depth_kbps if codec == "edge-rc" else 0.0)
+            edge = EdgeSettings(kbps=depth_kbps if codec == "edge-rc" else 0.0)
+            return Simulation(scene, server("edge", edge=edge), out_size, proxies=proxies)
         name, opts = {"log-zstd": ("log", {"bits": log_bits}), "zstd-lossless": ("zstd", {}),
                       "h264-8bit": ("h264-8bit", {}), "h264-10bit": ("h264-10bit", {})}[codec]
-        return Simulation(scene, view_size, out_size, proxies=proxies, depth_codec="edge", bitrate_kbps=colour_kbps,
+        return Simulation(scene, server("edge"), out_size, proxies=proxies,
                           depth_streams=lambda session, fps: ViewDepthStreams(name, session, fps, depth_kbps, **opts))
 
     codecs = [c for c in (codecs or E2E_CODECS) if with_10bit or c != "h264-10bit"]
@@ -335,8 +339,8 @@ def end_to_end(scene_spec="room", windows=None, totals_kbps=DEFAULT_TOTALS_KBPS,
     if unknown:
         raise ValueError(f"unknown end-to-end codecs {sorted(unknown)}: expected some of {E2E_CODECS}")
     # what the colour budgets need measured first: edge for itself, H.264 alone and edge-rc's motion
-    probes = [c for c in ("edge", "log-zstd", "zstd-lossless") if c in codecs or (
-        c == "edge" and set(codecs) & {"edge-rc", "h264-8bit", "h264-10bit"})]
+    edge_first = "edge" in codecs or bool(set(codecs) & {"edge-rc", "h264-8bit", "h264-10bit"})
+    probes = (["edge"] if edge_first else []) + [c for c in ("log-zstd", "zstd-lossless") if c in codecs]
     if scene.is_dynamic and "h264-8bit-atlas" in codecs:
         probes.append("h264-8bit-atlas")
     per_window = []
@@ -421,8 +425,8 @@ def extremes_table(near: float = 1e-2, far: float = 1e4, per_decade: int = 4) ->
     distance: the decoded distance and its relative error; per quantiser its documented bound
     (half a code step: in disparity for the linear ones, in ln r for log depth) and whether
     decoding is monotone and finite over the whole range."""
-    from pibr.protocol.depth import h264_quantizer
-    from pibr.server.depth_stream import EDGE_BITS, edge_quantizer
+    from pibr.protocol.depth_codecs import h264_quantizer
+    from pibr.protocol.depth_codecs import EDGE_BITS, edge_quantizer
 
     from .depth_codecs import LogDepthQuantizer
 

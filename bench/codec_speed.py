@@ -28,21 +28,20 @@ _WORKER = os.path.join(os.path.dirname(os.path.abspath(__file__)), "codec_speed_
 
 def render_frames(path: str, scene_spec: str, windows, fps: float, view_size, progress: bool = True) -> int:
     """Render the primary view's distance (n, h, w) float32 and poses along ``windows`` into ``path`` (.npz)."""
-    from pibr.protocol.atlas import build_layout
-    from pibr.protocol.depth import h264_quantizer
     from pibr.common.gl import create_context
     from pibr.common.traces.loading import load_trace
     from pibr.common.traces.placement import placement
+    from pibr.protocol.messages import Hello
     from pibr.scenes.registry import load_scene
-    from pibr.server.pipeline import FrameProducer, ProducerSpec
-    from pibr.server.renderer import Renderer
+    from pibr.server.pipeline import SessionPipeline
+
+    from .simulation import bench_server_config
 
     scene = load_scene(scene_spec)
-    w, h = view_size
     ctx = create_context()
-    renderer = Renderer(ctx, scene)
-    producer = FrameProducer(ctx, renderer, ProducerSpec((w, h), build_layout((w, h), None, depth_in_atlas=False),
-                                                         h264_quantizer(scene.near, scene.far), keep_distance=True))
+    # the primary view alone, its depth coded by the edge codec: the float distances are kept
+    pipeline = SessionPipeline(bench_server_config(view_size, extra_view="off", depth_codec="edge", fps=fps), scene,
+                               Hello(), deterministic=True).open(ctx)
     distance, position, orientation, start = [], [], [], []
     try:
         for win in windows:
@@ -50,7 +49,7 @@ def render_frames(path: str, scene_spec: str, windows, fps: float, view_size, pr
             origin = placement(trace, win.start_s, scene.viewer_origin)
             for k in range(max(1, int(win.duration_s * fps))):
                 pose = origin.compose(trace.pose_at(min(win.start_s + k / fps, trace.duration)))
-                p = producer.produce(pose, k / fps)
+                p = pipeline.produce(pose, k / fps)
                 distance.append(p.distances["primary"].astype(np.float32))
                 position.append(pose.position)
                 orientation.append(pose.orientation)
@@ -58,8 +57,7 @@ def render_frames(path: str, scene_spec: str, windows, fps: float, view_size, pr
             if progress:
                 print(f"rendered {win.label}", file=sys.stderr)
     finally:
-        producer.release()
-        renderer.release()
+        pipeline.release()
         ctx.release()
     np.savez(path, distance=np.stack(distance), position=np.array(position), orientation=np.array(orientation),
              window_start=np.array(start), near=scene.near, far=scene.far)

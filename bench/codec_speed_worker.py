@@ -50,8 +50,9 @@ def use_checkout(root: str) -> None:
     os.mkdir(pkg)
     for name in os.listdir(os.path.join(root, "cli")):
         os.symlink(os.path.join(root, "cli", name), os.path.join(pkg, name))
-    for sub in ("protocol", "scenes", "server", "client", "bench"):
-        os.symlink(os.path.join(root, sub), os.path.join(pkg, sub))
+    for sub in ("protocol", "common", "scenes", "server", "client", "bench"):
+        if os.path.isdir(os.path.join(root, sub)):   # common/: since the checkout split it off protocol/
+            os.symlink(os.path.join(root, sub), os.path.join(pkg, sub))
     sys.path.insert(0, shim)
     for name in [m for m in sys.modules if m == "pibr" or m.startswith("pibr.")]:
         del sys.modules[name]
@@ -106,7 +107,10 @@ def main(argv=None) -> int:
     import pibr.protocol.edgecodec.codec as codec
     from pibr.protocol.pose import Pose
     from pibr.server import edge_extract
-    from pibr.server.depth_stream import EDGE_BITS, edge_quantizer
+    try:   # where the edge codec's quantizer lives: protocol/depth_codecs.py since the codec registry
+        from pibr.protocol.depth_codecs import EDGE_BITS, edge_quantizer
+    except ImportError:
+        from pibr.server.depth_stream import EDGE_BITS, edge_quantizer
 
     data = np.load(args.frames)
     distances, positions, orientations = data["distance"], data["position"], data["orientation"]

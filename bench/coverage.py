@@ -122,7 +122,7 @@ def run_coverage_bench(scene_spec="room", windows=None, latency_ms=128.0, rate_h
     write_result(out_dir, "coverage.json", result)
     from .plots import plot_coverage
 
-    plot_coverage(result, os.path.join(out_dir, "coverage.png"))
+    plot_coverage(result, os.path.join(out_dir, "coverage.png"), VARIANTS, VARIANT_LABELS)
     return result
 
 

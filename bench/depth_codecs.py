@@ -16,7 +16,7 @@
 Each encoder maps a distance map (h, w) float32 (0 = sky, negative = peeled) to bytes; each
 decoder maps the bytes back to distance (h, w) float32. A payload that does not decode raises
 :class:`~pibr.protocol.errors.CodecError`. :class:`ViewDepthStreams` runs one pair per view of
-a session so the in-process simulation (``ibr_bench.Simulation``) can carry any of them.
+a session so the in-process simulation (``simulation.Simulation``) can carry any of them.
 """
 from __future__ import annotations
 
@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pibr.protocol.depth import PEELED, DepthQuantizer
+from pibr.protocol.depth import DepthQuantizer, PEELED
 from pibr.protocol.errors import CodecError
 from pibr.server.video import encode_packets, x264_context
 
@@ -377,7 +377,7 @@ class H264DepthDecoder:
 
 
 # ------------------------------------------------------------------------------------------
-# A session's views (for ibr_bench.Simulation)
+# A session's views (for simulation.Simulation)
 # ------------------------------------------------------------------------------------------
 
 def make_pair(codec: str, width: int, height: int, near: float, far: float, fps: float, kbps: float = 0.0,
@@ -388,7 +388,7 @@ def make_pair(codec: str, width: int, height: int, near: float, far: float, fps:
         q = LogDepthQuantizer(near, far, options.pop("bits", 16))
         return LogDepthEncoder(width, height, q, **options), LogDepthDecoder(width, height, q)
     if codec == "zstd":
-        from pibr.server.depth_stream import EDGE_BITS, edge_quantizer
+        from pibr.protocol.depth_codecs import EDGE_BITS, edge_quantizer
 
         q = edge_quantizer(near, far, EDGE_BITS)
         return ZstdDepthEncoder(width, height, q), ZstdDepthDecoder(width, height, q)

@@ -179,13 +179,13 @@ def measure_scene(scene, windows, latencies, rate_hz, stride, view_size, out_siz
                   event_latency_ms, event_stride=1, variants=VARIANTS, bar=None) -> dict:
     """Every variant at every latency on one scene, its event probes and its flow coding."""
     from pibr.client.motion_flow import MotionFlowDecoder
-    from pibr.protocol.motion_flow import FLOW_CODERS
+    from pibr.protocol.motion_flow import DEFAULT_FLOW_CODER, FLOW_CODERS
 
-    from .ibr_bench import Simulation, load_proxies
+    from .simulation import Simulation, bench_server_config, load_proxies
 
     proxies, _ = load_proxies(scene, progress=False)
-    sim = Simulation(scene, view_size, out_size, proxies=proxies, depth_codec=depth_codec, flow_coder=flow_coder,
-                     flow_frames=True, moving_truth=True)
+    server = bench_server_config(view_size, depth_codec=depth_codec, flow_coder=flow_coder or DEFAULT_FLOW_CODER)
+    sim = Simulation(scene, server, out_size, proxies=proxies, flow_frames=True, moving_truth=True)
     moving_names = {i: o.name for i, o in enumerate(scene.objects) if o.is_dynamic}
     decoders = {c: MotionFlowDecoder(*view_size) for c in FLOW_CODERS}
     flow_stats: dict = {}

@@ -70,10 +70,6 @@ def _frames(path: str):
             yield frame.to_ndarray(format="rgb24")
 
 
-def _metrics_job(gt, img, ppd, with_flip):
-    return frame_metrics(gt, img, ppd, with_flip)
-
-
 def _stack_rows(rows, scale: int) -> np.ndarray:
     out = np.concatenate([np.concatenate(r, axis=1) for r in rows], axis=0)
     if scale > 1:
@@ -156,9 +152,9 @@ def evaluate_run(run_dir: str, scene_spec: str | None = None, flip_every: int = 
                     raise ConfigError(f"{m}.lossless.mkv frames are {img.shape}, expected {ref.shape}")
                 with_flip = flip_every > 0 and i % flip_every == 0
                 if pool is not None:
-                    pending.append((m, i, pool.submit(_metrics_job, ref, img, ppd, with_flip)))
+                    pending.append((m, i, pool.submit(frame_metrics, ref, img, ppd, with_flip)))
                 else:
-                    pending.append((m, i, _metrics_job(ref, img, ppd, with_flip)))
+                    pending.append((m, i, frame_metrics(ref, img, ppd, with_flip)))
                 if writer is not None:
                     rows.append([img, ref, error_image(ref, img)])
             if writer is not None:
@@ -233,7 +229,7 @@ class TransmittedViews:
     def __init__(self, scene, session: dict, out_size, fov_deg: float, subsample: int = 2):
         from pibr.protocol.session import SessionConfig
 
-        from .coverage import CoverageProbe
+        from pibr.server.coverage import CoverageProbe
 
         config = SessionConfig.from_json(session)
         self.offset = config.extra_offset if config.extra is not None else None
@@ -245,7 +241,7 @@ class TransmittedViews:
 
     def holes(self, pose: Pose, rec: dict) -> dict:
         """{"primary": fraction, "both": fraction} for one tick's record (1.0 before any frame)."""
-        from .coverage import uncovered
+        from pibr.server.coverage import uncovered
 
         if rec["frame_id"] < 0:
             return {"primary": 1.0, "both": 1.0}

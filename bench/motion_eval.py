@@ -1,5 +1,5 @@
 """Moving objects under ``proxy``'s extrapolations: quality over the frame and over the moving
-objects' pixels, against ground truth, in one process (``ibr_bench.Simulation``).
+objects' pixels, against ground truth, in one process (``simulation.Simulation``).
 
 Per displayed tick of each window, on the virtual clock's schedule (``pibr.common.link.SessionSchedule``):
 the server's frame as the client has it, then ``proxy`` with each ``motion`` mode
@@ -43,12 +43,12 @@ def measure_motion(scene, windows, modes=MODES, latency_ms: float = 128.0, rate_
     moving dssim or None], ...] per window label}, ...}."""
     from pibr.server.renderer import RenderTarget
 
-    from .ibr_bench import Simulation, load_proxies
+    from .simulation import Simulation, bench_server_config, load_proxies
 
     if proxies is None:
         proxies, _ = load_proxies(scene, progress=False)
     schedule = SessionSchedule.round_trip(rate_hz, latency_ms)
-    sim = Simulation(scene, view_size, out_size, proxies=proxies, depth_codec=depth_codec)
+    sim = Simulation(scene, bench_server_config(view_size, depth_codec=depth_codec), out_size, proxies=proxies)
     truth = RenderTarget(sim.ctx, *out_size, motion=True)
     rows = {m: {} for m in modes}
     try:

@@ -13,7 +13,7 @@ bench/windows.py (disjoint from every window a default was fitted on), beside:
   methods that use only it, both views otherwise), reported beside each method's own count of
   pixels it left unfilled (alpha 0).
 
-Quality runs the real pipeline in one process (``ibr_bench.Simulation``) at the display rate
+Quality runs the real pipeline in one process (``simulation.Simulation``) at the display rate
 divided by ``stride``; metrics are computed in a worker process while the next frame renders.
 Speed is measured afterwards in a separate pass with nothing else running, every variant on
 the same frames in turn, at each output size (960x540 and 1280x720 by default): median and
@@ -26,32 +26,18 @@ import multiprocessing
 import os
 import sys
 import time
-from dataclasses import dataclass, field
 
 import numpy as np
 
 from pibr.common.link import SessionSchedule
 from pibr.common.replay import display_samples
-from pibr.server.coverage import camera_rays, displayed_points, uncovered
+from pibr.server.coverage import camera_rays
 
 from .metrics import frame_metrics, nearly_uniform, pixels_per_degree
 from .results import write_result
+from .simulation import geometric_holes
+from .variants import ORACLE, Variant, pareto_front
 from .windows import EVALUATION_WINDOWS, describe_windows, windows_json
-
-ORACLE = "oracle (zero latency)"
-
-
-@dataclass(frozen=True)
-class Variant:
-    """One point of the chart: a method with its knobs."""
-
-    label: str
-    method: str
-    options: dict = field(default_factory=dict)
-
-    def to_json(self) -> dict:
-        return {"method": self.method, "options": self.options}
-
 
 def default_variants(methods=None) -> list[Variant]:
     """Every registered method with each of its knobs (the proxy's LoD target and tau, with and
@@ -95,21 +81,6 @@ def motion_variants(variants, scene) -> list[Variant]:
     return [Variant(f"proxy, {mode} motion", "proxy", {"motion": mode}) for mode in ("static", "oracle")]
 
 
-def _metrics_job(gt, rgb, ppd, with_flip):
-    return frame_metrics(gt, rgb, ppd, with_flip)
-
-
-def pareto_front(points: dict) -> list[str]:
-    """Labels of the points (label -> (ms, dssim)) no other point beats on both, fastest first."""
-    order = sorted(points, key=lambda k: (points[k][0], points[k][1]))
-    front, best = [], float("inf")
-    for k in order:
-        if points[k][1] < best:
-            front.append(k)
-            best = points[k][1]
-    return front
-
-
 class _Quality:
     """Per-variant series of one scene."""
 
@@ -139,30 +110,11 @@ class _Quality:
         return out
 
 
-def _geometric_holes(rays, pose, gt_distance, frame, distances, peeled_marked: bool) -> dict:
-    """Geometric hole fraction of the displayed view for the primary view alone and for both."""
-    points, sky, dirs = displayed_points(rays, pose, gt_distance)
-    views = [(frame.primary_pose, distances["primary"], False)]
-    out = {"primary": float(uncovered(points, sky, dirs, views).mean())}
-    if "extra" in distances and frame.extra_pose is not None:
-        views.append((frame.extra_pose, distances["extra"], True))
-        out["both"] = float(uncovered(points, sky, dirs, views, peeled_marked=peeled_marked).mean())
-    else:
-        out["both"] = out["primary"]
-    return out
-
-
-def _display_timed(sim, method, pose, frame, t, textures=None):
-    c0 = time.process_time()
-    rgb, own, ms = sim.display(method, pose, frame, t, textures)
-    return rgb, own, ms, (time.process_time() - c0) * 1e3
-
-
 def measure_scene(scene, variants, windows, latency_ms=128.0, rate_hz=30.0, stride=8, view_size=(1024, 1024),
                   out_size=(960, 540), speed_sizes=((960, 540), (1280, 720)), speed_frames=12, flip_every=4,
                   depth_codec="h264", workers=1, bar=None) -> dict:
     """Quality and speed of every variant on one scene; see the module docstring."""
-    from .ibr_bench import Simulation, load_proxies
+    from .simulation import Simulation, bench_server_config, load_proxies
 
     variants = [*variants, *motion_variants(variants, scene)]
     with_proxies = any(v.method == "proxy" for v in variants)
@@ -178,7 +130,8 @@ def measure_scene(scene, variants, windows, latency_ms=128.0, rate_hz=30.0, stri
     pool = (concurrent.futures.ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"))
             if workers > 0 else None)
     pending = []
-    sim = Simulation(scene, view_size, out_size, proxies=proxies, depth_codec=depth_codec, keep_distances=True)
+    sim = Simulation(scene, bench_server_config(view_size, depth_codec=depth_codec), out_size, proxies=proxies,
+                     keep_distances=True)
     rays = camera_rays(*out_size, sim.output.fov_deg)
     try:
         methods = {v.label: sim.make_method(v.method, **v.options) for v in variants}
@@ -189,20 +142,20 @@ def measure_scene(scene, variants, windows, latency_ms=128.0, rate_hz=30.0, stri
                 frame = sim.frame_at(t_render, rendered)
                 gt = sim.ground_truth(display, t_disp)
                 uniform[window] += nearly_uniform(gt)
-                geo = _geometric_holes(rays, display, sim.ground_truth_distance(), frame, sim.distances,
+                geo = geometric_holes(rays, display, sim.ground_truth_distance(), frame, sim.distances,
                                        bool(sim.session.options.get("peel_marker")))
                 with_flip = flip_every > 0 and i % flip_every == 0
                 shown = []
                 for label, m in methods.items():
-                    rgb, own, ms, _ = _display_timed(sim, m, display, frame, t_disp)
+                    rgb, own, ms, _ = sim.display_timed(m, display, frame, t_disp)
                     shown.append((label, rgb, own, ms, m.last_primitives,
                                   geo["both" if uses_extra[label] else "primary"]))
                 oframe, otextures = sim.oracle_frame(t_disp, display, oracle_rate)
-                rgb, own, ms, _ = _display_timed(sim, oracle_method, display, oframe, t_disp, otextures)
+                rgb, own, ms, _ = sim.display_timed(oracle_method, display, oframe, t_disp, otextures)
                 shown.append((ORACLE, rgb, own, ms, 0, 0.0))
                 for label, rgb, own, ms, prims, holes in shown:
-                    job = (pool.submit(_metrics_job, gt, rgb, ppd, with_flip) if pool is not None
-                           else _metrics_job(gt, rgb, ppd, with_flip))
+                    job = (pool.submit(frame_metrics, gt, rgb, ppd, with_flip) if pool is not None
+                           else frame_metrics(gt, rgb, ppd, with_flip))
                     pending.append((label, window, job, dict(own_holes=own, ms=ms, primitives=prims,
                                                              geometric_holes=holes)))
                 while len(pending) > 8 * len(shown):
@@ -242,14 +195,15 @@ def _settle(item, quality, pool):
 
 def _measure_speed(scene, variants, samples, proxies, view_size, sizes, frames, depth_codec, bar) -> dict:
     """label -> size -> {ms_median, ms_mean, cpu_ms_median}; every variant on the same frames in turn."""
-    from .ibr_bench import Simulation
+    from .simulation import Simulation, bench_server_config
 
     per_window = max(1, -(-frames // len(samples)))
     chosen = [s for ws in samples.values() for s in ws[:per_window]][:frames]
     out: dict = {}
     for size in sizes:
         key = f"{size[0]}x{size[1]}"
-        sim = Simulation(scene, view_size, size, proxies=proxies, depth_codec=depth_codec, keep_distances=True)
+        sim = Simulation(scene, bench_server_config(view_size, depth_codec=depth_codec), size, proxies=proxies,
+                         keep_distances=True)
         try:
             methods = {v.label: sim.make_method(v.method, **v.options) for v in variants}
             methods[ORACLE] = sim.make_method("none")
@@ -258,7 +212,7 @@ def _measure_speed(scene, variants, samples, proxies, view_size, sizes, frames, 
                 frame = sim.frame_at(t_render, rendered)
                 for _ in range(2):      # the first display of a frame pays its per-frame work
                     for label, m in methods.items():
-                        _, _, ms, cpu = _display_timed(sim, m, display, frame, t_disp)
+                        _, _, ms, cpu = sim.display_timed(m, display, frame, t_disp)
                         times[label][0].append(ms)
                         times[label][1].append(cpu)
                 if bar is not None:

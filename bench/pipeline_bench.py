@@ -11,8 +11,10 @@ import time
 
 import numpy as np
 
-from pibr.protocol.messages import Frame, Hello, OutputConfig, PayloadKind
+from pibr.protocol.messages import Hello, OutputConfig, PayloadKind
+
 from .results import write_result
+from .simulation import BENCH_VIEW_SIZE, bench_server_config
 
 
 def _poses(scene, trace_spec: str, count: int, fps: float, start_s: float = 10.0):
@@ -23,12 +25,6 @@ def _poses(scene, trace_spec: str, count: int, fps: float, start_s: float = 10.0
     start = min(start_s, max(0.0, trace.duration - count / fps))
     origin = placement(trace, start, scene.viewer_origin)
     return [(start + k / fps, origin.compose(trace.pose_at(start + k / fps))) for k in range(count)]
-
-
-def _server_cfg(**kw):
-    from pibr.server.config import ServerConfig
-
-    return ServerConfig(**kw)
 
 
 def _median(xs) -> float:
@@ -47,7 +43,7 @@ def _distance_disagreement(reference: np.ndarray, distance: np.ndarray, toleranc
 REFERENCE_EDGE_DEG = 2.0
 
 
-def bench_server(scene_spec="room", trace="pred6dof-1", frames=40, view_size=(1024, 1024),
+def bench_server(scene_spec="room", trace="pred6dof-1", frames=40, view_size=BENCH_VIEW_SIZE,
                  projections=("vertex", "tess"), extra_view="auto", bitrate_kbps=16000.0, out_dir="out/bench",
                  fps=10.0, edge_angles=None, lod=(True,), accuracy=False, cube_scale=0.75) -> dict:
     """Server ms per frame by stage and bitrate, per projection, edge angle, LOD and extra view.
@@ -62,10 +58,8 @@ def bench_server(scene_spec="room", trace="pred6dof-1", frames=40, view_size=(10
     """
     from pibr.common.gl import create_context
     from pibr.scenes.registry import load_scene
-    from pibr.server.pipeline import FrameProducer
+    from pibr.server.pipeline import SessionPipeline
     from pibr.server.renderer import MAX_EDGE_ANGLE_DEG, RenderTarget, Renderer
-    from pibr.server.session_plan import plan_session
-    from pibr.server.video import H264Encoder
 
     from .metrics import psnr
 
@@ -86,34 +80,33 @@ def bench_server(scene_spec="room", trace="pred6dof-1", frames=40, view_size=(10
         setup_s = time.perf_counter() - t0
         for use_lod, extra in ((u, e) for u in lod for e in extras):
             renderer.lod = use_lod
-            cfg = _server_cfg(scene=scene_spec, view_size=tuple(view_size), extra_view=extra, projection=projection,
-                              bitrate_kbps=bitrate_kbps, fps=fps, max_edge_deg=angle)
-            session, spec = plan_session(cfg, scene, Hello())
-            producer = FrameProducer(ctx, renderer, spec)
-            encoder = H264Encoder(spec.layout.width, spec.layout.height, fps, bitrate_kbps, cfg.keyint, deterministic=True)
+            cfg = bench_server_config(view_size, scene=scene_spec, extra_view=extra, projection=projection,
+                                      bitrate_kbps=bitrate_kbps, fps=fps, max_edge_deg=angle)
+            pipeline = SessionPipeline(cfg, scene, Hello(), deterministic=True).open(ctx, renderer)
+            spec = pipeline.spec
             stages = {"render": [], "readback": [], "pack": [], "encode": []}
             sizes, keys = [], []
             accuracy = {"psnr": [], "off": []}
             for i, (t, pose) in enumerate(poses):
-                p = producer.produce(pose, t)
+                p = pipeline.produce(pose, t)
                 te = time.perf_counter()
-                data, key = encoder.encode(p.yuv)
+                encoded = pipeline.encode(p)
                 encode_ms = (time.perf_counter() - te) * 1e3
                 if i < 3:
                     continue  # warm-up: shader compilation, encoder start
                 if reference is not None and extra == extras[0]:
                     ref_renderer, ref_target = reference
                     ref_renderer.render_wide(ref_target, pose, t)
-                    accuracy["psnr"].append(psnr(ref_target.read_color(), producer.primary.read_color()))
+                    accuracy["psnr"].append(psnr(ref_target.read_color(), pipeline.producer.primary.read_color()))
                     accuracy["off"].append(_distance_disagreement(ref_target.read_distance(),
-                                                                  producer.primary.read_distance()))
+                                                                  pipeline.producer.primary.read_distance()))
                 stages["render"].append(p.render_ms)
                 stages["readback"].append(p.readback_ms)
                 stages["pack"].append(p.pack_ms)
                 stages["encode"].append(encode_ms)
-                sizes.append(len(data))
-                keys.append(key)
-            producer.release()
+                sizes.append(encoded.nbytes)
+                keys.append(encoded.keyframe)
+            pipeline.release()
             total = [sum(v) for v in zip(*stages.values())]
             rows.append({
                 "projection": projection, "max_edge_deg": angle, "lod": use_lod,
@@ -167,7 +160,7 @@ def print_server_table(result: dict) -> None:
           "is drawn from a coarser copy when the eye is farther from it")
 
 
-def bench_client(scene_spec="room", trace="pred6dof-1", frames=40, view_size=(1024, 1024), out_size=(960, 540),
+def bench_client(scene_spec="room", trace="pred6dof-1", frames=40, view_size=BENCH_VIEW_SIZE, out_size=(960, 540),
                  methods=("none", "rotation"), out_dir="out/bench", fps=10.0, rate_hz=60.0,
                  extra_view="auto") -> dict:
     from pibr.client.frame_textures import FrameTextures
@@ -176,27 +169,19 @@ def bench_client(scene_spec="room", trace="pred6dof-1", frames=40, view_size=(10
     from pibr.client.video import H264Decoder
     from pibr.common.gl import create_context
     from pibr.scenes.registry import load_scene
-    from pibr.server.pipeline import FrameProducer
-    from pibr.server.renderer import Renderer
-    from pibr.server.session_plan import plan_session
-    from pibr.server.video import H264Encoder
+    from pibr.server.pipeline import SessionPipeline
 
     scene = load_scene(scene_spec)
     poses = _poses(scene, trace, frames, fps)
     ctx = create_context()
-    cfg = _server_cfg(scene=scene_spec, view_size=tuple(view_size), extra_view=extra_view, fps=fps)
-    session, spec = plan_session(cfg, scene, Hello())
-    renderer = Renderer(ctx, scene, cfg.projection)
-    producer = FrameProducer(ctx, renderer, spec)
-    encoder = H264Encoder(spec.layout.width, spec.layout.height, fps, cfg.bitrate_kbps, cfg.keyint, deterministic=True)
+    cfg = bench_server_config(view_size, scene=scene_spec, extra_view=extra_view, fps=fps)
+    pipeline = SessionPipeline(cfg, scene, Hello(), deterministic=True).open(ctx)
+    session = pipeline.session
     stream = []
     for k, (t, pose) in enumerate(poses):
-        p = producer.produce(pose, t)
-        data, key = encoder.encode(p.yuv)
-        stream.append(Frame(k, int(t * 1e6), int(t * 1e6), k, int(t * 1e6), p.primary_pose, p.extra_pose,
-                            scene.near, scene.far, payloads=((PayloadKind.H264_ATLAS, data),), keyframe=key))
-    producer.release()
-    renderer.release()
+        p = pipeline.produce(pose, t)
+        stream.append(pipeline.frame(k, int(t * 1e6), int(t * 1e6), k, p, pipeline.encode(p)))
+    pipeline.release()
 
     out = OutputConfig(out_size[0], out_size[1], 90.0, rate_hz)
     decoder = H264Decoder(session.atlas.width, session.atlas.height)
@@ -205,7 +190,7 @@ def bench_client(scene_spec="room", trace="pred6dof-1", frames=40, view_size=(10
     from pibr.client.methods import needs_proxies
 
     if needs_proxies(methods):
-        from .ibr_bench import load_proxies
+        from .simulation import load_proxies
 
         proxies, _ = load_proxies(scene, progress=False)
     ms = [make_method(m, ctx, out, session, proxies=proxies) for m in methods]

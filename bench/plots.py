@@ -3,6 +3,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .variants import ORACLE, pareto_front, sweep_labels
+
 
 def _pyplot():
     import matplotlib
@@ -37,10 +39,9 @@ def plot_quality_over_time(rows: list[dict], path: str) -> None:
     plt.close(fig)
 
 
-def plot_coverage(result: dict, path: str) -> None:
-    """Missing-pixel fraction over time per variant (one panel per window) and the means."""
-    from .coverage import VARIANT_LABELS, VARIANTS
-
+def plot_coverage(result: dict, path: str, variants: tuple, labels: dict) -> None:
+    """Missing-pixel fraction over time per variant (one panel per window) and the means;
+    ``variants`` the coverage bench's, ``labels`` their names (and the floor's)."""
     plt = _pyplot()
     windows = list(result["per_window"])
     cols = min(4, len(windows) + 1)
@@ -49,8 +50,8 @@ def plot_coverage(result: dict, path: str) -> None:
     flat = axes.ravel()
     for ax, label in zip(flat, windows):
         d = result["per_window"][label]
-        for v in VARIANTS + ("floor",):
-            ax.plot(d["times"], 100 * np.array(d["missing"][v]), label=VARIANT_LABELS[v], lw=1,
+        for v in variants + ("floor",):
+            ax.plot(d["times"], 100 * np.array(d["missing"][v]), label=labels[v], lw=1,
                     ls=":" if v == "floor" else "-")
         ax.set_title(label, fontsize=9)
         ax.set_xlabel("time s")
@@ -58,11 +59,11 @@ def plot_coverage(result: dict, path: str) -> None:
         ax.grid(alpha=0.3)
     flat[0].legend(fontsize=7)
     ax = flat[len(windows)]
-    x = np.arange(len(VARIANTS))
-    ax.bar(x, [100 * result["means"][v] for v in VARIANTS], 0.4, label="all pixels")
-    ax.bar(x + 0.4, [100 * result["means"][v + ":geometry"] for v in VARIANTS], 0.4, label="geometry only")
+    x = np.arange(len(variants))
+    ax.bar(x, [100 * result["means"][v] for v in variants], 0.4, label="all pixels")
+    ax.bar(x + 0.4, [100 * result["means"][v + ":geometry"] for v in variants], 0.4, label="geometry only")
     ax.set_xticks(x + 0.2)
-    ax.set_xticklabels([VARIANT_LABELS[v].replace(": ", ":\n") for v in VARIANTS], fontsize=7)
+    ax.set_xticklabels([labels[v].replace(": ", ":\n") for v in variants], fontsize=7)
     ax.set_ylabel("mean missing %")
     ax.set_title(f"{result['scene']}, {result['latency_ms']:g} ms, all windows", fontsize=9)
     ax.legend(fontsize=8)
@@ -103,7 +104,6 @@ def plot_pareto(result: dict, path: str) -> None:
     """Reinert et al.'s Figure 9 per scene and output size: client ms per frame (log) against
     DSSIM, one marker per method and knob, the Pareto front drawn, the zero-latency oracle as a
     horizontal line."""
-    from .pareto import ORACLE, pareto_front
 
     plt = _pyplot()
     scenes = list(result["scenes"])
@@ -243,16 +243,15 @@ def plot_depth_rd(result: dict, path: str) -> None:
     plt.close(fig)
 
 
-def plot_trade(result: dict, knob: str, path: str) -> None:
+def plot_trade(result: dict, knob: str, path: str, client: bool, unit: str) -> None:
     """One knob of ``pibr bench trade``: DSSIM against the knob's value, against the total
     Mbit/s sent, and against ms (the server's CPU ms per frame for stream knobs, the client's
-    display pass for client knobs), one curve per method, per scene."""
-    from .trade import KNOBS, sweep_labels
+    display pass for client knobs: ``client``), one curve per method, per scene; ``unit``: the
+    knob's, for its axis."""
 
     plt = _pyplot()
     scenes = list(result["scenes"])
     fig, axes = plt.subplots(len(scenes), 3, figsize=(16, 4.6 * len(scenes)), squeeze=False)
-    client = KNOBS[knob].client
     for row, scene in enumerate(scenes):
         rows = result["scenes"][scene]["sweeps"][knob]
         values = [r["value"] for r in rows]
@@ -274,7 +273,6 @@ def plot_trade(result: dict, knob: str, path: str) -> None:
         for r, x, in zip(rows, xs):
             if r["default"]:
                 axes[row][0].axvline(x, color="grey", ls=":", lw=1)
-        unit = KNOBS[knob].unit
         axes[row][0].set_xlabel(f"{knob} ({unit})" if unit else knob)
         if categorical:
             axes[row][0].set_xticks(xs, [str(v) for v in values])

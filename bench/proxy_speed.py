@@ -43,14 +43,14 @@ def run(sizes=((960, 540), (1280, 720)), frames: int = 12, repeats: int = 3, sce
     """-> size -> {variant: median CPU ms, "ratio to floor": {...}, "image": {...}}."""
     from pibr.scenes.registry import load_scene
 
-    from .ibr_bench import Simulation, load_proxies
+    from .simulation import Simulation, bench_server_config, load_proxies
 
     scene = load_scene(scene_spec)
     proxies, _ = load_proxies(scene)
     samples = _samples(scene, frames)
     result = {}
     for size in sizes:
-        sim = Simulation(scene, (1024, 1024), size, proxies=proxies)
+        sim = Simulation(scene, bench_server_config(), size, proxies=proxies)
         methods = {label: sim.make_method("proxy", **options) for label, options in VARIANTS.items()}
         methods["floor"] = sim.make_method("floor")
         cpu = {label: [] for label in methods}

@@ -29,6 +29,8 @@ import time
 
 import numpy as np
 
+from pibr.protocol.depth_codecs import DEPTH_CODECS
+
 from .processes import run_sessions
 from .results import write_result
 
@@ -176,7 +178,7 @@ def run_one(out_dir: str, method: str, depth_codec: str, clients: int = 1, clock
     return result
 
 
-def run_realtime_bench(out_dir="out/bench", methods=("rotation", "proxy"), depth_codecs=("h264", "edge"),
+def run_realtime_bench(out_dir="out/bench", methods=("rotation", "proxy"), depth_codecs=tuple(DEPTH_CODECS),
                        clients=(1, 2, 4), duration_s: float = 20.0, scaling_duration_s: float = 6.0,
                        scene="room", trace="pred6dof-1", start_s: float = 30.0, rate_hz: float = 30.0,
                        size=(960, 540), latency_ms: float = 128.0, server_fps: float = 10.0,

@@ -80,7 +80,7 @@ def run_split_bench(out_dir="out/bench", traces=("synth-walk", "synth-look"), st
     from pibr.common.link import SessionSchedule
     from pibr.common.replay import display_samples
 
-    from .ibr_bench import Simulation, evaluate_methods, load_proxies, summarize
+    from .simulation import Simulation, bench_server_config, evaluate_methods, load_proxies, summarize
 
     specs = write_atrium(os.path.join(out_dir, "atrium"))
     schedule = SessionSchedule.round_trip(rate_hz, latency_ms)
@@ -94,7 +94,7 @@ def run_split_bench(out_dir="out/bench", traces=("synth-walk", "synth-look"), st
         build_s = time.perf_counter() - t0
         row = {"objects": len(scene.objects), "triangles": scene.triangle_count, "lod_seconds": build_s,
                "proxy_triangles": bundle.triangles["proxy"], "notes": list(scene.notes), "quality": {}}
-        sim = Simulation(scene, view_size, out_size, proxies=proxies)
+        sim = Simulation(scene, bench_server_config(view_size), out_size, proxies=proxies)
         try:
             for tr in traces:
                 samples = display_samples(scene, tr, start_s, duration_s, schedule)[::stride]

@@ -37,9 +37,10 @@ from pibr.protocol.errors import ConfigError
 from pibr.server.config import DEFAULT_MAX_IN_FLIGHT
 from pibr.server.coverage import camera_rays
 
-from .metrics import nearly_uniform, pixels_per_degree
-from .pareto import Variant, _display_timed, _geometric_holes, _metrics_job
+from .metrics import frame_metrics, nearly_uniform, pixels_per_degree
 from .results import write_result
+from .simulation import BENCH_VIEW_SIZE, geometric_holes
+from .variants import Variant, sweep_labels
 from .windows import EVALUATION_WINDOWS, describe_windows, windows_json
 
 #: rotation, proxy, and the best competitors of ``pibr bench pareto`` (README: gridwarp, and
@@ -55,7 +56,7 @@ class StreamPoint:
     bitrate_kbps: float = 16000.0
     preset: str = "ultrafast"
     keyint: int = 30
-    view_size: tuple = (1024, 1024)
+    view_size: tuple = BENCH_VIEW_SIZE
     extra_scale: float = 0.5          # 0: no extra view
     fps: float = 10.0
     latency_ms: float = 128.0         # round trip, half each way
@@ -64,6 +65,14 @@ class StreamPoint:
 
     def to_json(self) -> dict:
         return {k: list(v) if isinstance(v, tuple) else v for k, v in dataclasses.asdict(self).items()}
+
+    def server_config(self):
+        """The server's settings of this point (the network's are the schedule's)."""
+        from .simulation import bench_server_config
+
+        extra = {"extra_view": "off"} if self.extra_scale == 0 else {"extra_scale": self.extra_scale}
+        return bench_server_config(self.view_size, fps=self.fps, bitrate_kbps=self.bitrate_kbps, keyint=self.keyint,
+                                   preset=self.preset, **extra)
 
 
 def default_stream(out_size=(960, 540), fov_deg: float = 90.0) -> StreamPoint:
@@ -193,7 +202,7 @@ class _Proxies:
     def get(self, resolution, fraction):
         from pibr.server.proxies import ProxySettings
 
-        from .ibr_bench import load_proxies
+        from .simulation import load_proxies
 
         key = (int(resolution), float(fraction))
         if key not in self.cache:
@@ -229,14 +238,11 @@ def _client_variants(knobs, methods, defaults, values_of) -> list[tuple[str, str
 def measure_point(scene, point: StreamPoint, windows, methods, extra_variants, proxies_by_lod, gt: _GroundTruth,
                   ctx, rate_hz, stride, out_size, flip_every, seed, pool, bar=None) -> dict:
     """One stream point on every window: figures per method label (and the stream's own)."""
-    from .ibr_bench import Simulation
+    from .simulation import Simulation
 
     default_lod = next(iter(proxies_by_lod))
     proxies = proxies_by_lod[default_lod][0]
-    sim = Simulation(scene, point.view_size, out_size, fps=point.fps, bitrate_kbps=point.bitrate_kbps,
-                     extra_view="off" if point.extra_scale == 0 else "auto",
-                     extra_scale=point.extra_scale or None, proxies=proxies, ctx=ctx, keep_distances=True,
-                     keyint=point.keyint, preset=point.preset)
+    sim = Simulation(scene, point.server_config(), out_size, proxies=proxies, ctx=ctx, keep_distances=True)
     series = _Series()
     ppd = pixels_per_degree(out_size[0], sim.output.fov_deg)
     rays = camera_rays(*out_size, sim.output.fov_deg)
@@ -286,12 +292,12 @@ def measure_point(scene, point: StreamPoint, windows, methods, extra_variants, p
                 display = pose_at(t_us)
                 stream["age_ms"].append((t_us - shown.render_t_us) / 1e3)
                 gt_rgb, gt_distance = gt.get(sim, (w.label, i), display, t)
-                geo = _geometric_holes(rays, display, gt_distance, shown, shown_distances, peeled_marked)
+                geo = geometric_holes(rays, display, gt_distance, shown, shown_distances, peeled_marked)
                 with_flip = flip_every > 0 and (i // stride) % flip_every == 0
                 for label, m in made.items():
-                    rgb, own, _, cpu = _display_timed(sim, m, display, shown, t)
-                    job = (pool.submit(_metrics_job, gt_rgb, rgb, ppd, with_flip) if pool is not None
-                           else _metrics_job(gt_rgb, rgb, ppd, with_flip))
+                    rgb, own, _, cpu = sim.display_timed(m, display, shown, t)
+                    job = (pool.submit(frame_metrics, gt_rgb, rgb, ppd, with_flip) if pool is not None
+                           else frame_metrics(gt_rgb, rgb, ppd, with_flip))
                     pending.append((label, w.label, job, dict(cpu_ms=cpu, own_holes=own, geometric_holes=geo[
                         "both" if uses_extra[label] else "primary"])))
                 while len(pending) > 4 * len(made):
@@ -428,7 +434,8 @@ def run_trade_bench(scenes=("room",), knobs=tuple(KNOBS), windows=EVALUATION_WIN
     from .plots import plot_trade
 
     for name in result["knobs"]:
-        plot_trade(result, name, os.path.join(out_dir, f"trade_{name}.png"))
+        plot_trade(result, name, os.path.join(out_dir, f"trade_{name}.png"), KNOBS[name].client,
+                   KNOBS[name].unit)
     return result
 
 
@@ -447,12 +454,6 @@ def _sweep_json(name, sweep, measured, points) -> list[dict]:
         row["default"] = key in ("default", "proxy")
         out.append(row)
     return out
-
-
-def sweep_labels(rows: list) -> list:
-    """The methods scored at every point of one knob's sweep (the default point also carries the
-    client knobs' proxy variants, which the other points lack), in their order."""
-    return [label for label in rows[0]["methods"] if all(label in row["methods"] for row in rows)]
 
 
 def print_trade_tables(r: dict) -> None:

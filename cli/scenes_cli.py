@@ -3,11 +3,12 @@ what the server would model for that scene and a client, and why (server/scene_p
 here because the plan is the server's and scenes/ must not import the server."""
 from __future__ import annotations
 
-import argparse
 import json
 
 
 def register(subparsers) -> None:
+    from pibr.common import arguments
+    from pibr.protocol.depth_codecs import AUTO, DEPTH_CODECS
     from pibr.scenes import cli as scenes_cli
 
     p = scenes_cli.register(subparsers)
@@ -15,28 +16,18 @@ def register(subparsers) -> None:
     g.add_argument("--plan", metavar="SPEC",
                    help="print the server's plan for this scene: extra view (measured coverage), motion, proxy or "
                         "box per object, view size for the output, depth codec for the bandwidth")
-    g.add_argument("--output", type=_size, default=(960, 540), metavar="WxH",
+    g.add_argument("--output", type=arguments.size, default=(960, 540), metavar="WxH",
                    help="the client's output size (default 960x540)")
     g.add_argument("--fov", type=float, default=90.0, help="the client's horizontal field of view, degrees (default 90)")
     g.add_argument("--bandwidth-kbps", type=float, default=0.0, metavar="KBPS",
                    help="the bandwidth the client states (default 0: none)")
     g.add_argument("--extra-view", choices=("auto", "on", "off"), default="auto", help="as 'pibr serve' (default auto)")
-    g.add_argument("--depth-codec", choices=("auto", "h264", "edge"), default="auto",
+    g.add_argument("--depth-codec", choices=(AUTO, *DEPTH_CODECS), default=AUTO,
                    help="as 'pibr serve' (default auto)")
-    g.add_argument("--view-size", type=_size, default=None, metavar="WxH", help="as 'pibr serve' (default: for the output)")
+    g.add_argument("--view-size", type=arguments.size, default=None, metavar="WxH", help="as 'pibr serve' (default: for the output)")
     g.add_argument("--bitrate-kbps", type=float, default=16000.0, help="as 'pibr serve' (default 16000)")
     g.add_argument("--edge-kbps", type=float, default=0.0, help="as 'pibr serve' (default 0: a fixed threshold)")
     p.set_defaults(func=run)
-
-
-def _size(text: str) -> tuple[int, int]:
-    from pibr.common.address import parse_size
-    from pibr.protocol.errors import ConfigError
-
-    try:
-        return parse_size(text)
-    except ConfigError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def run(args) -> int:
@@ -72,7 +63,7 @@ def plan_for(spec: str, output=(960, 540), fov_deg: float = 90.0, bandwidth_kbps
     from pibr.server.scene_plan import cached_extra_view, decide_proxies
     from pibr.server.session_plan import extra_offset_for, scene_plan
 
-    from pibr.server.depth_stream import EdgeSettings
+    from pibr.server.depth_encoders import EdgeSettings
 
     cfg = ServerConfig(extra_view=extra_view, depth_codec=depth_codec, view_size=view_size, bitrate_kbps=bitrate_kbps,
                        edge=EdgeSettings(kbps=edge_kbps))

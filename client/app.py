@@ -33,6 +33,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
+from pibr.protocol.depth_codecs import DEPTH_CODECS
 from pibr.protocol.errors import ConfigError, MalformedMessage, UnexpectedMessage
 from pibr.common.gl import GLThread
 from pibr.protocol.messages import (FRAMES_DECODED, MAX_BANDWIDTH_KBPS, Clock, Frame, Hello, OutputConfig,
@@ -41,6 +42,7 @@ from pibr.protocol.pose import Pose
 from pibr.protocol.tls import ClientTLS
 
 from .connection import ClientConnection
+from .depth_decoders import make_depth_decoder
 from .frame_textures import FrameTextures
 from .methods import make_method, method_names, needs_proxies, quadtree_threshold
 from .recorder import POSE_FIELDS, MethodRecorder
@@ -66,7 +68,7 @@ class ClientConfig:
     fov_deg: float = 90.0
     start_s: float = 0.0
     duration_s: float | None = None
-    anchor: str = "start"    # how the trace window is placed in the scene (protocol.trace.placement)
+    anchor: str = "start"    # how the trace window is placed in the scene (pibr.common.traces.placement)
     preroll_s: float = 0.5
     scene: str = ""
     depth_codec: str = ""
@@ -134,7 +136,7 @@ def _check_atlas(session) -> None:
     extra = None if session.extra is None else (session.extra.width, session.extra.height)
     try:
         expected = build_layout((session.primary.width, session.primary.height), extra,
-                                depth_in_atlas=session.depth_codec == "h264")
+                                depth_in_atlas=DEPTH_CODECS[session.depth_codec].in_atlas)
     except ValueError as exc:
         raise MalformedMessage(f"Welcome.config: the views have no atlas layout ({exc})") from None
     if session.atlas != expected:
@@ -201,7 +203,7 @@ class Client:
         self._newest: _Decoded | None = None
         self._gl_state = None
         self._method_info: dict = {}
-        self._placement: Pose | None = None   # trace -> scene (protocol.trace.placement)
+        self._placement: Pose | None = None   # trace -> scene (pibr.common.traces.placement)
         self._last_shown: dict = {}
         self.proxies = None
         self.proxy_stats: dict = {}
@@ -304,10 +306,7 @@ class Client:
             if hello.want_proxies:
                 await self._receive_proxies(t_welcome)
             self._decoder = H264Decoder(self.session.atlas.width, self.session.atlas.height)
-            if self.session.depth_codec == "edge":
-                from .depth_stream import EdgeDepthDecoder
-
-                self._depth_decoder = EdgeDepthDecoder(self.session)
+            self._depth_decoder = make_depth_decoder(self.session)
             if self.session.motion:
                 self.poses = self._pose_history()
                 if cfg.options.get("motion") == "flow":
@@ -417,8 +416,7 @@ class Client:
             for i, (frame, _) in enumerate(frames):
                 newest = i == len(frames) - 1
                 image = self._decoder.decode(frame.payload(PayloadKind.H264_ATLAS), convert=newest)
-                depth = (self._depth_decoder.decode(frame, reconstruct=newest)
-                         if self._depth_decoder is not None else None)
+                depth = self._depth_decoder.decode(frame, reconstruct=newest)
             # the flow (its decoder keeps no state) only for the frame that will be shown
             return image, depth, self._flow_frame(frames[-1][0], image, depth)
 

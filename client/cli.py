@@ -5,17 +5,9 @@ import argparse
 import asyncio
 import sys
 
+from pibr.common import arguments
 from pibr.common.address import parse_host_port
-
-
-def _size(text: str) -> tuple[int, int]:
-    from pibr.common.address import parse_size
-    from pibr.protocol.errors import ConfigError
-
-    try:
-        return parse_size(text)
-    except ConfigError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
+from pibr.protocol.depth_codecs import DEPTH_CODECS
 
 
 def parse_methods(text: str) -> tuple:
@@ -37,24 +29,24 @@ def register(sub) -> None:
     p.add_argument("--connect", default="127.0.0.1:7451", help="HOST:PORT of the server or relay (default :7451)")
     p.add_argument("--trace", default="pred6dof-1",
                    help="head trace: a file (canonical CSV or pred6dof) or a built-in name (see 'pibr trace list')")
-    p.add_argument("--rate", type=float, default=60.0, help="output rate in Hz (default 60)")
+    p.add_argument("--rate", dest="rate_hz", type=float, default=60.0, help="output rate in Hz (default 60)")
     p.add_argument("--clock", choices=("virtual", "real"), default="virtual",
                    help="virtual: simulated, deterministic time; real: the wall clock (default virtual)")
-    p.add_argument("--method", type=parse_methods, default=("rotation",),
+    p.add_argument("--method", dest="methods", type=parse_methods, default=("rotation",),
                    help="re-rendering method(s), comma-separated: none, rotation, ... (default rotation)")
-    p.add_argument("--out", default="out", help="output directory (default out)")
-    p.add_argument("--size", type=_size, default=(960, 540), metavar="WxH", help="output size (default 960x540)")
-    p.add_argument("--fov", type=float, default=90.0, help="horizontal field of view in degrees (default 90)")
-    p.add_argument("--start", type=float, default=0.0, help="start this many seconds into the trace")
-    p.add_argument("--duration", type=float, default=None, help="seconds of trace to replay (default: all)")
+    p.add_argument("--out", dest="out_dir", default="out", help="output directory (default out)")
+    p.add_argument("--size", type=arguments.size, default=(960, 540), metavar="WxH", help="output size (default 960x540)")
+    p.add_argument("--fov", dest="fov_deg", type=float, default=90.0, help="horizontal field of view in degrees (default 90)")
+    p.add_argument("--start", dest="start_s", type=float, default=0.0, help="start this many seconds into the trace")
+    p.add_argument("--duration", dest="duration_s", type=float, default=None, help="seconds of trace to replay (default: all)")
     p.add_argument("--anchor", choices=("start", "origin", "none"), default="start",
                    help="place the trace in the scene: its pose at --start at the scene's viewer origin and "
                         "heading (start, default), its own origin at the viewer origin (origin), or as recorded in "
                         "the scene's coordinates (none)")
-    p.add_argument("--preroll", type=float, default=0.5,
+    p.add_argument("--preroll", dest="preroll_s", type=float, default=0.5,
                    help="seconds of poses sent before the first displayed tick (default 0.5)")
     p.add_argument("--scene", default="", help="ask the server for this scene (default: the server's)")
-    p.add_argument("--depth-codec", choices=("h264", "edge"), default=None, help="ask for this depth transport")
+    p.add_argument("--depth-codec", choices=tuple(DEPTH_CODECS), default=None, help="ask for this depth transport")
     p.add_argument("--bandwidth-kbps", type=float, default=0.0, metavar="KBPS",
                    help="tell the server the bandwidth this client receives: it fits its streams into it and "
                         "picks the depth codec for it (default 0: not stated)")
@@ -68,7 +60,7 @@ def register(sub) -> None:
     p.add_argument("--lod-level", choices=("original", "proxy", "box"), default=None,
                    help="proxy: draw this level for every object instead of choosing by distance")
     p.add_argument("--progress", choices=("bar", "lines", "none"), default="bar")
-    p.add_argument("--receive-timeout-s", type=_positive_float, default=30.0, metavar="S",
+    p.add_argument("--receive-timeout-s", type=arguments.positive, default=30.0, metavar="S",
                    help="give up when the server sends nothing for S seconds while the client waits for it "
                         "(default 30; the Welcome may take longer: up to 120 s while the server loads a scene)")
     g = p.add_argument_group("access (a server or relay with a token or TLS)")
@@ -86,43 +78,21 @@ def register(sub) -> None:
     p.set_defaults(func=cmd_client)
 
 
-def _positive_float(text: str) -> float:
-    import math
-
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
-    if not (math.isfinite(v) and v > 0):
-        raise argparse.ArgumentTypeError(f"must be a positive number, got {text}")
-    return v
-
-
-def _positive_int(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
-    if v <= 0:
-        raise argparse.ArgumentTypeError(f"must be positive, got {text}")
-    return v
-
-
 # The competitors' knobs: flag, the option it sets, its type, help. Each method takes the
 # options it knows (see make_method); an option no chosen method takes is ignored.
 METHOD_KNOBS = (
-    ("--plane-distance", "plane_distance", _positive_float,
+    ("--plane-distance", "plane_distance", arguments.positive,
      "homography: metres from the primary camera to the plane every pixel is taken to lie on"),
-    ("--point-size", "point_size", _positive_float, "splat: point size in output pixels"),
-    ("--split", "split", _positive_float,
+    ("--point-size", "point_size", arguments.positive, "splat: point size in output pixels"),
+    ("--split", "split", arguments.positive,
      "meshwarp, quadtree, iterative: relative depth range that splits a triangle at a discontinuity"),
-    ("--coarse-step", "step", _positive_int, "coarse-meshwarp: pixels between grid vertices"),
-    ("--quadtree-threshold", "threshold", _positive_float,
+    ("--coarse-step", "step", arguments.positive_int, "coarse-meshwarp: pixels between grid vertices"),
+    ("--quadtree-threshold", "threshold", arguments.positive,
      "quadtree, iterative: the server merges pixels into a quad while its relative depth range stays below this"),
-    ("--iterations", "iterations", _positive_int, "iterative: fixed-point iterations per pixel"),
-    ("--damping", "damping", _positive_float, "iterative: damping of each correction"),
-    ("--grid-tile", "tile", _positive_int, "gridwarp: tile size of the surface-estimation quadtree, pixels"),
-    ("--grid-epsilon", "epsilon", _positive_float, "gridwarp: relative collinearity tolerance"),
+    ("--iterations", "iterations", arguments.positive_int, "iterative: fixed-point iterations per pixel"),
+    ("--damping", "damping", arguments.positive, "iterative: damping of each correction"),
+    ("--grid-tile", "tile", arguments.positive_int, "gridwarp: tile size of the surface-estimation quadtree, pixels"),
+    ("--grid-epsilon", "epsilon", arguments.positive, "gridwarp: relative collinearity tolerance"),
 )
 
 
@@ -181,16 +151,10 @@ def cmd_client(args) -> int:
         from pibr.protocol.tls import ClientTLS
 
         tls = ClientTLS(args.tls_ca, args.tls_pin)
-    cfg = ClientConfig(host=host, port=port, trace=args.trace, rate_hz=args.rate, clock=args.clock,
-                       methods=tuple(args.method), out_dir=args.out, width=args.size[0], height=args.size[1],
-                       fov_deg=args.fov, start_s=args.start, duration_s=args.duration, preroll_s=args.preroll,
-                       anchor=args.anchor,
-                       scene=args.scene, depth_codec=args.depth_codec or "",
-                       bandwidth_kbps=args.bandwidth_kbps, lossless=not args.no_lossless,
-                       video=not args.no_video,
-                       progress=args.progress, tau=args.tau, lod_pixels=args.lod_pixels,
-                       lod_level=args.lod_level, receive_timeout_s=args.receive_timeout_s,
-                       options=method_knobs(args), token=resolve_token(args.token, args.token_file), tls=tls)
+    cfg = arguments.config_from_args(
+        ClientConfig, args, host=host, port=port, width=args.size[0], height=args.size[1],
+        depth_codec=args.depth_codec or "", lossless=not args.no_lossless, video=not args.no_video,
+        options=method_knobs(args), token=resolve_token(args.token, args.token_file), tls=tls)
     from .connection import ServerClosed
 
     try:
@@ -199,7 +163,7 @@ def cmd_client(args) -> int:
         print(f"pibr client: error: {exc}", file=sys.stderr)
         return 2
     print(f"pibr client: {result.ticks} ticks, {result.frames_received} frames received, "
-          f"{result.missed_deadlines} missed deadlines; recordings in {args.out}/")
+          f"{result.missed_deadlines} missed deadlines; recordings in {args.out_dir}/")
     if result.summary.get("proxies"):
         p = result.summary["proxies"]
         print(f"pibr client: proxies {p['objects']} objects, {p['bytes'] / 1e6:.2f} MB, received in "

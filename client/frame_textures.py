@@ -20,6 +20,7 @@ from __future__ import annotations
 import numpy as np
 
 from pibr.protocol.depth import GLSL as DEPTH_GLSL
+from pibr.protocol.depth_codecs import DEPTH_CODECS
 from pibr.protocol.projection import GLSL as PROJECTION_GLSL
 from pibr.protocol.session import SessionConfig
 
@@ -88,7 +89,7 @@ float extra_distance(vec2 uv) { return map_distance(u_dist_extra, uv); }
 
 def frame_glsl(config: SessionConfig) -> str:
     """GLSL for sampling a frame of this session (projection maths included)."""
-    depth = _EDGE_DEPTH if config.depth_codec == "edge" else _H264_DEPTH
+    depth = _H264_DEPTH if DEPTH_CODECS[config.depth_codec].in_atlas else _EDGE_DEPTH
     return PROJECTION_GLSL + DEPTH_GLSL + _COMMON + depth
 
 
@@ -116,7 +117,8 @@ def rect_uniform(config: SessionConfig, name: str) -> tuple:
 
 
 def has_extra_depth(config: SessionConfig) -> bool:
-    return config.extra is not None and (config.depth_codec == "edge" or config.atlas.rect("extra.depth") is not None)
+    return config.extra is not None and (not DEPTH_CODECS[config.depth_codec].in_atlas
+                                         or config.atlas.rect("extra.depth") is not None)
 
 
 def transport_quantizer(config: SessionConfig):
@@ -167,7 +169,7 @@ class FrameTextures:
             t.filter = (ctx.LINEAR, ctx.LINEAR)
             t.repeat_x = t.repeat_y = False
         self.distances = {}
-        if config.depth_codec == "edge":
+        if not DEPTH_CODECS[config.depth_codec].in_atlas:   # depth arrives decoded: a float texture per view
             views = {"primary": config.primary, "extra": config.extra}
             for name, view in views.items():
                 size = (view.width, view.height) if view is not None else (1, 1)
@@ -205,7 +207,7 @@ class FrameTextures:
         if name in self._cpu_distances:
             return self._cpu_distances[name]
         rect = self.config.atlas.rect(f"{name}.depth")
-        if self.config.depth_codec != "h264" or rect is None or self._image is None:
+        if not DEPTH_CODECS[self.config.depth_codec].in_atlas or rect is None or self._image is None:
             return None
         x, y, w, h = rect
         d = transport_quantizer(self.config).dequantize(self._image.y[y:y + h, x:x + w]).astype(np.float32)

@@ -98,8 +98,3 @@ class DepthQuantizer:
         """Size in metres of one code step at distance r: the quantization's resolution there."""
         r = np.asarray(r, dtype=np.float64)
         return r * r / (self.near * (self.max_code - self.min_code))
-
-
-def h264_quantizer(near: float, far: float) -> DepthQuantizer:
-    """The 8-bit disparity carried in the luma of the H.264 atlas."""
-    return DepthQuantizer(near, far, bits=8, min_code=16)

@@ -21,11 +21,11 @@ from dataclasses import dataclass, field
 
 from . import bounded_json
 from .atlas import ALIGN, MAX_VIEW_PIXELS, MAX_VIEW_SIDE, AtlasLayout, check_view_size
+from .depth_codecs import DEPTH_CODECS
 from .errors import JSONError, MalformedMessage
 from .pose import Pose
 from .proxy import BundleInfo
 
-DEPTH_CODECS = ("h264", "edge")
 #: Clip spheres a session may announce, metres (scene descriptions obey the same ranges).
 NEAR_RANGE = (1e-9, 1e12)
 FAR_RANGE = (1e-9, 1e15)
@@ -77,7 +77,7 @@ class SessionConfig:
     extra_offset     : the extra view's pose relative to the primary (pose ∘ offset)
     atlas            : where the views sit in the H.264 image
     video_bitrate_kbps, keyint : H.264 settings
-    depth_codec      : "h264" (8-bit disparity in the atlas) or "edge" (edge codec payloads)
+    depth_codec      : a name of protocol/depth_codecs.py: "h264" (8-bit disparity in the atlas) or "edge"
     depth_bits, depth_min_code : quantization of the depth transport
     motion           : the scene has moving objects: every frame carries their transforms
                        (``PayloadKind.OBJECT_POSES``) and their motion flow in the primary view
@@ -217,12 +217,10 @@ def _check_depth_transport(near: float, far: float, bits: int, min_code: int, co
         DepthQuantizer(near, far, bits, min_code)
     except ValueError as exc:
         raise MalformedMessage(f"Welcome.config: depth quantization: {exc}") from None
-    if codec == "edge":
-        from .edgecodec.bitstream import MAX_BITS, MIN_BITS
-
-        if not MIN_BITS <= bits <= MAX_BITS:
-            raise MalformedMessage(f"Welcome.config: the edge codec carries {MIN_BITS}..{MAX_BITS} bits, "
-                                   f"depth_bits is {bits}")
+    spec = DEPTH_CODECS[codec]
+    lo, hi = spec.bits_range
+    if not lo <= bits <= hi:
+        raise MalformedMessage(f"Welcome.config: {spec.noun} carries {lo}..{hi} bits, depth_bits is {bits}")
 
 
 def _check_atlas_views(atlas: AtlasLayout, primary: ViewConfig, extra: ViewConfig | None, codec: str) -> None:
@@ -231,7 +229,7 @@ def _check_atlas_views(atlas: AtlasLayout, primary: ViewConfig, extra: ViewConfi
     views = {"primary": primary, "extra": extra}
     for name in ("primary.color", "primary.depth", "extra.color", "extra.depth"):
         view = views[name.split(".")[0]]
-        wanted = view is not None and (name.endswith("color") or codec == "h264")
+        wanted = view is not None and (name.endswith("color") or DEPTH_CODECS[codec].in_atlas)
         r = atlas.rect(name)
         if wanted and r is None:
             raise MalformedMessage(f"Welcome.config.atlas: rectangle {name} is missing")

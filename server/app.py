@@ -22,10 +22,8 @@ from pibr.protocol.messages import Hello
 from .config import ServerConfig
 from .fair_queue import FairQueue
 from .listener import TrackedListener
-from .pipeline import FrameProducer
+from .pipeline import SessionPipeline
 from .session import Session
-from .session_plan import plan_session
-from .video import H264Encoder
 
 log = logging.getLogger(__name__)
 
@@ -228,7 +226,7 @@ class Server(TrackedListener):
         return measured
 
     async def setup_session(self, session_id: int, hello: Hello):
-        """Scene, session parameters (its plan), GL producer, encoders (and proxy bundle) for a client's Hello."""
+        """-> (the session's pipeline, opened on the GL thread; its proxy bundle or None) for a client's Hello."""
         scene = await self.get_scene(hello.scene)
         bundle = await self.get_bundle(scene) if hello.want_proxies else None
         try:
@@ -236,28 +234,16 @@ class Server(TrackedListener):
         except ValueError as exc:   # a bundle too big for the protocol's chunk limit
             raise ConfigError(f"proxies of scene {scene.name!r}: {exc}") from None
         coverage = await self.get_coverage(scene, session_id)
-        config, spec = plan_session(self.config, scene, hello, proxies, coverage,
-                                    bundle.levels if bundle is not None else None)
-        plan = config.options["plan"]
+        pipeline = SessionPipeline(self.config, scene, hello, proxies, coverage,
+                                   bundle.levels if bundle is not None else None)
+        plan = pipeline.session.options["plan"]
         log.info("session %d plan: extra view %s, motion %s, view %dx%d, depth %s at %g kbit/s video", session_id,
                  "on" if plan["extra_view"]["value"] else "off", "on" if plan["motion"]["value"] else "off",
                  *plan["view_size"]["value"], plan["depth_codec"]["value"]["codec"],
                  plan["depth_codec"]["value"]["video_kbps"])
 
-        def make_producer(ctx):
-            return FrameProducer(ctx, self._renderer(ctx, scene), spec)
-
-        producer = await self.render(session_id, make_producer)
-        cfg = self.config
-        encoder = H264Encoder(spec.layout.width, spec.layout.height, cfg.fps, config.video_bitrate_kbps, cfg.keyint,
-                              cfg.preset,
-                              deterministic=hello.clock == "virtual")
-        depth_encoder = None
-        if config.depth_codec == "edge":
-            from .depth_stream import EdgeDepthEncoder
-
-            depth_encoder = EdgeDepthEncoder(config, cfg.fps, cfg.edge)
-        return config, producer, encoder, depth_encoder, bundle
+        await self.render(session_id, lambda ctx: pipeline.open(ctx, self._renderer(ctx, scene)))
+        return pipeline, bundle
 
     @property
     def proxy_chunk_bytes(self) -> int:

@@ -1,35 +1,16 @@
 """``pibr serve`` and ``pibr relay``."""
 from __future__ import annotations
 
-import argparse
 import asyncio
 import sys
 
+from pibr.common import arguments
 from pibr.common.address import parse_host_port
+from pibr.protocol.depth_codecs import AUTO, DEPTH_CODECS
 from pibr.protocol.motion_flow import DEFAULT_FLOW_CODER, FLOW_CODERS
 
 from .config import DEFAULT_PORT
 from .relay import DEFAULT_BUFFER_BYTES, DEFAULT_MAX_CONNECTIONS
-
-
-def _size(text: str) -> tuple[int, int]:
-    from pibr.common.address import parse_size
-    from pibr.protocol.errors import ConfigError
-
-    try:
-        return parse_size(text)
-    except ConfigError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
-
-
-def _offset(text: str) -> tuple[float, float, float]:
-    try:
-        parts = [float(x) for x in text.split(",")]
-    except ValueError:
-        parts = []
-    if len(parts) != 3:
-        raise argparse.ArgumentTypeError(f"expected FORWARD,UP,TILT_DEG (metres, metres, degrees), got {text!r}")
-    return tuple(parts)
 
 
 def _announce(what: str):
@@ -46,9 +27,9 @@ def _add_access_options(p, what: str) -> None:
     """--token/--token-file and --tls-cert/--tls-key of a listening process."""
     g = p.add_argument_group("access (needed to listen on anything but loopback)")
     g.add_argument("--token-file", metavar="FILE",
-                   help=f"read the access token from the first line of FILE; with a token (this, $PIBR_TOKEN or "
-                        f"--token) every client must send it, also on loopback. Listening on any other address "
-                        f"needs one")
+                   help="read the access token from the first line of FILE; with a token (this, $PIBR_TOKEN or "
+                        "--token) every client must send it, also on loopback. Listening on any other address "
+                        "needs one")
     g.add_argument("--token", metavar="TEXT", help=TOKEN_HELP)
     g.add_argument("--tls-cert", metavar="FILE",
                    help=f"serve TLS (1.2 or newer) with this PEM certificate chain; clients then connect with "
@@ -83,7 +64,7 @@ def register(sub) -> None:
                    help="address to listen on (default 127.0.0.1, this machine only; any other needs a token)")
     p.add_argument("--port", type=int, default=DEFAULT_PORT, help=f"TCP port, 0 for any free one (default {DEFAULT_PORT})")
     p.add_argument("--fps", type=float, default=10.0, help="server frame rate (default 10)")
-    p.add_argument("--view-size", type=_size, default=None, metavar="WxH",
+    p.add_argument("--view-size", type=arguments.size, default=None, metavar="WxH",
                    help="primary wide-angle view size; the extra view is half (default: sized for each client's "
                         "output, 1.12 x its angular density, as Reinert et al.; 'pibr scenes --plan')")
     p.add_argument("--extra-view", choices=("auto", "on", "off"), default="auto",
@@ -96,7 +77,7 @@ def register(sub) -> None:
                    help="the extra view leaves peeled pixels empty like sky instead of marking them (saves the "
                         "early depth test: about a quarter of the extra view's render time; clients then cannot "
                         "take sky from it)")
-    p.add_argument("--extra-offset", type=_offset, default=None, metavar="F,U,TILT",
+    p.add_argument("--extra-offset", type=arguments.offset, default=None, metavar="F,U,TILT",
                    help="extra view offset: metres forward, metres up, degrees tilted down (default: the "
                         "scene's, else Reinert et al.'s 1.5,1.8,15)")
     p.add_argument("--bitrate-kbps", type=float, default=16000.0, help="H.264 bitrate (default 16000)")
@@ -112,7 +93,7 @@ def register(sub) -> None:
                         f"{MAX_EDGE_ANGLE_DEG:g}; 'pibr bench server --max-edge-deg 3,6,12' measures the trade)")
     p.add_argument("--server-delay-ms", type=float, default=20.0,
                    help="virtual clock: modelled render + encode time of a frame (default 20)")
-    p.add_argument("--depth-codec", choices=("auto", "h264", "edge"), default="auto",
+    p.add_argument("--depth-codec", choices=(AUTO, *DEPTH_CODECS), default=AUTO,
                    help="depth transport: 8-bit disparity in the H.264 atlas, the edge codec, or auto (default: "
                         "H.264 unless a stated bandwidth favours the edge codec; 'pibr scenes --plan')")
     p.add_argument("--bandwidth-kbps", type=float, default=None, metavar="KBPS",
@@ -181,27 +162,14 @@ def register(sub) -> None:
 def cmd_serve(args) -> int:
     from .app import run_server
     from .config import ServerConfig
-    from .depth_stream import EdgeSettings
+    from .depth_encoders import EdgeSettings
 
     from pibr.scenes.registry import with_up
 
-    config = ServerConfig(host=args.host, port=args.port, scene=with_up(args.scene, args.up), fps=args.fps,
-                          view_size=None if args.view_size is None else tuple(args.view_size),
-                          extra_view=args.extra_view, bandwidth_kbps=args.bandwidth_kbps,
-                          extra_scale=args.extra_scale,
-                          peel_marker=not args.no_peel_marker,
-                          extra_offset=args.extra_offset, bitrate_kbps=args.bitrate_kbps, keyint=args.keyint,
-                          preset=args.preset, projection=args.projection, max_edge_deg=args.max_edge_deg,
-                          server_delay_ms=args.server_delay_ms,
-                          depth_codec=args.depth_codec, max_sessions=args.max_sessions,
-                          max_pending=args.max_pending, admit_wait_s=args.admit_wait_s,
-                          hello_timeout_s=args.hello_timeout_s,
-                          idle_timeout_s=args.idle_timeout_s, idle_timeout_virtual_s=args.idle_timeout_virtual_s,
-                          max_clock_lead_s=args.max_clock_lead_s,
-                          max_in_flight=args.max_in_flight, flow_coder=args.flow_coder,
-                          edge=EdgeSettings(kbps=args.edge_kbps, temporal=not args.edge_no_temporal,
-                                            perceptual=args.edge_perceptual),
-                          token=_token(args), tls_cert=args.tls_cert, tls_key=args.tls_key)
+    config = arguments.config_from_args(
+        ServerConfig, args, scene=with_up(args.scene, args.up), peel_marker=not args.no_peel_marker,
+        edge=EdgeSettings(kbps=args.edge_kbps, temporal=not args.edge_no_temporal, perceptual=args.edge_perceptual),
+        token=_token(args))
     _print_fingerprint("serve", config.tls_cert)
     try:
         asyncio.run(run_server(config, _announce("serve")))

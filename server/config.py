@@ -5,12 +5,13 @@ from dataclasses import dataclass, field
 
 from pibr.protocol.access import check_listen_access
 from pibr.protocol.atlas import check_view_size
+from pibr.protocol.depth_codecs import AUTO, DEPTH_CODECS
 from pibr.protocol.errors import ConfigError
 from pibr.protocol.framing import DEFAULT_MAX_MESSAGE_SIZE
 from pibr.protocol.motion_flow import DEFAULT_FLOW_CODER, FLOW_CODERS
 from pibr.protocol.pose import dual_view_offset
 
-from .depth_stream import EdgeSettings
+from .depth_encoders import EdgeSettings
 from .proxies import ProxySettings
 from .renderer import DEFAULT_PROJECTION, MAX_EDGE_ANGLE_DEG, PROJECTIONS
 
@@ -47,7 +48,7 @@ class ServerConfig:
     projection: str = DEFAULT_PROJECTION
     max_edge_deg: float = MAX_EDGE_ANGLE_DEG  # longest edge (view angle) the projection rasterises straight
     server_delay_ms: float = 20.0       # virtual clock: render + encode time model
-    depth_codec: str = "auto"           # "h264", "edge", or "auto": for the bandwidth (scene_plan.py)
+    depth_codec: str = AUTO             # protocol/depth_codecs.py, or "auto": for the bandwidth (scene_plan.py)
     bandwidth_kbps: float | None = None  # the most any session may send (kbit/s); None: no cap
     max_message_size: int = DEFAULT_MAX_MESSAGE_SIZE
     max_sessions: int = 8               # sessions past their Hello
@@ -57,7 +58,7 @@ class ServerConfig:
     idle_timeout_s: float = 15.0        # real clock: longest wait for the client's next pose or clock
     idle_timeout_virtual_s: float = 30.0  # virtual clock: the same (a client may work long per tick)
     max_clock_lead_s: float = 10.0      # virtual clock: how far a client's clock may run ahead of the frames
-    max_in_flight: int = DEFAULT_MAX_IN_FLIGHT              # real clock: frames sent ahead of what the client has decoded
+    max_in_flight: int = DEFAULT_MAX_IN_FLIGHT  # real clock: frames sent ahead of what the client has decoded
     token: str | None = None            # every Hello must carry it; required to listen off loopback
     tls_cert: str | None = None         # PEM certificate chain: serve TLS (with tls_key)
     tls_key: str | None = None          # PEM key, unencrypted
@@ -90,8 +91,8 @@ class ServerConfig:
                               f"got {self.max_edge_deg}")
         if not (0 <= self.server_delay_ms <= 10000):
             raise ConfigError(f"server delay must be in 0..10000 ms, got {self.server_delay_ms}")
-        if self.depth_codec not in ("auto", "h264", "edge"):
-            raise ConfigError(f"depth codec must be auto, h264 or edge, got {self.depth_codec!r}")
+        if self.depth_codec not in (AUTO, *DEPTH_CODECS):
+            raise ConfigError(f"depth codec must be {', '.join((AUTO, *DEPTH_CODECS))}, got {self.depth_codec!r}")
         if self.bandwidth_kbps is not None and not (16 <= self.bandwidth_kbps <= 1e7):
             raise ConfigError(f"bandwidth cap must be in 16..10000000 kbit/s, got {self.bandwidth_kbps}")
         if self.flow_coder not in FLOW_CODERS:

@@ -1,158 +1,174 @@
-"""One session's frame production on the GL thread: render the views, read back, pack.
+"""One session's pipeline, from a pose to a ``Frame``: the one place it is built, for the
+server's sessions and for every benchmark.
 
-A :class:`FrameProducer` lives on the server's GL thread (pibr.common.gl); the session
-calls ``await gl.run(producer.produce, pose, t)`` and hands the returned yuv420p buffer to
-its encoder in a worker thread. Renderers are shared by every session showing the same
-scene; render targets belong to the producer. The atlas is packed on the CPU after one
-readback of each view's colour and distance (server/packer.py: the same bytes as the GL
-passes, ``gpu_pack``, at a quarter of their cost on llvmpipe).
+:class:`SessionPipeline` is made from the server's settings (:class:`~pibr.server.config.ServerConfig`),
+the scene and the client's ``Hello``: the session plan (session_plan.py) decides what the frames
+hold, then
+
+    pose --FrameProducer (GL thread)--> ProducedFrame: the views rendered, read back, the atlas packed
+         --H.264 encoder-------------> the atlas's access unit
+         --depth encoder-------------> depth payloads of the session's depth codec (depth_encoders.py)
+         --quadtree, motion flow-----> the payloads a client asked for or a moving scene needs
+         --frame()-------------------> the Frame message
+
+The server runs each stage where it belongs (rendering on its shared GL thread, encoders in its
+pool, concurrently where they are independent); a benchmark calls :meth:`SessionPipeline.encode`,
+which runs them in order. Either way the payloads are assembled by :class:`EncodedFrame`, in one
+order.
+
+The :class:`~pibr.server.producer.FrameProducer` lives on the GL thread (producer.py).
 """
 from __future__ import annotations
 
-import time
-from dataclasses import dataclass, field
+import dataclasses
+from dataclasses import dataclass
 
-import numpy as np
-
-from pibr.protocol.atlas import AtlasLayout
-from pibr.protocol.depth import DepthQuantizer
+from pibr.protocol.messages import Frame, PayloadKind
 from pibr.protocol.pose import Pose
 
-from .object_poses import object_poses_payload
-from .packer import AtlasPacker, CpuAtlasPacker
-from .renderer import PEEL_TOLERANCE, RenderTarget, Renderer, edge_angle_for_width
+from .depth_encoders import make_depth_encoder
+from .producer import FrameProducer, ProducedFrame
+from .renderer import Renderer
+from .session_plan import plan_session
 
 
 @dataclass
-class ProducerSpec:
-    """What a session's frames contain."""
+class EncodedFrame:
+    """A produced frame's coded streams: ``video`` the H.264 access unit (``keyframe`` whether it
+    is one), ``depth`` the depth codec's payloads, ``quadtree`` and ``motion`` their payloads or None,
+    ``object_poses`` the moving objects' transforms or None."""
 
-    primary_size: tuple
-    layout: AtlasLayout
-    quantizer: DepthQuantizer | None
-    projection: str = "vertex"
-    extra_size: tuple | None = None
-    extra_offset: Pose | None = None
-    keep_distance: bool = False   # hand the float distance maps to the caller (edge codec)
-    peel: bool = True             # depth-peel the extra view against the primary
-    mark_peeled: bool = True      # ... marking peeled pixels apart from sky (protocol/depth.py)
-    peel_tolerance: float = PEEL_TOLERANCE
-    motion_dt: float | None = None  # render the primary's object motion over this many seconds
-    object_poses: bool = False     # hand the moving objects' transforms (the scene moves)
-    low_colour: int = 0            # hand a colour image downsampled by this factor (0: none)
-    #: rasterise the smaller extra view with edges as much longer as keeps their bend in pixels
-    #: (renderer.edge_angle_for_width): fewer triangles for the same accuracy in its own pixels
-    extra_edges_by_size: bool = True
-    #: pack the atlas in GL passes and read back the planes (same bytes as the CPU packer, slower
-    #: on llvmpipe; kept as the reference the CPU packer is tested against)
-    gpu_pack: bool = False
+    video: bytes
+    keyframe: bool
+    depth: list
+    quadtree: bytes | None = None
+    object_poses: bytes | None = None
+    motion: bytes | None = None
 
+    @property
+    def payloads(self) -> tuple:
+        """The Frame's payloads, always in this order: atlas, depth, quadtree, object poses, motion flow."""
+        out = [(PayloadKind.H264_ATLAS, self.video), *self.depth]
+        for kind, data in ((PayloadKind.QUADTREE, self.quadtree), (PayloadKind.OBJECT_POSES, self.object_poses),
+                           (PayloadKind.MOTION_FLOW, self.motion)):
+            if data is not None:
+                out.append((kind, data))
+        return tuple(out)
 
-@dataclass
-class ProducedFrame:
-    """yuv : (1.5 H, W) uint8 atlas; distances : name -> (h, w) float32 when requested."""
-
-    yuv: np.ndarray
-    primary_pose: Pose
-    extra_pose: Pose | None
-    scene_t: float
-    render_ms: float
-    readback_ms: float
-    pack_ms: float
-    distances: dict = field(default_factory=dict)
-    motion: np.ndarray | None = None       # (h, w, 2) pixels of moving objects, primary view
-    moving: np.ndarray | None = None       # (h, w) bool: pixels of moving objects
-    low_colour: np.ndarray | None = None   # (h / k, w / k, 3) uint8 primary colour
-    object_poses: bytes | None = None      # the OBJECT_POSES payload at scene_t (moving objects)
+    @property
+    def nbytes(self) -> int:
+        return sum(len(d) for _, d in self.payloads)
 
 
-class FrameProducer:
-    """Render targets and atlas packer of one session. Create, use and release on the GL thread."""
+class SessionPipeline:
+    """Everything that makes one session's frames (module docstring).
 
-    def __init__(self, ctx, renderer: Renderer, spec: ProducerSpec):
-        self.ctx, self.renderer, self.spec = ctx, renderer, spec
-        self.primary = RenderTarget(ctx, *spec.primary_size, motion=spec.motion_dt is not None)
-        self.extra = RenderTarget(ctx, *spec.extra_size) if spec.extra_size else None
-        if spec.gpu_pack:
-            self.packer = AtlasPacker(ctx, spec.layout, spec.quantizer)
-        else:
-            self.packer = CpuAtlasPacker(spec.layout, spec.quantizer)
-        views = [("primary", self.primary)] + ([("extra", self.extra)] if self.extra is not None else [])
-        #: readback buffers, reused every frame: name -> (target, (h, w, 4) uint8, (h, w) float32)
-        self._reads = {name: (t, np.empty((t.height, t.width, 4), np.uint8), np.empty((t.height, t.width), np.float32))
-                       for name, t in views}
-        self.extra_edge_deg = None
-        if spec.extra_size and spec.extra_edges_by_size:
-            self.extra_edge_deg = edge_angle_for_width(renderer.max_edge_angle_deg, spec.primary_size[0],
-                                                       spec.extra_size[0])
-            renderer.prepare_edge_angle(self.extra_edge_deg)
+    config : the server's :class:`~pibr.server.config.ServerConfig`; scene : the loaded scene;
+    hello : the client's ``Hello``; proxies, coverage, proxy_levels : as :func:`~pibr.server.session_plan.plan_session`
+    takes them. ``deterministic`` (default: on the virtual clock) encodes on one thread so that
+    the same frames give the same bytes. ``keep_distance``: also hand the views' float distances
+    to the caller (benchmarks measure against them). ``depth_encoder``: a callable (session, fps) ->
+    an encoder (``encode(produced)`` -> [(kind, bytes)], ``close()``) to use instead of the session
+    codec's, e.g. a benchmark's competing codec; made again when the stream restarts.
+
+    Not GL: call :meth:`open` on the GL thread before :meth:`produce`, and :meth:`release` there.
+    """
+
+    def __init__(self, config, scene, hello, proxies: dict | None = None, coverage: dict | None = None,
+                 proxy_levels=None, deterministic: bool | None = None, keep_distance: bool = False,
+                 depth_encoder=None):
+        self.config, self.scene = config, scene
+        self.session, spec = plan_session(config, scene, hello, proxies, coverage, proxy_levels)
+        if keep_distance and not spec.keep_distance:
+            spec = dataclasses.replace(spec, keep_distance=True)
+        self.spec = spec
+        self.deterministic = hello.clock == "virtual" if deterministic is None else deterministic
+        self.quadtree_threshold = hello.quadtree_threshold   # > 0: every frame carries the views' quadtrees
+        self._make_depth = depth_encoder or (lambda session, fps: make_depth_encoder(session, fps, config.edge))
+        self.video = self.new_video_encoder()
+        self.depth = self._make_depth(self.session, config.fps)
+        self.producer: FrameProducer | None = None
+
+    # ------------------------------------------------------------------ GL thread
+
+    def open(self, ctx, renderer: Renderer | None = None) -> "SessionPipeline":
+        """Make the producer on ``ctx``'s thread. ``renderer``: the scene's, shared (the server's);
+        None: one of its own, drawn as the config says, released with the pipeline."""
+        self._own_renderer = renderer is None
+        if renderer is None:
+            renderer = Renderer(ctx, self.scene, self.config.projection, max_edge_angle_deg=self.config.max_edge_deg)
+        self.renderer = renderer
+        self.producer = FrameProducer(ctx, renderer, self.spec)
+        return self
 
     def produce(self, pose: Pose, t: float) -> ProducedFrame:
-        ctx = self.ctx
-        t0 = time.perf_counter()
-        self.renderer.render_wide(self.primary, pose, t, self.spec.projection, motion_dt=self.spec.motion_dt)
-        extra_pose = None
-        if self.extra is not None:
-            extra_pose = pose.compose(self.spec.extra_offset)
-            peel = (self.primary, pose, self.spec.peel_tolerance) if self.spec.peel else None
-            self.renderer.render_wide(self.extra, extra_pose, t, self.spec.projection, peel=peel,
-                                      mark_peeled=self.spec.mark_peeled, max_edge_deg=self.extra_edge_deg)
-        ctx.finish()
-        t1 = time.perf_counter()
-        if self.spec.gpu_pack:
-            yuv, distances, low, pack_ms, readback_ms = self._pack_on_gpu(t1)
-        else:
-            yuv, distances, low, pack_ms, readback_ms = self._pack_on_cpu(t1)
-        motion, moving = None, None
-        if self.spec.motion_dt is not None:
-            t2 = time.perf_counter()
-            motion, moving = self.primary.read_moving_motion()
-            readback_ms += (time.perf_counter() - t2) * 1e3
-        poses = object_poses_payload(self.renderer.scene, t) if self.spec.object_poses else None
-        return ProducedFrame(yuv, pose, extra_pose, t, (t1 - t0) * 1e3, readback_ms, pack_ms, distances,
-                             motion, moving, low, poses)
-
-    def _pack_on_cpu(self, t1: float) -> tuple:
-        """One readback of each view's colour and distance, then the CPU packer; the distances
-        and low-resolution colour the caller wants come from the same reads."""
-        layout, colors, dists = self.spec.layout, {}, {}
-        keep = self.spec.keep_distance
-        for name, (target, rgba, dist) in self._reads.items():
-            colors[name + ".color"] = target.read_rgba_into(rgba)
-            if keep or layout.rect(name + ".depth") is not None:
-                dists[name + ".depth"] = target.read_distance_into(dist)
-        t2 = time.perf_counter()
-        yuv = self.packer.pack(colors, dists).copy()
-        t3 = time.perf_counter()
-        distances = {name: dists[name + ".depth"].copy() for name in self._reads} if keep else {}
-        low = None
-        if self.spec.low_colour:
-            k = self.spec.low_colour
-            low = colors["primary.color"][k // 2::k, k // 2::k, :3].copy()
-        return yuv, distances, low, (t3 - t2) * 1e3, (t2 - t1 + time.perf_counter() - t3) * 1e3
-
-    def _pack_on_gpu(self, t1: float) -> tuple:
-        """The GL packing passes, then reading back their planes (and what the caller wants)."""
-        sources = {"primary.color": self.primary.color, "primary.depth": self.primary.distance}
-        if self.extra is not None:
-            sources.update({"extra.color": self.extra.color, "extra.depth": self.extra.distance})
-        self.packer.pack(sources)
-        self.ctx.finish()
-        t2 = time.perf_counter()
-        yuv = self.packer.read().copy()
-        distances, low = {}, None
-        if self.spec.keep_distance:
-            distances["primary"] = self.primary.read_distance().copy()
-            if self.extra is not None:
-                distances["extra"] = self.extra.read_distance().copy()
-        if self.spec.low_colour:
-            k = self.spec.low_colour
-            low = self.primary.read_color()[k // 2::k, k // 2::k].copy()
-        return yuv, distances, low, (t2 - t1) * 1e3, (time.perf_counter() - t2) * 1e3
+        """Render, read back and pack the frame of ``pose`` at scene time ``t`` (GL thread)."""
+        return self.producer.produce(pose, t)
 
     def release(self) -> None:
-        self.primary.release()
-        if self.extra is not None:
-            self.extra.release()
-        if self.spec.gpu_pack:
-            self.packer.release()
+        """Release the GL resources (GL thread) and close the encoders."""
+        if self.producer is not None:
+            self.producer.release()
+            self.producer = None
+            if self._own_renderer:
+                self.renderer.release()
+        self.close_encoders()
+
+    # ------------------------------------------------------------------ encoders (any thread)
+
+    def new_video_encoder(self, fps: float | None = None, kbps: float | None = None):
+        """An H.264 encoder of the session's atlas with the server's settings (``fps`` and ``kbps``:
+        others than the session's, e.g. a benchmark's zero-latency oracle stream)."""
+        from .video import H264Encoder
+
+        layout, cfg = self.spec.layout, self.config
+        return H264Encoder(layout.width, layout.height, cfg.fps if fps is None else fps,
+                           self.session.video_bitrate_kbps if kbps is None else kbps, cfg.keyint, cfg.preset,
+                           deterministic=self.deterministic)
+
+    def restart_stream(self) -> None:
+        """Fresh encoders, as a new session's stream starts (the next frame is a keyframe)."""
+        self.close_encoders()
+        self.video = self.new_video_encoder()
+        self.depth = self._make_depth(self.session, self.config.fps)
+
+    def close_encoders(self) -> None:
+        self.video.close()
+        self.depth.close()
+
+    def encode_video(self, produced: ProducedFrame, force_keyframe: bool = False) -> tuple[bytes, bool]:
+        return self.video.encode(produced.yuv, force_keyframe)
+
+    def encode_depth(self, produced: ProducedFrame) -> list:
+        return self.depth.encode(produced)
+
+    def encode_quadtree(self, produced: ProducedFrame) -> bytes | None:
+        """The views' quadtrees when the client asked for them (``Hello.quadtree_threshold``), else None."""
+        if self.quadtree_threshold <= 0:
+            return None
+        from .quadtree import quadtree_payload
+
+        return quadtree_payload(produced.distances, self.quadtree_threshold)
+
+    def encode_motion(self, produced: ProducedFrame) -> bytes | None:
+        """The motion flow of a scene that moves (whatever the depth codec), else None."""
+        if produced.motion is None:
+            return None
+        from .motion_flow import motion_flow_payload
+
+        return motion_flow_payload(produced, self.config.flow_coder)
+
+    def encode(self, produced: ProducedFrame, force_keyframe: bool = False) -> EncodedFrame:
+        """Every stream of ``produced``, in order, on this thread."""
+        video, key = self.encode_video(produced, force_keyframe)
+        return EncodedFrame(video, key, self.encode_depth(produced), self.encode_quadtree(produced),
+                            produced.object_poses, self.encode_motion(produced))
+
+    def frame(self, frame_id: int, render_t_us: int, pose_t_us: int, pose_seq: int, produced: ProducedFrame,
+              encoded: EncodedFrame, timings_ms: tuple = (0.0, 0.0, 0.0, 0.0)) -> Frame:
+        """The Frame message of ``produced`` (rendered at ``render_t_us``, which is also its scene time)."""
+        return Frame(frame_id=frame_id, render_t_us=render_t_us, pose_t_us=pose_t_us, pose_seq=pose_seq,
+                     scene_t_us=render_t_us, primary_pose=produced.primary_pose, extra_pose=produced.extra_pose,
+                     near=self.session.near, far=self.session.far, timings_ms=timings_ms,
+                     payloads=encoded.payloads, keyframe=encoded.keyframe)
+

@@ -33,6 +33,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from pibr.protocol.atlas import ALIGN, MAX_VIEW_PIXELS
+from pibr.protocol.depth_codecs import DEPTH_CODECS
 from pibr.protocol.errors import ConfigError
 from pibr.protocol.pose import Pose
 
@@ -351,7 +352,7 @@ def decide_depth_codec(asked: str, server: str, bandwidth_kbps: float | None, vi
 
 
 def _fit(bandwidth_kbps: float, codec: str, edge_kbps: float) -> float:
-    return max(MIN_VIDEO_KBPS, bandwidth_kbps - (edge_kbps if codec == "edge" else 0.0))
+    return max(MIN_VIDEO_KBPS, bandwidth_kbps - (0.0 if DEPTH_CODECS[codec].in_atlas else edge_kbps))
 
 
 # ----------------------------------------------------------------------------- the whole plan

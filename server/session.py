@@ -24,11 +24,10 @@ from pibr.protocol.access import token_matches
 from pibr.protocol.connection import Connection, Envelope
 from pibr.protocol.errors import (AccessDenied, ConfigError, PeerTimeout, ProtocolError, SceneError,
                                   UnexpectedMessage, UnsupportedVersion)
-from pibr.protocol.messages import (FRAMES_DECODED, PROTOCOL_VERSION, Bye, Clock, Error, Frame, Hello, PayloadKind,
-                                    PoseMsg, Stats, Welcome)
+from pibr.protocol.messages import (FRAMES_DECODED, PROTOCOL_VERSION, Bye, Clock, Error, Hello, PoseMsg, Stats,
+                                    Welcome)
 
-from .motion_flow import motion_flow_payload
-from .quadtree import quadtree_payload
+from .pipeline import EncodedFrame
 
 log = logging.getLogger(__name__)
 
@@ -44,11 +43,8 @@ class Session:
         self.server, self.reader, self.writer, self.id = server, reader, writer, session_id
         self.conn = Connection(server.config.max_message_size)
         self.peer = writer.get_extra_info("peername")
-        self.producer = None
-        self.encoder = None
-        self.depth_encoder = None
+        self.pipeline = None            # the session's SessionPipeline (server/pipeline.py), after the Hello
         self.config = None
-        self.quadtree_threshold = 0.0   # > 0: every frame carries the views' quadtrees
         self.frames_sent = 0
         self.frames_skipped = 0
         self.frames_held = 0            # real clock: ticks not rendered while the client caught up
@@ -159,11 +155,9 @@ class Session:
             await asyncio.wait_for(self.writer.wait_closed(), 2.0)
         except (ConnectionError, ssl.SSLError, asyncio.TimeoutError):
             pass  # TLS: the client may still have been sending when we closed
-        if self.producer is not None:
-            producer, self.producer = self.producer, None
-            await self.server.gl.run(lambda ctx: producer.release())
-        if self.encoder is not None:
-            self.encoder.close()
+        if self.pipeline is not None:
+            pipeline, self.pipeline = self.pipeline, None
+            await self.server.gl.run(lambda ctx: pipeline.release())
         log.info("session %d: closed after %d frames (%d skipped for a slow connection, %d held while the client "
                  "decoded, %d tick overruns)", self.id, self.frames_sent, self.frames_skipped, self.frames_held,
                  self.tick_overruns)
@@ -197,9 +191,8 @@ class Session:
         t_hello = time.monotonic()
         cfg = self.server.config
         self.idle_timeout_s = cfg.idle_timeout_virtual_s if hello.clock == "virtual" else cfg.idle_timeout_s
-        setup = await self.server.setup_session(self.id, hello)
-        self.config, self.producer, self.encoder, self.depth_encoder, bundle = setup
-        self.quadtree_threshold = hello.quadtree_threshold
+        self.pipeline, bundle = await self.server.setup_session(self.id, hello)
+        self.config = self.pipeline.session
         setup_us = int((time.monotonic() - t_hello) * 1e6)
         self.conn.send(Welcome(server=self.server.name, session=self.id, config=self.config.to_json(),
                                setup_us=setup_us))
@@ -214,30 +207,27 @@ class Session:
     # ------------------------------------------------------------------ frames
 
     async def _send_frame(self, pose_msg: PoseMsg, t_us: int, vtime_us: int, force_keyframe: bool = False) -> None:
-        produced = await self.server.render(self.id, lambda ctx: self.producer.produce(pose_msg.pose, t_us * 1e-6))
+        """The pipeline's stages (server/pipeline.py) where they belong: rendering on the shared GL
+        thread, the encoders in the pool, the H.264 encode and the quadtrees side by side."""
+        pipeline = self.pipeline
+        produced = await self.server.render(self.id, lambda ctx: pipeline.produce(pose_msg.pose, t_us * 1e-6))
         t0 = time.perf_counter()
-        jobs = [self.server.encode(self.id, self.encoder.encode, produced.yuv, force_keyframe)]
-        if self.quadtree_threshold > 0:   # the views' quadtrees, built beside the H.264 encode
-            jobs.append(self.server.encode(self.id, quadtree_payload, produced.distances, self.quadtree_threshold))
-        (data, key), *quadtree = await asyncio.gather(*jobs)
-        payloads = [(PayloadKind.H264_ATLAS, data)]
-        if self.depth_encoder is not None:
-            payloads += await self.server.encode(self.id, self.depth_encoder.encode, produced)
-        payloads += [(PayloadKind.QUADTREE, q) for q in quadtree]
-        if produced.object_poses is not None:
-            payloads.append((PayloadKind.OBJECT_POSES, produced.object_poses))
+        jobs = [self.server.encode(self.id, pipeline.encode_video, produced, force_keyframe)]
+        if pipeline.quadtree_threshold > 0:
+            jobs.append(self.server.encode(self.id, pipeline.encode_quadtree, produced))
+        (video, key), *quadtree = await asyncio.gather(*jobs)
+        depth, motion = [], None
+        if pipeline.depth.sends_payloads:
+            depth = await self.server.encode(self.id, pipeline.encode_depth, produced)
         if produced.motion is not None:   # a scene that moves: its flow, whatever the depth codec
-            payloads.append((PayloadKind.MOTION_FLOW, await self.server.encode(
-                self.id, motion_flow_payload, produced, self.server.config.flow_coder)))
+            motion = await self.server.encode(self.id, pipeline.encode_motion, produced)
+        encoded = EncodedFrame(video, key, depth, quadtree[0] if quadtree else None, produced.object_poses, motion)
         encode_ms = (time.perf_counter() - t0) * 1e3   # H.264 and, with the edge codec, depth (and quadtrees)
-        frame = Frame(frame_id=self.frames_sent, render_t_us=t_us, pose_t_us=pose_msg.t_us, pose_seq=pose_msg.seq,
-                      scene_t_us=t_us, primary_pose=produced.primary_pose, extra_pose=produced.extra_pose,
-                      near=self.config.near, far=self.config.far,
-                      timings_ms=(produced.render_ms, produced.readback_ms, produced.pack_ms, encode_ms),
-                      payloads=tuple(payloads), keyframe=key)
+        frame = pipeline.frame(self.frames_sent, t_us, pose_msg.t_us, pose_msg.seq, produced, encoded,
+                               (produced.render_ms, produced.readback_ms, produced.pack_ms, encode_ms))
         self.conn.send(frame, vtime_us=vtime_us)
         self.frames_sent += 1
-        self.server.record_frame_timings(frame.timings_ms, sum(len(d) for _, d in payloads))
+        self.server.record_frame_timings(frame.timings_ms, encoded.nbytes)
 
     async def _run_virtual(self) -> None:
         """Deterministic schedule (see protocol/session.py): frame k at k * interval.

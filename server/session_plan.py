@@ -3,14 +3,12 @@ through the scene plan (scene_plan.py), which also travels in ``SessionConfig.op
 from __future__ import annotations
 
 from pibr.protocol.atlas import ALIGN, build_layout
-from pibr.protocol.depth import h264_quantizer
-from pibr.protocol.errors import ConfigError
+from pibr.protocol.depth_codecs import depth_codec
 from pibr.protocol.messages import Hello
 from pibr.protocol.session import SessionConfig, ViewConfig
 
 from .config import PAPER_EXTRA_OFFSET, ServerConfig, extra_offset_pose
-from .depth_stream import edge_quantizer
-from .pipeline import ProducerSpec
+from .producer import ProducerSpec
 from .quadtree import ROOT_TILE as QUADTREE_ROOT_TILE
 from .scene_plan import Decision, ScenePlan, decide_proxies, make_plan
 
@@ -54,20 +52,19 @@ def plan_session(cfg: ServerConfig, scene, hello: Hello, proxies: dict | None = 
     proxies : the bundle's announcement (BundleInfo JSON) or None; proxy_levels : the bundle's
     proxy/box decision; coverage : the extra view's measurement (needed for ``extra_view`` auto to
     be measured rather than the scene's own setting)."""
-    if hello.depth_codec not in ("", "h264", "edge"):
-        raise ConfigError(f"unknown depth codec {hello.depth_codec!r}; choose h264 or edge")
+    if hello.depth_codec:
+        depth_codec(hello.depth_codec)   # ConfigError naming the choices
     if proxies is not None and proxy_levels is None:   # a bundle built by the caller (benchmarks)
         proxy_levels = Decision(None, "proxies sent as the caller built them: their levels are not planned here")
     plan = scene_plan(cfg, scene, hello, coverage, proxy_levels if proxies is not None else None)
-    depth_codec = plan.depth_codec.value["codec"]
+    codec = depth_codec(plan.depth_codec.value["codec"])
     video_kbps = float(plan.depth_codec.value["video_kbps"])
     use_extra = bool(plan.extra_view.value)
     pw, ph = plan.view_size.value
     extra_size = extra_view_size((pw, ph), cfg.extra_scale) if use_extra else None
     offset = extra_offset_for(cfg, scene) if use_extra else None
-    edge = depth_codec == "edge"
-    layout = build_layout((pw, ph), extra_size, depth_in_atlas=not edge)
-    quantizer = edge_quantizer(scene.near, scene.far) if edge else h264_quantizer(scene.near, scene.far)
+    layout = build_layout((pw, ph), extra_size, depth_in_atlas=codec.in_atlas)
+    quantizer = codec.quantizer(scene.near, scene.far)
     # A scene with nothing moving sends no motion at all. One that moves sends its objects'
     # transforms and their motion flow with every frame, whatever the depth codec.
     motion = bool(plan.motion.value)
@@ -82,10 +79,12 @@ def plan_session(cfg: ServerConfig, scene, hello: Hello, proxies: dict | None = 
         server_delay_us=int(round(cfg.server_delay_ms * 1000)),
         primary=ViewConfig(pw, ph), extra=ViewConfig(*extra_size) if extra_size else None,
         extra_offset=offset, atlas=layout, video_bitrate_kbps=video_kbps, keyint=cfg.keyint,
-        depth_codec=depth_codec, depth_bits=quantizer.bits, depth_min_code=quantizer.min_code,
+        depth_codec=codec.name, depth_bits=quantizer.bits, depth_min_code=quantizer.min_code,
         motion=motion, proxies=proxies, options=options)
-    spec = ProducerSpec((pw, ph), layout, None if edge else quantizer, cfg.projection, extra_size, offset,
-                        keep_distance=edge or quadtree, motion_dt=1.0 / cfg.fps if motion else None,
+    # depth in the atlas is packed from the views' distances; depth of its own is coded from them (float)
+    spec = ProducerSpec((pw, ph), layout, quantizer if codec.in_atlas else None, cfg.projection, extra_size, offset,
+                        keep_distance=not codec.in_atlas or quadtree, motion_dt=1.0 / cfg.fps if motion else None,
                         object_poses=motion,
-                        low_colour=8 if edge and cfg.edge.perceptual else 0, mark_peeled=bool(cfg.peel_marker))
+                        low_colour=8 if not codec.in_atlas and cfg.edge.perceptual else 0,
+                        mark_peeled=bool(cfg.peel_marker))
     return config, spec

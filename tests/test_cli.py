@@ -161,8 +161,8 @@ def test_method_knobs_reach_the_client_config():
 
 
 @pytest.mark.parametrize("argv, message", [
-    (["client", "--coarse-step", "0"], "--coarse-step: must be positive"),
-    (["client", "--plane-distance", "inf"], "--plane-distance: must be a positive number"),
+    (["client", "--coarse-step", "0"], "--coarse-step: must be at least 1"),
+    (["client", "--plane-distance", "inf"], "--plane-distance: expected a finite number"),
     (["client", "--point-size", "two"], "--point-size: expected a number"),
 ])
 def test_bad_method_knobs_are_named(capsys, argv, message):
@@ -209,7 +209,7 @@ def test_timeouts_and_limits_are_options(capsys):
     assert build_parser().parse_args(["client", "--receive-timeout-s", "7"]).receive_timeout_s == 7.0
     with pytest.raises(SystemExit):
         build_parser().parse_args(["client", "--receive-timeout-s", "0"])
-    assert "must be a positive number" in capsys.readouterr().err
+    assert "--receive-timeout-s: must be positive" in capsys.readouterr().err
     for argv, message in [(["--idle-timeout-s", "0"], "idle timeout must be in (0, 86400] s"),
                           (["--max-pending", "0"], "max pending connections must be at least 1"),
                           (["--max-clock-lead-s", "-1"], "clock lead must be in (0, 86400] s")]:
@@ -218,7 +218,7 @@ def test_timeouts_and_limits_are_options(capsys):
 
 
 def test_bench_realtime_passes_only_the_server_options_set():
-    from pibr.bench.cli import realtime_server_args
+    from pibr.bench.commands import realtime_server_args
 
     parse = build_parser().parse_args
     a = parse(["bench", "realtime"])

@@ -8,7 +8,7 @@ from pibr.bench.depth_codecs import (H264DepthDecoder, H264DepthEncoder, LogDept
 from pibr.bench.codec_bench import winners
 from pibr.protocol.depth import PEELED
 from pibr.protocol.errors import CodecError
-from pibr.server.depth_stream import edge_quantizer
+from pibr.protocol.depth_codecs import edge_quantizer
 
 
 def _scene_maps(h=37, w=53, frames=6):

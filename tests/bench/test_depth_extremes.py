@@ -9,9 +9,10 @@ import pytest
 
 from pibr.bench.codec_bench import extremes_table
 from pibr.bench.depth_codecs import LogDepthDecoder, LogDepthEncoder, LogDepthQuantizer, make_pair
-from pibr.client.depth_stream import EdgeDepthStreamDecoder
+from pibr.client.depth_decoders import EdgeDepthStreamDecoder
 from pibr.protocol.pose import Pose
-from pibr.server.depth_stream import EdgeDepthStream, edge_quantizer
+from pibr.protocol.depth_codecs import edge_quantizer
+from pibr.server.depth_encoders import EdgeDepthStream
 
 NEAR, FAR = 1e-2, 1e4
 H, W = 48, 64
@@ -128,12 +129,12 @@ def test_rendered_10_km_wall_behind_a_1_cm_speck():
     large surfaces: tessellation levels are capped, and a 30 km wall of 12 triangles 90 m away
     comes out up to 85 % too far.)"""
     from pibr.protocol.atlas import build_layout
-    from pibr.protocol.depth import h264_quantizer
+    from pibr.protocol.depth_codecs import h264_quantizer
     from pibr.common.gl import create_context
     from pibr.protocol.projection import pixel_centers, unproject
     from pibr.scenes.primitives import box
     from pibr.scenes.scene import Scene, SceneObject
-    from pibr.server.pipeline import FrameProducer, ProducerSpec
+    from pibr.server.producer import FrameProducer, ProducerSpec
     from pibr.server.renderer import MAX_EDGE_ANGLE_DEG, Renderer
 
     speck_z, wall_z = 0.0195, 8995.0

@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 
 from pibr.bench.metrics import nearly_uniform
-from pibr.bench.pareto import ORACLE, default_variants, pareto_front, run_pareto_bench
+from pibr.bench.pareto import default_variants, run_pareto_bench
+from pibr.bench.variants import ORACLE, pareto_front
 from pibr.bench.windows import EVALUATION_WINDOWS, TUNING_WINDOWS, Window, overlapping_tuning, parse_windows
 from pibr.protocol.errors import ConfigError
 from pibr.common.traces.loading import load_trace

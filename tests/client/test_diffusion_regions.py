@@ -111,7 +111,7 @@ def test_room_frames_diffuse_as_the_reference(tmp_path, gl_ctx):
     from pibr.bench.codec_speed import render_frames
     from pibr.bench.windows import EVALUATION_WINDOWS, Window
     from pibr.server import edge_extract
-    from pibr.server.depth_stream import EDGE_BITS, edge_quantizer
+    from pibr.protocol.depth_codecs import EDGE_BITS, edge_quantizer
 
     path = str(tmp_path / "frames.npz")
     windows = tuple(Window(w.trace, w.start_s, 0.1) for w in EVALUATION_WINDOWS[:3])

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from pibr.bench.metrics import masked_metrics
-from pibr.bench.ibr_bench import Simulation, load_proxies
+from pibr.bench.simulation import Simulation, bench_server_config, load_proxies
 from pibr.protocol.pose import Pose
 from pibr.scenes.registry import load_scene
 
@@ -20,7 +20,8 @@ FLOW_METHODS = ("none", "rotation", "homography", "splat", "coarse-meshwarp", "p
 def sim():
     scene = load_scene("dynamic")
     proxies, _ = load_proxies(scene)
-    s = Simulation(scene, (512, 512), (192, 108), fov_deg=45.0, proxies=proxies, flow_frames=True, moving_truth=True)
+    s = Simulation(scene, bench_server_config((512, 512)), (192, 108), fov_deg=45.0, proxies=proxies, flow_frames=True,
+                   moving_truth=True)
     yield s
     s.close()
     s.ctx.release()

@@ -8,7 +8,8 @@ import pytest
 from pibr.client.frame_textures import DEPTH_SLACK_CODES
 from pibr.client.surface_grid import (ALL_CONNECTED, E, W, build_surface_grid, check_tile, corner_directions,
                                       pixel_connectivity)
-from pibr.protocol.depth import DepthQuantizer, h264_quantizer
+from pibr.protocol.depth import DepthQuantizer
+from pibr.protocol.depth_codecs import h264_quantizer
 from pibr.protocol.projection import pixel_centers, unproject
 
 NEAR, FAR = 0.1, 1000.0
@@ -266,10 +267,10 @@ def test_hole_filling_takes_the_background_not_the_occluder(gl_ctx):
 
 @pytest.fixture(scope="module")
 def sim():
-    from pibr.bench.ibr_bench import Simulation
+    from pibr.bench.simulation import Simulation, bench_server_config
     from pibr.scenes.registry import load_scene
 
-    s = Simulation(load_scene("room"), (256, 256), (320, 180))
+    s = Simulation(load_scene("room"), bench_server_config((256, 256)), (320, 180))
     yield s
     s.close()
     s.ctx.release()

@@ -4,7 +4,7 @@ import pytest
 
 from pibr.common.link import SessionSchedule
 from pibr.common.replay import display_samples
-from pibr.bench.ibr_bench import Simulation, load_proxies
+from pibr.bench.simulation import Simulation, bench_server_config, load_proxies
 from pibr.bench.metrics import dssim, psnr, ssim
 from pibr.client.lod_select import LodSelector
 from pibr.protocol.messages import OutputConfig
@@ -46,7 +46,7 @@ def test_lod_selection_by_distance_and_frustum(room):
 @pytest.fixture(scope="module")
 def sim(room):
     scene, proxies = room
-    s = Simulation(scene, (512, 512), (320, 180), proxies=proxies)
+    s = Simulation(scene, bench_server_config((512, 512)), (320, 180), proxies=proxies)
     yield s
     s.close()
     s.ctx.release()

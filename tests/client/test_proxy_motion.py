@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from pibr.bench.ibr_bench import Simulation, load_proxies
+from pibr.bench.simulation import Simulation, bench_server_config, load_proxies
 from pibr.bench.metrics import dssim, ssim
 from pibr.bench.motion_eval import masked_quality
 from pibr.protocol.messages import PayloadKind
@@ -20,7 +20,7 @@ pytestmark = pytest.mark.gl
 def sim():
     scene = load_scene("dynamic")
     proxies, _ = load_proxies(scene, progress=False)
-    s = Simulation(scene, (384, 384), (320, 180), proxies=proxies)
+    s = Simulation(scene, bench_server_config((384, 384)), (320, 180), proxies=proxies)
     s.truth = RenderTarget(s.ctx, 320, 180, motion=True)
     yield s
     s.truth.release()

@@ -7,7 +7,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from pibr.bench.ibr_bench import Simulation
+from pibr.bench.simulation import Simulation, bench_server_config
 from pibr.bench.metrics import dssim, psnr, ssim
 from pibr.client.methods.iterative_warp import IterativeWarp, void_marked
 from pibr.client.methods.quadtree_warp import QuadtreeWarp, leaf_quads
@@ -16,7 +16,7 @@ from pibr.protocol.messages import PayloadKind
 from pibr.protocol.pose import Pose, quat_from_axis_angle, quat_multiply
 from pibr.protocol.quadtree import decode_quadtrees
 from pibr.scenes.registry import load_scene
-from pibr.server.pipeline import FrameProducer
+from pibr.server.producer import FrameProducer
 from pibr.server.quadtree import quadtree_payload
 
 # ------------------------------------------------------------------ geometry of the quads (no GL)
@@ -65,9 +65,9 @@ def test_extra_view_void_is_grown_by_the_margin():
 
 @pytest.fixture(scope="module")
 def sim():
-    s = Simulation(load_scene("room"), (256, 256), (320, 180))
+    s = Simulation(load_scene("room"), bench_server_config((256, 256)), (320, 180))
     # the server's float distances, which Simulation does not hand out
-    s.qt_producer = FrameProducer(s.ctx, s.renderer, dataclasses.replace(s.producer.spec, keep_distance=True))
+    s.qt_producer = FrameProducer(s.ctx, s.renderer, dataclasses.replace(s.spec, keep_distance=True))
     yield s
     s.qt_producer.release()
     s.close()

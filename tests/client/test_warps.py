@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pibr.bench.ibr_bench import Simulation
+from pibr.bench.simulation import Simulation, bench_server_config
 from pibr.bench.metrics import dssim, psnr, ssim
 from pibr.protocol.errors import ConfigError
 from pibr.protocol.pose import Pose, quat_from_axis_angle, quat_multiply
@@ -19,7 +19,7 @@ WARPS = (("homography", {}), ("splat", {}), ("meshwarp", {}), ("coarse-meshwarp"
 
 @pytest.fixture(scope="module", params=["room", "sphere"])
 def sim(request):
-    s = Simulation(load_scene(request.param), (512, 512), (160, 90))
+    s = Simulation(load_scene(request.param), bench_server_config((512, 512)), (160, 90))
     yield s
     s.close()
     s.ctx.release()
@@ -110,7 +110,7 @@ def test_at_the_hemisphere_rim(sim, name, options):
 def test_coarse_grid_step_beyond_the_view():
     """A step larger than the view is clamped to it: one quad between the corner pixels (the
     projection's poles), two triangles, the same image as a step of exactly the view's size."""
-    s = Simulation(load_scene("sphere"), (64, 64), (32, 18))
+    s = Simulation(load_scene("sphere"), bench_server_config((64, 64)), (32, 18))
     try:
         pose = s.scene.viewer_origin
         frame = s.frame_at(0.0, pose)

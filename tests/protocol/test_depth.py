@@ -1,7 +1,8 @@
 import numpy as np
 import pytest
 
-from pibr.protocol.depth import DEQUANTIZE, GLSL, PEELED, QUANTIZE, DepthQuantizer, h264_quantizer
+from pibr.protocol.depth import DEQUANTIZE, DepthQuantizer, GLSL, PEELED, QUANTIZE
+from pibr.protocol.depth_codecs import h264_quantizer
 
 
 def test_codes_span_and_sky():

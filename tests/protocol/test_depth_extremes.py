@@ -9,7 +9,8 @@ wrapped to near, never NaN.
 import numpy as np
 import pytest
 
-from pibr.protocol.depth import PEELED, DepthQuantizer, h264_quantizer
+from pibr.protocol.depth import DepthQuantizer, PEELED
+from pibr.protocol.depth_codecs import h264_quantizer
 
 NEAR, FAR = 1e-2, 1e4
 R = np.geomspace(NEAR, FAR, 200001)

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from pibr.client.connection import ClientConnection
-from pibr.client.depth_stream import EdgeDepthDecoder
+from pibr.client.depth_decoders import EdgeDepthDecoder
 from pibr.protocol.messages import Hello, OutputConfig, PayloadKind, ProxyChunk
 from pibr.protocol.object_poses import decode_object_poses
 from pibr.protocol.proxy import BundleAssembler, BundleInfo, decode_bundle, decompress_bundle

@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 
 from pibr.protocol.atlas import AtlasLayout, build_layout
-from pibr.protocol.depth import PEELED, h264_quantizer
+from pibr.protocol.depth import PEELED
+from pibr.protocol.depth_codecs import h264_quantizer
 from pibr.server.packer import AtlasPacker, CpuAtlasPacker
 
 
@@ -125,7 +126,7 @@ def test_rendered_room_frames_equal_through_the_producer(ctx):
     hands out), then the edge-depth layout: identical with the GL passes and on the CPU."""
     from pibr.scenes.registry import load_scene
     from pibr.server.config import extra_offset_pose
-    from pibr.server.pipeline import FrameProducer, ProducerSpec
+    from pibr.server.producer import FrameProducer, ProducerSpec
     from pibr.server.renderer import Renderer
     from pibr.protocol.pose import Pose, quat_from_euler
 

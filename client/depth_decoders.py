@@ -1,6 +1,12 @@
-"""Decoding a session's edge-codec depth streams into dense distance maps (Pajak et al.).
+"""A session's depth decoder, chosen by the session's depth codec (protocol/depth_codecs.py).
 
-Each view's decoder warps its previous decoded samples to the new frame's pose exactly as
+Every decoder has ``decode(frame, reconstruct=True) -> {view: distance (h, w) float32} | None``
+and ``close()``:
+
+* ``h264``: :class:`AtlasDepthDecoder`, nothing to decode (the textures read the disparity from the atlas);
+* ``edge``: :class:`EdgeDepthDecoder`, the edge codec's streams decoded into dense maps (Pajak et al.).
+
+Each edge view's decoder warps its previous decoded samples to the new frame's pose exactly as
 the server's encoder did, decodes, and diffuses the sparse samples into a dense map.
 """
 from __future__ import annotations
@@ -10,9 +16,10 @@ import concurrent.futures
 import numpy as np
 
 from pibr.protocol.depth import DepthQuantizer
+from pibr.protocol.depth_codecs import DEPTH_CODECS
 from pibr.protocol.edgecodec.codec import DecodedSamples, EdgeDecoder, warp_samples
 from pibr.protocol.errors import CodecError
-from pibr.protocol.messages import Frame, PayloadKind
+from pibr.protocol.messages import Frame
 from pibr.protocol.pose import Pose
 
 from .diffusion import DiffusionWorkspace, reconstruct_depth
@@ -44,11 +51,12 @@ class EdgeDepthDecoder:
 
     def __init__(self, session, edge_aware: bool = True):
         q = DepthQuantizer(session.near, session.far, bits=session.depth_bits, min_code=session.depth_min_code)
+        kinds = DEPTH_CODECS["edge"].payloads
         self.streams = {"primary": (EdgeDepthStreamDecoder(session.primary.width, session.primary.height, q,
-                                                           edge_aware), PayloadKind.EDGE_DEPTH)}
+                                                           edge_aware), kinds["primary"])}
         if session.extra is not None:
             self.streams["extra"] = (EdgeDepthStreamDecoder(session.extra.width, session.extra.height, q, edge_aware),
-                                     PayloadKind.EDGE_DEPTH_EXTRA)
+                                     kinds["extra"])
         self.motion = None
         # The views' streams are independent and their kernels release the GIL: the extra
         # view decodes on this helper thread while the caller's decodes the primary.
@@ -80,3 +88,27 @@ class EdgeDepthDecoder:
         if extra is not None:
             out["extra"] = extra.result()[0]
         return out if reconstruct else None
+
+
+class AtlasDepthDecoder:
+    """Depth in the H.264 atlas: the frame textures read it from the decoded image, nothing to decode here."""
+
+    motion = None
+
+    def __init__(self, session, edge_aware: bool = True):
+        pass
+
+    def decode(self, frame: Frame, reconstruct: bool = True) -> None:
+        return None
+
+    def close(self) -> None:
+        pass
+
+
+#: The client's decoder of each depth codec (protocol/depth_codecs.py), by name.
+DEPTH_DECODERS = {"h264": AtlasDepthDecoder, "edge": EdgeDepthDecoder}
+
+
+def make_depth_decoder(session, edge_aware: bool = True):
+    """The depth decoder of ``session`` (its ``depth_codec``)."""
+    return DEPTH_DECODERS[session.depth_codec](session, edge_aware)

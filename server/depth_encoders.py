@@ -1,9 +1,16 @@
-"""The edge codec's depth streams of one session (Pajak et al.): one per transmitted view.
+"""A session's depth encoder, chosen by the session's depth codec (protocol/depth_codecs.py).
 
-Per frame and view: edge samples of the distance map (``edge_extract``), coded against the
-previous frame's decoded samples warped to the new pose (both ends warp identically), with
-the significance threshold steered towards a bitrate when one is set. Every ``intra_every``
-frames a view is coded without the temporal context, as H.264 sends keyframes.
+Every encoder takes a :class:`~pibr.server.pipeline.ProducedFrame` and gives the frame's depth
+payloads, ``encode(produced) -> [(PayloadKind, bytes)]``, and has ``close()``:
+
+* ``h264``: :class:`AtlasDepthEncoder`, nothing of its own (the packer put the disparity in the atlas);
+* ``edge``: :class:`EdgeDepthEncoder`, the edge codec's streams (Pajak et al.), one per view.
+
+Per frame and view, the edge codec codes the edge samples of the distance map
+(``edge_extract``) against the previous frame's decoded samples warped to the new pose (both
+ends warp identically), with the significance threshold steered towards a bitrate when one is
+set. Every ``intra_every`` frames a view is coded without the temporal context, as H.264 sends
+keyframes.
 """
 from __future__ import annotations
 
@@ -12,19 +19,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from pibr.protocol.depth import DepthQuantizer
+from pibr.protocol.depth_codecs import DEPTH_CODECS, edge_quantizer
 from pibr.protocol.edgecodec.codec import DEFAULT_THRESHOLD, EdgeEncoder, EncodeStats, warp_samples
-from pibr.protocol.messages import PayloadKind
 from pibr.protocol.pose import Pose
 
 from .edge_extract import RateController, extract_edge_samples
-
-EDGE_BITS = 12
-
-
-def edge_quantizer(near: float, far: float, bits: int = EDGE_BITS) -> DepthQuantizer:
-    """The edge codec's depth quantizer: ``bits`` of disparity, sky = code 0, peeled (the extra
-    view's pixels the primary already shows) = 1, surfaces from 2."""
-    return DepthQuantizer(near, far, bits=bits, min_code=2)
 
 
 class EdgeDepthStream:
@@ -75,11 +74,14 @@ class EdgeSettings:
 class EdgeDepthEncoder:
     """A session's depth encoding: the primary view's stream and the extra view's. ``encode(produced)`` gives the Frame's payloads."""
 
+    sends_payloads = True
+
     def __init__(self, session, fps: float, settings: EdgeSettings = EdgeSettings()):
         q = edge_quantizer(session.near, session.far, session.depth_bits)
-        views = {"primary": (session.primary, PayloadKind.EDGE_DEPTH)}
+        kinds = DEPTH_CODECS["edge"].payloads
+        views = {"primary": (session.primary, kinds["primary"])}
         if session.extra is not None:
-            views["extra"] = (session.extra, PayloadKind.EDGE_DEPTH_EXTRA)
+            views["extra"] = (session.extra, kinds["extra"])
         # Split a bitrate target by pixel count.
         pixels = {k: v.width * v.height for k, (v, _) in views.items()}
         total = sum(pixels.values())
@@ -98,3 +100,30 @@ class EdgeDepthEncoder:
             payloads.append((kind, data))
             self.last_stats[name] = stats
         return payloads
+
+    def close(self) -> None:
+        pass
+
+
+class AtlasDepthEncoder:
+    """Depth in the H.264 atlas: the packer already wrote it, so a frame gets no payload of its own."""
+
+    sends_payloads = False
+
+    def __init__(self, session, fps: float, settings: EdgeSettings = EdgeSettings()):
+        pass
+
+    def encode(self, produced) -> list[tuple[int, bytes]]:
+        return []
+
+    def close(self) -> None:
+        pass
+
+
+#: The server's encoder of each depth codec (protocol/depth_codecs.py), by name.
+DEPTH_ENCODERS = {"h264": AtlasDepthEncoder, "edge": EdgeDepthEncoder}
+
+
+def make_depth_encoder(session, fps: float, settings: EdgeSettings = EdgeSettings()):
+    """The depth encoder of ``session`` (its ``depth_codec``), at ``fps`` frames a second."""
+    return DEPTH_ENCODERS[session.depth_codec](session, fps, settings)

@@ -1,0 +1,158 @@
+"""One session's frame production on the GL thread: render the views, read back, pack.
+
+A :class:`FrameProducer` lives on the GL thread (pibr.common.gl); the session pipeline
+(pipeline.py) calls ``producer.produce(pose, t)`` there and hands the returned yuv420p buffer to
+its encoders. Renderers are shared by every session showing the same scene; render targets
+belong to the producer. The atlas is packed on the CPU after one readback of each view's colour
+and distance (server/packer.py: the same bytes as the GL passes, ``gpu_pack``, at a quarter of
+their cost on llvmpipe).
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from pibr.protocol.atlas import AtlasLayout
+from pibr.protocol.depth import DepthQuantizer
+from pibr.protocol.pose import Pose
+
+from .object_poses import object_poses_payload
+from .packer import AtlasPacker, CpuAtlasPacker
+from .renderer import PEEL_TOLERANCE, RenderTarget, Renderer, edge_angle_for_width
+
+
+@dataclass
+class ProducerSpec:
+    """What a session's frames contain."""
+
+    primary_size: tuple
+    layout: AtlasLayout
+    quantizer: DepthQuantizer | None
+    projection: str = "vertex"
+    extra_size: tuple | None = None
+    extra_offset: Pose | None = None
+    keep_distance: bool = False   # hand the float distance maps to the caller (edge codec)
+    peel: bool = True             # depth-peel the extra view against the primary
+    mark_peeled: bool = True      # ... marking peeled pixels apart from sky (protocol/depth.py)
+    peel_tolerance: float = PEEL_TOLERANCE
+    motion_dt: float | None = None  # render the primary's object motion over this many seconds
+    object_poses: bool = False     # hand the moving objects' transforms (the scene moves)
+    low_colour: int = 0            # hand a colour image downsampled by this factor (0: none)
+    #: rasterise the smaller extra view with edges as much longer as keeps their bend in pixels
+    #: (renderer.edge_angle_for_width): fewer triangles for the same accuracy in its own pixels
+    extra_edges_by_size: bool = True
+    #: pack the atlas in GL passes and read back the planes (same bytes as the CPU packer, slower
+    #: on llvmpipe; kept as the reference the CPU packer is tested against)
+    gpu_pack: bool = False
+
+
+@dataclass
+class ProducedFrame:
+    """yuv : (1.5 H, W) uint8 atlas; distances : name -> (h, w) float32 when requested."""
+
+    yuv: np.ndarray
+    primary_pose: Pose
+    extra_pose: Pose | None
+    scene_t: float
+    render_ms: float
+    readback_ms: float
+    pack_ms: float
+    distances: dict = field(default_factory=dict)
+    motion: np.ndarray | None = None       # (h, w, 2) pixels of moving objects, primary view
+    moving: np.ndarray | None = None       # (h, w) bool: pixels of moving objects
+    low_colour: np.ndarray | None = None   # (h / k, w / k, 3) uint8 primary colour
+    object_poses: bytes | None = None      # the OBJECT_POSES payload at scene_t (moving objects)
+
+
+class FrameProducer:
+    """Render targets and atlas packer of one session. Create, use and release on the GL thread."""
+
+    def __init__(self, ctx, renderer: Renderer, spec: ProducerSpec):
+        self.ctx, self.renderer, self.spec = ctx, renderer, spec
+        self.primary = RenderTarget(ctx, *spec.primary_size, motion=spec.motion_dt is not None)
+        self.extra = RenderTarget(ctx, *spec.extra_size) if spec.extra_size else None
+        if spec.gpu_pack:
+            self.packer = AtlasPacker(ctx, spec.layout, spec.quantizer)
+        else:
+            self.packer = CpuAtlasPacker(spec.layout, spec.quantizer)
+        views = [("primary", self.primary)] + ([("extra", self.extra)] if self.extra is not None else [])
+        #: readback buffers, reused every frame: name -> (target, (h, w, 4) uint8, (h, w) float32)
+        self._reads = {name: (t, np.empty((t.height, t.width, 4), np.uint8), np.empty((t.height, t.width), np.float32))
+                       for name, t in views}
+        self.extra_edge_deg = None
+        if spec.extra_size and spec.extra_edges_by_size:
+            self.extra_edge_deg = edge_angle_for_width(renderer.max_edge_angle_deg, spec.primary_size[0],
+                                                       spec.extra_size[0])
+            renderer.prepare_edge_angle(self.extra_edge_deg)
+
+    def produce(self, pose: Pose, t: float) -> ProducedFrame:
+        ctx = self.ctx
+        t0 = time.perf_counter()
+        self.renderer.render_wide(self.primary, pose, t, self.spec.projection, motion_dt=self.spec.motion_dt)
+        extra_pose = None
+        if self.extra is not None:
+            extra_pose = pose.compose(self.spec.extra_offset)
+            peel = (self.primary, pose, self.spec.peel_tolerance) if self.spec.peel else None
+            self.renderer.render_wide(self.extra, extra_pose, t, self.spec.projection, peel=peel,
+                                      mark_peeled=self.spec.mark_peeled, max_edge_deg=self.extra_edge_deg)
+        ctx.finish()
+        t1 = time.perf_counter()
+        if self.spec.gpu_pack:
+            yuv, distances, low, pack_ms, readback_ms = self._pack_on_gpu(t1)
+        else:
+            yuv, distances, low, pack_ms, readback_ms = self._pack_on_cpu(t1)
+        motion, moving = None, None
+        if self.spec.motion_dt is not None:
+            t2 = time.perf_counter()
+            motion, moving = self.primary.read_moving_motion()
+            readback_ms += (time.perf_counter() - t2) * 1e3
+        poses = object_poses_payload(self.renderer.scene, t) if self.spec.object_poses else None
+        return ProducedFrame(yuv, pose, extra_pose, t, (t1 - t0) * 1e3, readback_ms, pack_ms, distances,
+                             motion, moving, low, poses)
+
+    def _pack_on_cpu(self, t1: float) -> tuple:
+        """One readback of each view's colour and distance, then the CPU packer; the distances
+        and low-resolution colour the caller wants come from the same reads."""
+        layout, colors, dists = self.spec.layout, {}, {}
+        keep = self.spec.keep_distance
+        for name, (target, rgba, dist) in self._reads.items():
+            colors[name + ".color"] = target.read_rgba_into(rgba)
+            if keep or layout.rect(name + ".depth") is not None:
+                dists[name + ".depth"] = target.read_distance_into(dist)
+        t2 = time.perf_counter()
+        yuv = self.packer.pack(colors, dists).copy()
+        t3 = time.perf_counter()
+        distances = {name: dists[name + ".depth"].copy() for name in self._reads} if keep else {}
+        low = None
+        if self.spec.low_colour:
+            k = self.spec.low_colour
+            low = colors["primary.color"][k // 2::k, k // 2::k, :3].copy()
+        return yuv, distances, low, (t3 - t2) * 1e3, (t2 - t1 + time.perf_counter() - t3) * 1e3
+
+    def _pack_on_gpu(self, t1: float) -> tuple:
+        """The GL packing passes, then reading back their planes (and what the caller wants)."""
+        sources = {"primary.color": self.primary.color, "primary.depth": self.primary.distance}
+        if self.extra is not None:
+            sources.update({"extra.color": self.extra.color, "extra.depth": self.extra.distance})
+        self.packer.pack(sources)
+        self.ctx.finish()
+        t2 = time.perf_counter()
+        yuv = self.packer.read().copy()
+        distances, low = {}, None
+        if self.spec.keep_distance:
+            distances["primary"] = self.primary.read_distance().copy()
+            if self.extra is not None:
+                distances["extra"] = self.extra.read_distance().copy()
+        if self.spec.low_colour:
+            k = self.spec.low_colour
+            low = self.primary.read_color()[k // 2::k, k // 2::k].copy()
+        return yuv, distances, low, (t2 - t1) * 1e3, (time.perf_counter() - t2) * 1e3
+
+    def release(self) -> None:
+        self.primary.release()
+        if self.extra is not None:
+            self.extra.release()
+        if self.spec.gpu_pack:
+            self.packer.release()
