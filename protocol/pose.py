@@ -275,10 +275,6 @@ class Pose:
             raise InvalidPose(f"a pose array must have shape (7,), got {a.shape}")
         return cls.make(a[:3], a[3:])
 
-    def distance_to(self, other: "Pose") -> tuple[float, float]:
-        """(metres, radians) between two poses."""
-        return float(np.linalg.norm(self.p - other.p)), float(quat_angle(self.q, other.q))
-
 
 def dual_view_offset(forward: float, up: float, tilt_deg: float) -> Pose:
     """The dual view's extra camera relative to the primary: ``forward`` metres along the

@@ -287,13 +287,6 @@ class DecodedSamples:
     def shape(self) -> tuple[int, int]:
         return self.edges.shape
 
-    @property
-    def regular_mask(self) -> np.ndarray:
-        """(h, w) bool: positions of the regular samples."""
-        m = np.zeros(self.edges.shape, dtype=bool)
-        m[np.ix_(self.regular_rows, self.regular_cols)] = True
-        return m
-
 
 @dataclass
 class EncodeStats:
