@@ -30,7 +30,7 @@ import numpy as np
 
 from .errors import TraceError
 from .pose import quat_conjugate, quat_from_euler, quat_from_matrix, quat_multiply, quat_rotate
-from .trace import (PRED6DOF_COLUMNS, TIMESTAMP_RANGE, HeadTrace, check_quaternion, header_fields, iter_lines,
+from .trace import (PRED6DOF_COLUMNS, TIMESTAMP_RANGE, HeadTrace, check_quaternion, iter_lines,
                     parse_number, row_error)
 
 log = logging.getLogger(__name__)
