@@ -24,6 +24,7 @@ from pibr.protocol.errors import CodecError
 from pibr.protocol.pose import Pose, quat_from_axis_angle
 
 from . import arith_reference as arith_ref
+from . import edgecodec_reference
 from .codec_fuzz import decode_or_codec_error
 from .golden_edge import (GOLDEN_DIR, cluttered_codes, HEIGHT, NAMES, POSE, QUANTIZER, WIDTH, golden_payload, piecewise_planar,
                           piecewise_planar_codes)
@@ -205,12 +206,13 @@ def _hand_coded_edge_image(h, w, occ, pixel_on):
             arith_ref.encode_bit(enc, model, c, int(occ[by, bx]))
     pad = edge_module.PAD
     img = np.zeros((h + 2 * pad, w + 2 * pad), np.uint8)
-    for phase, (py, px) in enumerate(edge_module.PASS_PHASES):
+    for phase, (py, px) in enumerate(edgecodec_reference.PASS_PHASES):
         for y in range(py, h, 2):
             for x in range(px, w, 2):
                 if occ[y >> 3, x >> 3]:
                     bit = int((y, x) == pixel_on)
-                    arith_ref.encode_bit(enc, model, edge_module._ctx_pass(img, tctx, phase, pad + y, pad + x, True), bit)
+                    c = edgecodec_reference.ctx_pass(img, tctx, phase, pad + y, pad + x, True)
+                    arith_ref.encode_bit(enc, model, c, bit)
                     img[pad + y, pad + x] = bit
     return enc.finish()
 
@@ -631,7 +633,7 @@ def test_compiled_temporal_helpers_and_assembly_match_numpy(shape):
 
 @pytest.mark.parametrize("shape", [(1, 1), (1, 2), (2, 1), (1, 6), (6, 1), (2, 2), (2, 9), (3, 3), (3, 8), (9, 4), (31, 47)])
 def test_compiled_laplacian_matches_its_numpy_definition(shape):
-    from pibr.protocol.edgecodec.codec import laplacian_numpy
+    from .edgecodec_reference import laplacian_numpy
 
     rng = np.random.default_rng(shape[0] * 31 + shape[1])
     y, x = np.indices(shape)
@@ -662,7 +664,7 @@ def test_compiled_warp_matches_its_numpy_definition(min_code):
                         quat_from_axis_angle(rng.normal(size=3), rng.uniform(-3, 3)))
         for a, b in ((prev, cur), (prev, prev)):
             got = warp_samples(s, a, b, q)
-            want = codec_module.warp_samples_numpy(s, a, b, q)
+            want = edgecodec_reference.warp_samples_numpy(s, a, b, q)
             np.testing.assert_array_equal(got.values, want.values)
             np.testing.assert_array_equal(got.edges, want.edges)
         assert got.values.dtype == np.int32
