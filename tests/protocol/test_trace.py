@@ -12,12 +12,13 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from pibr.protocol.errors import ConfigError, TraceError
-from pibr.protocol.pose import (left_handed_to_right_handed, quat_angle, quat_from_axis_angle,
-                                quat_normalize, quat_rotate, quat_to_matrix)
+from pibr.protocol.pose import quat_angle, quat_from_axis_angle, quat_normalize, quat_rotate, quat_to_matrix
 from pibr.protocol.trace import (CANONICAL_HEADER, HeadTrace, builtin_traces, load_trace,
                                  read_canonical_csv, write_canonical_csv, yaw_pitch)
 from pibr.protocol.trace_import import import_csv, import_pred6dof, parse_columns
 from pibr.protocol.trace_synth import synthesize
+
+from .pose_reference import left_handed_to_right_handed
 
 PRED6DOF_HEADER = "timestamp,x,y,z,qx,qy,qz,qw"
 
