@@ -36,9 +36,6 @@ from .results import write_result
 
 log = logging.getLogger(__name__)
 
-SUMMARY_KEYS = ("psnr_mean", "ssim_mean", "dssim_mean", "flip_mean", "geometric_holes_mean", "hole_fraction_mean",
-                "client_ms_median", "frames")
-
 
 def read_session(run_dir: str) -> dict:
     """The client's ``session.json`` in ``run_dir`` (a clear error when missing or broken)."""

@@ -320,10 +320,10 @@ def _toml_scalar(v) -> str:
 
 
 def _toml_value(v) -> str:
-    return _dump(v, _toml_scalar, _toml_key, " = ", '""', inline_table=True)
+    return _dump(v, _toml_scalar, _toml_key, " = ", '""')
 
 
-def _dump(tree, scalar, key, colon: str, null: str, inline_table: bool = False) -> str:
+def _dump(tree, scalar, key, colon: str, null: str) -> str:
     """Iterative writer (trees may be deep): containers, RawTokens and scalars."""
     out = []
     stack = [tree]

@@ -25,14 +25,6 @@ from .metrics import masked_metrics
 MODES = ("static", "velocity", "accel", "oracle")
 
 
-def masked_quality(ref: np.ndarray, test: np.ndarray, mask: np.ndarray) -> tuple:
-    """(DSSIM, PSNR dB) over the pixels of ``mask`` (H, W) bool; (None, None) for an empty mask."""
-    if not mask.any():
-        return None, None
-    q = masked_metrics(ref, test, {"mask": mask}, min_pixels=1)
-    return q["dssim_mask"], q["psnr_mask"]
-
-
 def measure_motion(scene, windows, modes=MODES, latency_ms: float = 128.0, rate_hz: float = 30.0, stride: int = 3,
                    view_size=(512, 512), out_size=(480, 270), depth_codec: str = "h264", proxies=None,
                    bar=None) -> dict:

@@ -1,6 +1,6 @@
 """Dense depth from the edge codec's sparse samples: push-pull diffusion (Pajak et al. 2011, Sec. 5).
 
-**Push-pull** (:func:`push_pull`) fills the pixels without a sample. *Push* builds a pyramid:
+**Push-pull** (:func:`push_pull_fast`) fills the pixels without a sample. *Push* builds a pyramid:
 each level halves the resolution in two quincunx steps, first every pixel with x + y even
 averages itself (weight 1/2) and its four axial neighbours (1/8 each), then every pixel with x
 and y even averages itself and its four diagonal neighbours from that lattice; weights are
@@ -13,8 +13,8 @@ Laplace equation on its unknown pixels (``iterations`` at the finest level, twic
 per coarser level, which cost little: a cascadic multigrid), so the result approaches the
 harmonic interpolation of the samples, which reproduces planes. On the image border the
 missing neighbour is extrapolated linearly (not mirrored), so a slanted plane running into
-the border stays a plane. The same scheme exists as vectorised numpy (:func:`push_pull`) and
-as a numba kernel (:func:`push_pull_fast`), equal to rounding.
+the border stays a plane. It runs as numba kernels; their vectorised numpy definition, equal to
+rounding, is ``push_pull_numpy`` in tests/client/diffusion_reference.py (compared there).
 
 **Edge-aware diffusion** (:func:`diffuse`). Plain push-pull averages samples from both sides of
 a depth discontinuity at its coarse levels and smears the step over many pixels. But the
@@ -66,101 +66,6 @@ _C_SELF, _C_NEIGHBOUR = 0.5, 0.125
 DEFAULT_ITERATIONS = 4
 #: Sweeps at a coarse level are capped here.
 _MAX_ITERATIONS = 64
-_AXIAL = ((-1, 0), (1, 0), (0, -1), (0, 1))
-_DIAGONAL = ((-1, -1), (-1, 1), (1, -1), (1, 1))
-
-
-# ------------------------------------------------------------------------------------------
-# numpy push-pull
-# ------------------------------------------------------------------------------------------
-
-def _shift(a: np.ndarray, dy: int, dx: int) -> np.ndarray:
-    """b[y, x] = a[y + dy, x + dx], 0 outside."""
-    h, w = a.shape
-    b = np.zeros_like(a)
-    b[max(0, -dy):min(h, h - dy), max(0, -dx):min(w, w - dx)] = a[max(0, dy):min(h, h + dy), max(0, dx):min(w, w + dx)]
-    return b
-
-
-def _gather(wv: np.ndarray, wm: np.ndarray, offsets) -> tuple[np.ndarray, np.ndarray]:
-    """Weighted sums (values, weights) of self (1/2) and the neighbours at ``offsets`` (1/8 each)."""
-    num = _C_SELF * wv
-    den = _C_SELF * wm
-    for dy, dx in offsets:
-        num = num + _C_NEIGHBOUR * _shift(wv, dy, dx)
-        den = den + _C_NEIGHBOUR * _shift(wm, dy, dx)
-    return num, den
-
-
-def _mean_inside(a: np.ndarray, offsets) -> np.ndarray:
-    """Mean of a over the neighbours at ``offsets`` that are inside the image."""
-    ones = np.ones_like(a)
-    total = sum(_shift(a, dy, dx) for dy, dx in offsets)
-    count = sum(_shift(ones, dy, dx) for dy, dx in offsets)
-    return total / np.maximum(count, 1.0)
-
-
-def _smooth_np(u, fixed, iterations):
-    """Red-black Gauss-Seidel sweeps of the Laplace equation on the pixels that are not ``fixed``.
-
-    On the image border the missing neighbour is extrapolated linearly (zero second
-    derivative, exact for planes), which reduces to a 1-D Laplace equation along the border;
-    corners stay as they are.
-    """
-    h, w = u.shape
-    yy, xx = np.indices((h, w))
-    row_border = (yy == 0) | (yy == h - 1)
-    col_border = (xx == 0) | (xx == w - 1)
-    horizontal = row_border & ~col_border & (w > 1)
-    vertical = col_border & ~row_border & (h > 1)
-    interior = ~row_border & ~col_border
-    for _ in range(iterations):
-        for colour in (0, 1):
-            sel = ((yy + xx) % 2 == colour) & ~fixed
-            u = np.where(sel & interior, _mean_inside(u, _AXIAL), u)
-            u = np.where(sel & horizontal, 0.5 * (_shift(u, 0, -1) + _shift(u, 0, 1)), u)
-            u = np.where(sel & vertical, 0.5 * (_shift(u, -1, 0) + _shift(u, 1, 0)), u)
-    return u
-
-
-def push_pull(values, valid, iterations: int = DEFAULT_ITERATIONS) -> np.ndarray:
-    """Fill the pixels where ``valid`` is False: values (h, w) float, valid (h, w) bool -> (h, w) float64.
-
-    Samples keep their values; with no sample at all the result is 0. ``iterations`` red-black
-    Gauss-Seidel sweeps follow the pull at the finest level, twice as many at each coarser one.
-    """
-    v = np.asarray(values, dtype=np.float64)
-    m = np.asarray(valid, dtype=bool)
-    if v.shape != m.shape or v.ndim != 2:
-        raise ValueError(f"values and valid must be (h, w) arrays of one shape, got {v.shape} and {m.shape}")
-    if not m.any():
-        return np.zeros_like(v)
-    return _push_pull_np(v, m, int(iterations))
-
-
-def _push_pull_np(v, m, iterations):
-    h, w = v.shape
-    if m.all() or (h == 1 and w == 1):
-        return np.where(m, v, 0.0)
-    yy, xx = np.indices((h, w))
-    quincunx = (yy + xx) % 2 == 0
-    even = (yy % 2 == 0) & (xx % 2 == 0)
-    # push, step 1: the quincunx lattice gathers its axial neighbours
-    num, den = _gather(np.where(m, v, 0.0), m.astype(np.float64), _AXIAL)
-    qm = quincunx & (den > 0)
-    qv = np.where(qm, num / np.where(den > 0, den, 1.0), 0.0)
-    # push, step 2: the even lattice gathers its diagonal neighbours (all on the quincunx lattice)
-    num, den = _gather(qv, qm.astype(np.float64), _DIAGONAL)
-    cm = (den > 0)[::2, ::2]
-    cv = np.where(cm, num[::2, ::2] / np.where(cm, den[::2, ::2], 1.0), 0.0)
-    coarse = _push_pull_np(cv, cm, min(2 * iterations, _MAX_ITERATIONS))
-    # pull: even pixels from the coarse level, odd-odd ones from their diagonals, the rest from axial neighbours
-    q = np.zeros((h, w))
-    q[::2, ::2] = coarse
-    q = np.where(qm, qv, q)
-    q = np.where(quincunx & ~even & ~qm, _mean_inside(np.where(even, q, 0.0), _DIAGONAL), q)
-    full = np.where(quincunx, q, _mean_inside(np.where(quincunx, q, 0.0), _AXIAL))
-    return _smooth_np(np.where(m, v, full), m, iterations)
 
 
 # ------------------------------------------------------------------------------------------
@@ -169,7 +74,8 @@ def _push_pull_np(v, m, iterations):
 
 @njit(cache=True, nogil=True)
 def _smooth_simple(u, m, iterations):
-    """numba twin of :func:`_smooth_np` (in place), straight from its definition."""
+    """The sweeps of ``_smooth_np`` (tests/client/diffusion_reference.py) in numba (in place),
+    straight from their definition."""
     h, w = u.shape
     for _ in range(iterations):
         for colour in range(2):
@@ -226,7 +132,7 @@ def _half_sweep(t, o, f, h, w, p0):
 
 @njit(cache=True, nogil=True)
 def _smooth_nb(u, m, iterations, sf=None, su=None):
-    """numba twin of :func:`_smooth_np` (in place).
+    """The sweeps of ``_smooth_np`` (tests/client/diffusion_reference.py) in numba (in place).
 
     The two colours are compacted into arrays of their own first, so each half-sweep reads
     and writes contiguous rows (vectorised: measured ~3x faster than striding over the full
@@ -543,7 +449,11 @@ def _push_pull_nb(v, m, iterations, fixed):
 
 
 def push_pull_fast(values, valid, iterations: int = DEFAULT_ITERATIONS) -> np.ndarray:
-    """numba twin of :func:`push_pull` (same result up to float rounding)."""
+    """Push-pull (module docstring): values (h, w) float, valid (h, w) bool -> (h, w) float64, the
+    numpy definition's result (``push_pull_numpy`` in tests/client/diffusion_reference.py) up to
+    float rounding. Samples keep their values; with no sample at all the result is 0.
+    ``iterations`` red-black Gauss-Seidel sweeps follow the pull at the finest level, twice as
+    many at each coarser one."""
     v = np.ascontiguousarray(values, dtype=np.float64)
     m = np.ascontiguousarray(valid, dtype=np.uint8)
     if v.shape != m.shape or v.ndim != 2:

@@ -213,7 +213,8 @@ class FlowFrame:
     distance (0 = sky); flow : (h, w, 2) float32 pixels per ``interval`` seconds; moving : (h, w)
     bool; scene_t : the frame's scene time (s); horizon_frames : see the module docstring;
     depth_slack : the depth transport's error in disparity (1 / m) that a static pixel must be
-    nearer by to hide a moving one.
+    nearer by to hide a moving one. ``count``: how many pixels move (0: extrapolation changes
+    nothing).
     """
 
     def __init__(self, y, u, v, distance, flow, moving, scene_t: float, interval: float,
@@ -284,11 +285,6 @@ class FlowFrame:
     def steps(self, t: float) -> float:
         """Frame intervals to extrapolate by at scene time ``t`` (bounded; see the module docstring)."""
         return max(damped_horizon(t - self.scene_t, self.horizon), 0.0) / self.interval
-
-    @property
-    def moves(self) -> bool:
-        """Whether anything in the view moves (else extrapolation changes nothing)."""
-        return self.count > 0
 
     def extrapolate(self, steps: float) -> Extrapolated | None:
         """The view ``steps`` intervals after the frame; None when nothing changes (no motion, or 0 steps)."""

@@ -224,12 +224,6 @@ class HoleFill:
         self.done[0].use(self.unit + 1)
         self.vaos["final"].render(ctx.TRIANGLE_STRIP)
 
-    def read_level(self, k: int, completed: bool = False) -> np.ndarray:
-        """Level k (1 = half size) as (h, w, 4) float32, row 0 first as stored (for tests)."""
-        tex = (self.done if completed else self.raw)[k - 1]
-        w, h = tex.size
-        return np.frombuffer(tex.read(), np.float32).reshape(h, w, 4).copy()
-
     def release(self) -> None:
         for obj in reversed(self._objects):
             obj.release()

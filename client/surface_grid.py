@@ -170,16 +170,6 @@ def build_surface_grid(distance, tile: int, epsilon: float, code_scale: float, s
     return SurfaceGrid(w, h, tile, cells, levels, cbits, cerr, verts)
 
 
-def pixel_connectivity(distance, epsilon: float, code_scale: float, slack_codes: float,
-                       sky_distance: float | None = None, void_margin: int = 1) -> np.ndarray:
-    """(h, w) uint8: each pixel's connectedness to its 8 neighbours (bit d: ``DIRECTIONS[d]``;
-    neighbours outside the image count as connected). Arguments as :func:`build_surface_grid`."""
-    d = np.ascontiguousarray(distance, dtype=np.float64)
-    sky = -1.0 if sky_distance is None else float(sky_distance)
-    kind, code = _classify(d, sky, int(void_margin) if sky_distance is None else 0, float(code_scale))
-    return _connectivity(kind, code, pixel_directions(d.shape[1], d.shape[0]), float(epsilon), float(slack_codes))
-
-
 @functools.lru_cache(maxsize=4)
 def pixel_directions(width: int, height: int) -> np.ndarray:
     """(height, width, 3) float32 unit camera-space directions of the pixel centres, cached per
@@ -187,12 +177,6 @@ def pixel_directions(width: int, height: int) -> np.ndarray:
     d = _pixel_directions(int(width), int(height))
     d.setflags(write=False)
     return d
-
-
-def corner_directions(width: int, height: int) -> np.ndarray:
-    """(height + 1, width + 1, 3) unit camera-space directions of the pixel corners (the numba
-    kernels' own formula, for tests against :func:`pibr.protocol.projection.unproject`)."""
-    return _corner_directions(int(width), int(height))
 
 
 # --------------------------------------------------------------------------------------------
@@ -217,15 +201,6 @@ def _pixel_directions(w, h):
     for y in range(h):
         for x in range(w):
             out[y, x, 0], out[y, x, 1], out[y, x, 2] = _direction(x + 0.5, y + 0.5, w, h)
-    return out
-
-
-@njit(cache=True, nogil=True)
-def _corner_directions(w, h):
-    out = np.empty((h + 1, w + 1, 3), np.float64)
-    for y in range(h + 1):
-        for x in range(w + 1):
-            out[y, x, 0], out[y, x, 1], out[y, x, 2] = _direction(float(x), float(y), w, h)
     return out
 
 

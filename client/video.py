@@ -24,14 +24,6 @@ class YUVImage:
     def height(self) -> int:
         return self.y.shape[0]
 
-    def to_rgb(self) -> np.ndarray:
-        """(H, W, 3) uint8 on the CPU (for tests and tools; the client converts in shaders)."""
-        y = self.y.astype(np.float32)
-        u = np.repeat(np.repeat(self.u.astype(np.float32) - 128.0, 2, 0), 2, 1)
-        v = np.repeat(np.repeat(self.v.astype(np.float32) - 128.0, 2, 0), 2, 1)
-        rgb = np.stack([y + 1.402 * v, y - 0.344136 * u - 0.714136 * v, y + 1.772 * u], axis=-1)
-        return np.clip(rgb + 0.5, 0, 255).astype(np.uint8)
-
 
 class H264Decoder:
     """Decodes one session's access units in order. Every frame must be fed, keyframe first:

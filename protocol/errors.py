@@ -118,15 +118,6 @@ class GLUnavailable(PibrError, RuntimeError):
     """No OpenGL context could be created; the message names the backend and how to install it."""
 
 
-#: Wire code -> exception class, for turning a received ``Error`` back into an exception.
-ERROR_CODES = {
-    cls.code: cls
-    for cls in (ProtocolError, BadMagic, UnsupportedVersion, MessageTooLarge, UnknownMessageType,
-                MalformedMessage, TruncatedMessage, UnexpectedMessage, InvalidPose, SceneError,
-                CodecError, ConfigError, AccessDenied, PeerTimeout)
-}
-
-
 class RemoteError(PibrError):
     """The peer closed the session with an ``Error`` message."""
 

@@ -113,10 +113,6 @@ class FrameReader:
                     f"connection closed inside a frame: {pending - HEADER_SIZE} of {length} payload bytes received")
             raise self._failed
 
-    @property
-    def buffered(self) -> int:
-        return len(self._buf) - self._pos
-
     def _next(self) -> RawFrame | None:
         avail = len(self._buf) - self._pos
         if avail < 4:

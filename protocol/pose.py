@@ -165,20 +165,6 @@ def quat_angle(a, b) -> np.ndarray:
     return 2.0 * np.arccos(np.clip(dot, 0.0, 1.0))
 
 
-def left_handed_to_right_handed(position, quat):
-    """Convert Unity-style left-handed (+Y up, +Z forward) to pibr's right-handed axes.
-
-    The conversion mirrors Z: a position (x, y, z) becomes (x, y, -z) and a rotation
-    quaternion (w, x, y, z) becomes (w, -x, -y, z). A Unity camera looking along its +Z
-    then looks along -Z, as an OpenGL camera does.
-
-    position : (3,) or (n, 3); quat : (4,) or (n, 4), (w, x, y, z)
-    """
-    p = np.array(position, dtype=np.float64) * np.array([1.0, 1.0, -1.0])
-    q = _as_quats(quat) * np.array([1.0, -1.0, -1.0, 1.0])
-    return p, q
-
-
 @dataclass(frozen=True)
 class Pose:
     """Camera-to-world rigid transform: ``position`` (3,) metres, ``orientation`` (4,) (w, x, y, z).
@@ -274,10 +260,6 @@ class Pose:
         if a.shape != (7,):
             raise InvalidPose(f"a pose array must have shape (7,), got {a.shape}")
         return cls.make(a[:3], a[3:])
-
-    def distance_to(self, other: "Pose") -> tuple[float, float]:
-        """(metres, radians) between two poses."""
-        return float(np.linalg.norm(self.p - other.p)), float(quat_angle(self.q, other.q))
 
 
 def dual_view_offset(forward: float, up: float, tilt_deg: float) -> Pose:

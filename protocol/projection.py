@@ -129,8 +129,3 @@ def to_pixels(t, width: int, height: int) -> np.ndarray:
     """t' (n, 2) -> continuous pixel coordinates (n, 2) as (column, row), row 0 on top."""
     t = np.asarray(t, dtype=np.float64)
     return np.stack([(t[:, 0] + 1.0) * 0.5 * width, (1.0 - t[:, 1]) * 0.5 * height], axis=1)
-
-
-def angular_resolution(width: int, height: int) -> tuple[float, float]:
-    """Pixels per radian at the image centre, (horizontal, vertical)."""
-    return width / 2.0, height / 2.0

@@ -152,19 +152,6 @@ class AtlasPacker:
             r.release()
 
 
-def yuv420_to_rgb(yuv: np.ndarray, width: int, height: int) -> np.ndarray:
-    """Reference CPU conversion of a (1.5 H, W) full-range BT.601 yuv420p buffer to (H, W, 3) uint8."""
-    y = yuv[:height].astype(np.float32)
-    q = (width // 2) * (height // 2)
-    flat = yuv[height:].reshape(-1)
-    u = flat[:q].reshape(height // 2, width // 2).astype(np.float32) - 128.0
-    v = flat[q:2 * q].reshape(height // 2, width // 2).astype(np.float32) - 128.0
-    u = np.repeat(np.repeat(u, 2, 0), 2, 1)
-    v = np.repeat(np.repeat(v, 2, 0), 2, 1)
-    rgb = np.stack([y + 1.402 * v, y - 0.344136 * u - 0.714136 * v, y + 1.772 * u], axis=-1)
-    return np.clip(rgb + 0.5, 0, 255).astype(np.uint8)
-
-
 # float32 constants of the shaders above, as llvmpipe folds them: a texel is x * (1 / 255)
 # rounded to float32; ``texel * 255.0 * k`` becomes ``texel * (255 k)``, and the chroma
 # pass's ``(sum of 4 texels) * (255 / 4) * k`` becomes ``sum * (63.75 k)``.

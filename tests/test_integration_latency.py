@@ -15,7 +15,7 @@ import time
 import pytest
 
 from pibr.bench.evaluate import evaluate_run, read_session
-from pibr.bench.processes import PibrProcess, run_through_relay
+from pibr.bench.processes import PibrProcess, ProcessFailed
 from pibr.client.recorder import read_records
 from pibr.common.link import LinkModel, LinkParams, SessionSchedule
 
@@ -58,6 +58,35 @@ REAL_RUNS = {
     "real_cap": (LINK + ["--jitter-ms", str(REAL_JITTER_MS), "--kbps", str(REAL_CAP_KBPS)],
                  REAL_CLIENT + ["--duration", str(REAL_CAP_DURATION_S)]),
 }
+
+
+def run_through_relay(out_dir: str, upstream: tuple[str, int], relay_args: list[str], client_args: list[str],
+                      timeout: float = 1800.0) -> dict:
+    """Start a relay (``relay_args``: its delays, jitter, cap) in front of a server already
+    running at ``upstream``, run one client through it to completion, stop the relay. The
+    client writes to ``out_dir``, logs go to ``out_dir/logs``; several of these may run at once
+    against one server. -> timings in seconds."""
+    logs = os.path.join(out_dir, "logs")
+    t0 = time.perf_counter()
+    procs = []
+    try:
+        relay = PibrProcess("relay", ["relay", "--listen", "127.0.0.1:0", "--upstream", "%s:%d" % upstream,
+                                      *relay_args], os.path.join(logs, "relay.log"))
+        procs.append(relay)
+        host, port = relay.wait_listening(30)
+        client = PibrProcess("client", ["client", "--connect", f"{host}:{port}", "--out", out_dir,
+                                        "--progress", "none", *client_args], os.path.join(logs, "client.log"))
+        procs.append(client)
+        code = client.wait(timeout)
+        if code != 0:
+            raise ProcessFailed(f"client exited with code {code}; its last output:\n{client.tail()}\n"
+                                f"relay's last output:\n{relay.tail()}")
+        if relay.proc.poll() is not None:
+            raise ProcessFailed(f"relay exited early with code {relay.proc.returncode}:\n{relay.tail()}")
+        return {"total_s": time.perf_counter() - t0}
+    finally:
+        for p in reversed(procs):
+            p.stop()
 
 
 @pytest.fixture(scope="module")

@@ -250,14 +250,6 @@ class GridWarp(Method):
             ctx.viewport = viewport
             self.hole_fill.fill(self.target)
 
-    def read_warp(self) -> np.ndarray | None:
-        """The last warp before hole filling, (h, w, 4) float32 (rgb, distance; 0 = hole), row 0
-        first as stored; None with ``fill=False``."""
-        if self.target is None:
-            return None
-        w, h = self.target.size
-        return np.frombuffer(self.target.read(), np.float32).reshape(h, w, 4).copy()
-
     def release(self) -> None:
         for grid in getattr(self, "grids", []):
             grid.release()

@@ -33,7 +33,6 @@ from .view_warp import COLOR_FS, SKY_FRACTION, VIEW_POINT_GLSL, output_projectio
 
 #: A triangle is split where max - min distance > DEFAULT_SPLIT * min distance + slack.
 DEFAULT_SPLIT = 0.05
-COARSE_STEPS = (2, 4, 8, 16)
 
 # Vertex i of a regular grid (every ``u_step``-th pixel, the last row and column included),
 # attributeless: drawn with an index buffer, so each vertex is shaded once.

@@ -12,7 +12,7 @@ A frame of radial distance (h, w) becomes a payload (see :mod:`.bitstream`) of
 The client diffuses the samples into a dense map (``pibr.client.diffusion``).
 
 **Temporal context.** Both ends warp the previous frame's *decoded* samples to the current
-view with :func:`warp_samples` (deterministic numpy: same inputs, same bytes) and hand the
+view with :func:`warp_samples` (deterministic: same inputs, same bytes) and hand the
 result to ``encode`` / ``decode``. The header records whether the encoder used it; a decoder
 without it then refuses the payload instead of decoding garbage.
 
@@ -27,11 +27,10 @@ from dataclasses import dataclass, field
 import numpy as np
 from numba import njit
 
-from ..depth import DEQUANTIZE, DepthQuantizer
+from ..depth import DepthQuantizer
 from ..errors import CodecError
 from ..pose import Pose
 from ..projection import EPS as _EPS
-from ..projection import FORWARD, INVERSE
 from . import bitstream
 from .bitstream import FrameHeader, grid_shape
 from .edges import decode_edge_image, encode_edge_image, temporal_context
@@ -56,30 +55,11 @@ def default_quantizer(bits: int = 12) -> DepthQuantizer:
 # Edge selection (the server's edge_extract builds on these)
 # ------------------------------------------------------------------------------------------
 
-def _border_pad(c0, c1, c2):
-    """Value beyond a border row c0 (c1, c2 inside): linear extrapolation where c2, c1, c0 lie on a
-    line (up to quantization), else c0 repeated, so a step right at the border still shows."""
-    linear = np.abs(c0 - 2 * c1 + c2) <= 2
-    return np.where(linear, 2 * c0 - c1, c0)
-
-
-def laplacian_numpy(codes) -> np.ndarray:
-    """The definition of :func:`laplacian` in numpy (the tests hold the compiled one to it)."""
-    c = np.asarray(codes, dtype=np.int32)
-    h, w = c.shape
-    p = np.pad(c, 1, mode="edge")
-    if h >= 3:
-        p[0, 1:-1] = _border_pad(c[0], c[1], c[2])
-        p[-1, 1:-1] = _border_pad(c[-1], c[-2], c[-3])
-    if w >= 3:
-        p[1:-1, 0] = _border_pad(c[:, 0], c[:, 1], c[:, 2])
-        p[1:-1, -1] = _border_pad(c[:, -1], c[:, -2], c[:, -3])
-    return p[:-2, 1:-1] + p[2:, 1:-1] + p[1:-1, :-2] + p[1:-1, 2:] - 4 * c
-
-
 @njit(cache=True, nogil=True)
 def _beyond(c0, c1, c2, linear_ok):
-    """Value one step beyond border value c0 (c1, c2 further inside), as :func:`_border_pad`."""
+    """Value one step beyond border value c0 (c1, c2 further inside): linear extrapolation where
+    c2, c1, c0 lie on a line (up to quantization), else c0 repeated, so a step right at the border
+    still shows."""
     if linear_ok and abs(c0 - 2 * c1 + c2) <= 2:
         return 2 * c0 - c1
     return c0
@@ -114,7 +94,8 @@ def laplacian(codes) -> np.ndarray:
     Outside the image the codes continue linearly where the last three rows (columns) are
     linear, else the border value repeats: a plane running into the border has no Laplacian
     there, a step at the border keeps its own. Positive on the far side of a step in
-    disparity, negative on the near side. (Compiled; :func:`laplacian_numpy` is its definition.)
+    disparity, negative on the near side. (Compiled; its numpy definition, which the tests hold it
+    to, is ``laplacian_numpy`` in tests/protocol/edgecodec_reference.py.)
     """
     c = np.ascontiguousarray(codes, dtype=np.int32)
     if c.ndim != 2:
@@ -286,13 +267,6 @@ class DecodedSamples:
     @property
     def shape(self) -> tuple[int, int]:
         return self.edges.shape
-
-    @property
-    def regular_mask(self) -> np.ndarray:
-        """(h, w) bool: positions of the regular samples."""
-        m = np.zeros(self.edges.shape, dtype=bool)
-        m[np.ix_(self.regular_rows, self.regular_cols)] = True
-        return m
 
 
 @dataclass
@@ -548,16 +522,10 @@ class EdgeDecoder:
 # Temporal warp (both ends)
 # ------------------------------------------------------------------------------------------
 
-def _rotate(m, x, y, z):
-    """Rows of m (3, 3) applied to vectors (x, y, z) (n,), written out so no BLAS reorders the sums."""
-    return (m[0, 0] * x + m[0, 1] * y + m[0, 2] * z,
-            m[1, 0] * x + m[1, 1] * y + m[1, 2] * z,
-            m[2, 0] * x + m[2, 1] * y + m[2, 2] * z)
-
-
 @njit(cache=True, nogil=True, error_model="numpy")  # no division-by-zero checks: every divisor is > 0
 def _warp_kernel(edges, codes, rp, t, rc, near, far, min_code, max_code, eps, values):
-    """:func:`warp_samples_numpy` per sample, operation for operation (so bit-identical): unproject
+    """``warp_samples_numpy`` (tests/protocol/edgecodec_reference.py) per sample, operation for
+    operation (so bit-identical): unproject
     (INVERSE), dequantize (DEQUANTIZE), move, project (FORWARD), quantize (QUANTIZE), splat max."""
     h, w = edges.shape
     span = max_code - min_code
@@ -617,9 +585,10 @@ def warp_samples(samples: DecodedSamples, prev_pose: Pose, cur_pose: Pose,
     direction at infinity), moved from ``prev_pose`` to ``cur_pose`` (camera-to-world poses),
     projected, and splatted to the pixel containing it with its re-quantized code; where
     several land on one pixel the nearest (largest code) wins. Compiled, with the same IEEE
-    operations in the same order as :func:`warp_samples_numpy` (no fused multiply-adds:
-    numba does not contract without fastmath), so encoder and decoder get identical results
-    and so does the numpy definition (tested).
+    operations in the same order as its numpy definition (``warp_samples_numpy`` in
+    tests/protocol/edgecodec_reference.py; no fused multiply-adds: numba does not contract
+    without fastmath), so encoder and decoder get identical results and so does the numpy
+    definition (tested).
     """
     h, w = samples.shape
     values = np.full((h, w), -1, dtype=np.int32)
@@ -628,47 +597,4 @@ def warp_samples(samples: DecodedSamples, prev_pose: Pose, cur_pose: Pose,
                  np.ascontiguousarray(prev_pose.rotation(), dtype=np.float64), t,
                  np.ascontiguousarray(cur_pose.rotation().T, dtype=np.float64), float(quantizer.near),
                  float(quantizer.far), float(quantizer.min_code), float(quantizer.max_code), float(_EPS), values)
-    return WarpedPrevious(edges=values >= 0, values=values)
-
-
-def warp_samples_numpy(samples: DecodedSamples, prev_pose: Pose, cur_pose: Pose,
-                       quantizer: DepthQuantizer) -> WarpedPrevious:
-    """The definition of :func:`warp_samples` in numpy (the tests hold the compiled one to it).
-
-    Forward-splat the previous frame's decoded edge samples into the current wide-angle view.
-
-    Each edge sample is unprojected through its pixel centre at its decoded distance (sky: a
-    direction at infinity), moved from ``prev_pose`` to ``cur_pose`` (camera-to-world poses),
-    projected, and splatted to the pixel containing it with its re-quantized code; where
-    several land on one pixel the nearest (largest code) wins. Pure numpy, elementwise
-    IEEE operations only, so encoder and decoder get identical results.
-    """
-    h, w = samples.shape
-    values = np.full(h * w, -1, dtype=np.int32)
-    ys, xs = np.nonzero(samples.edges)
-    if len(ys):
-        code = samples.codes[ys, xs].astype(np.float64)
-        tx = (xs + 0.5) / w * 2.0 - 1.0
-        ty = 1.0 - (ys + 0.5) / h * 2.0
-        dx, dy, dz = INVERSE.numpy(vx=tx, vy=ty)
-        mc = float(quantizer.max_code)
-        r = DEQUANTIZE.numpy(code=code, near=quantizer.near, far=quantizer.far, min_code=float(quantizer.min_code),
-                             max_code=mc)
-        sky = r <= 0.0
-        r = np.where(sky, 1.0, r)
-        r_prev, r_cur = prev_pose.rotation(), cur_pose.rotation()
-        # world = R_prev p + t_prev; current camera = R_cur^T (world - t_cur); sky: rotation only
-        wx, wy, wz = _rotate(r_prev, dx * r, dy * r, dz * r)
-        t = np.asarray(prev_pose.position) - np.asarray(cur_pose.position)
-        wx = np.where(sky, wx, wx + t[0])
-        wy = np.where(sky, wy, wy + t[1])
-        wz = np.where(sky, wz, wz + t[2])
-        cx, cy, cz = _rotate(r_cur.T, wx, wy, wz)
-        px, py, dist = FORWARD.numpy(px=cx, py=cy, pz=cz)
-        col = np.floor((px + 1.0) * 0.5 * w).astype(np.int64)
-        row = np.floor((1.0 - py) * 0.5 * h).astype(np.int64)
-        keep = (cz <= 0.0) & (col >= 0) & (col < w) & (row >= 0) & (row < h)
-        new = quantizer.quantize(np.where(sky, 0.0, dist)).astype(np.int32)
-        np.maximum.at(values, row[keep] * w + col[keep], new[keep])
-    values = values.reshape(h, w)
     return WarpedPrevious(edges=values >= 0, values=values)

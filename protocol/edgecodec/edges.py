@@ -62,8 +62,6 @@ N_CONTEXTS_4PASS = _PIXEL_CONTEXTS_4PASS + _OCC_CONTEXTS
 N_CONTEXTS_RASTER = _PIXEL_CONTEXTS_RASTER + _OCC_CONTEXTS
 #: log2 of the side of the occupancy map's blocks: only blocks holding an edge code their pixels.
 BLOCK_LOG2 = 3
-#: (row, column) parity of passes A, B, C, D.
-PASS_PHASES = ((0, 0), (1, 1), (1, 0), (0, 1))
 
 
 @njit(cache=True, nogil=True)
@@ -135,25 +133,6 @@ def _ctx_d(img, tc, y, x, big):
         c |= (int(img[y, x - 2]) << 8) | (int(img[y - 2, x]) << 9)
         return _OFF_D + (c << 2) + int(tc[y, x])
     return _SMALL_D + (c << 2) + int(tc[y, x])
-
-
-@njit(cache=True, nogil=True)
-def _ctx_pass(img, tc, phase, y, x, big):
-    """Context of padded pixel (y, x) in pass ``phase`` (0..3 = A..D) of the four-pass order
-    (one small function per pass, so the compiler inlines them). The coders' loops write this
-    dispatch out instead of calling it: through the call, a 1024² edge image coded 1.05-1.6x
-    slower (intra frames most).
-
-    ``big``: the larger templates (intra frames); else the smaller ones (with a temporal
-    context, which carries most of the information and learns faster in fewer contexts).
-    """
-    if phase == 0:
-        return _ctx_a(img, tc, y, x, big)
-    if phase == 1:
-        return _ctx_b(img, tc, y, x, big)
-    if phase == 2:
-        return _ctx_c(img, tc, y, x, big)
-    return _ctx_d(img, tc, y, x, big)
 
 
 @njit(cache=True, nogil=True)
@@ -247,6 +226,8 @@ def _encode_kernel(img, tc, h, w, four_passes, big, buf, m, rate, block_log2, oc
                     if occ[by, bx] == 0:
                         continue
                     for x in range((bx << block_log2) + px, min((bx + 1) << block_log2, w), 2):
+                        # the pass's template written out here (and in the decoder): through one
+                        # function taking the phase, a 1024² edge image coded 1.05-1.6x slower
                         if phase == 0:
                             c = _ctx_a(img, tc, PAD + y, PAD + x, big)
                         elif phase == 1:

@@ -48,7 +48,6 @@ from .arith import (INT_SLOT, RATE_SHIFT, as_data, dec_raw, dec_sint, dec_start,
 
 PAD = 3
 N_PREDICTORS = 16
-PREDICTOR_NAMES = ("W", "N", "NW", "NE", "W2", "N2", "T", "Wx", "Nx", "R", "P", "NW2", "NE2", "F", "W3", "N3")
 _T, _R = 6, 9
 #: Residual context kind per predictor: 0 axial same sign, 1 diagonal same sign, 2 temporal,
 #: 3 nearest same sign further away, 4 other sign or regular sample.

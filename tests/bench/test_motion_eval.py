@@ -3,9 +3,11 @@ import numpy as np
 import pytest
 
 from pibr.bench.metrics import PSNR_CAP
-from pibr.bench.motion_eval import masked_quality, measure_motion
+from pibr.bench.motion_eval import measure_motion
 from pibr.bench.windows import Window
 from pibr.scenes.registry import load_scene
+
+from .motion_quality import masked_quality
 
 
 def test_masked_quality():

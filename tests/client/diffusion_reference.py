@@ -1,16 +1,24 @@
-"""The edge-aware diffusion as it was before its finest level was restricted to the regions (main at
-c715502, ``client/diffusion.py``): every region push-pulled over its whole bounding box. Kept
-verbatim (numba kernels included, so a later change to the shared push-pull cannot move both
-sides at once) for tests that require the current diffusion to equal it bit for bit."""
+"""Reference diffusion for the tests of ``client/diffusion.py``.
+
+* The edge-aware diffusion as it was before its finest level was restricted to the regions (main
+  at c715502, ``client/diffusion.py``): every region push-pulled over its whole bounding box.
+  Kept verbatim (numba kernels included, so a later change to the shared push-pull cannot move
+  both sides at once) for tests that require the current diffusion to equal it bit for bit.
+* The vectorised numpy push-pull (:func:`push_pull_numpy`, moved here from
+  ``client/diffusion.py``, where nothing used it): the definition ``push_pull_fast`` equals to
+  rounding.
+"""
 from __future__ import annotations
 
 import numpy as np
 from numba import njit
 
-from pibr.client.diffusion import _label_regions, push_pull_fast
+from pibr.client.diffusion import DEFAULT_ITERATIONS, _label_regions, push_pull_fast
 
 _C_SELF, _C_NEIGHBOUR = 0.5, 0.125
 _MAX_ITERATIONS = 64
+_AXIAL = ((-1, 0), (1, 0), (0, -1), (0, 1))
+_DIAGONAL = ((-1, -1), (-1, 1), (1, -1), (1, 1))
 
 
 @njit(nogil=True)
@@ -392,3 +400,97 @@ def reference_push_pull(values, valid, iterations: int = 4) -> np.ndarray:
     wh = (w + 1) // 2
     return _push_pull_pooled(v, m, int(iterations), m, np.empty(nf), np.empty(nu, dtype=np.uint8),
                              np.empty(2 * h * wh), np.empty(2 * h * wh, dtype=np.uint8)).copy()
+
+
+# ------------------------------------------------------------------------------------------
+# numpy push-pull: the definition the numba push_pull_fast is held to (to rounding), as it
+# was in client/diffusion.py
+# ------------------------------------------------------------------------------------------
+
+def _shift(a: np.ndarray, dy: int, dx: int) -> np.ndarray:
+    """b[y, x] = a[y + dy, x + dx], 0 outside."""
+    h, w = a.shape
+    b = np.zeros_like(a)
+    b[max(0, -dy):min(h, h - dy), max(0, -dx):min(w, w - dx)] = a[max(0, dy):min(h, h + dy), max(0, dx):min(w, w + dx)]
+    return b
+
+
+def _gather(wv: np.ndarray, wm: np.ndarray, offsets) -> tuple[np.ndarray, np.ndarray]:
+    """Weighted sums (values, weights) of self (1/2) and the neighbours at ``offsets`` (1/8 each)."""
+    num = _C_SELF * wv
+    den = _C_SELF * wm
+    for dy, dx in offsets:
+        num = num + _C_NEIGHBOUR * _shift(wv, dy, dx)
+        den = den + _C_NEIGHBOUR * _shift(wm, dy, dx)
+    return num, den
+
+
+def _mean_inside(a: np.ndarray, offsets) -> np.ndarray:
+    """Mean of a over the neighbours at ``offsets`` that are inside the image."""
+    ones = np.ones_like(a)
+    total = sum(_shift(a, dy, dx) for dy, dx in offsets)
+    count = sum(_shift(ones, dy, dx) for dy, dx in offsets)
+    return total / np.maximum(count, 1.0)
+
+
+def _smooth_np(u, fixed, iterations):
+    """Red-black Gauss-Seidel sweeps of the Laplace equation on the pixels that are not ``fixed``.
+
+    On the image border the missing neighbour is extrapolated linearly (zero second
+    derivative, exact for planes), which reduces to a 1-D Laplace equation along the border;
+    corners stay as they are.
+    """
+    h, w = u.shape
+    yy, xx = np.indices((h, w))
+    row_border = (yy == 0) | (yy == h - 1)
+    col_border = (xx == 0) | (xx == w - 1)
+    horizontal = row_border & ~col_border & (w > 1)
+    vertical = col_border & ~row_border & (h > 1)
+    interior = ~row_border & ~col_border
+    for _ in range(iterations):
+        for colour in (0, 1):
+            sel = ((yy + xx) % 2 == colour) & ~fixed
+            u = np.where(sel & interior, _mean_inside(u, _AXIAL), u)
+            u = np.where(sel & horizontal, 0.5 * (_shift(u, 0, -1) + _shift(u, 0, 1)), u)
+            u = np.where(sel & vertical, 0.5 * (_shift(u, -1, 0) + _shift(u, 1, 0)), u)
+    return u
+
+
+def push_pull_numpy(values, valid, iterations: int = DEFAULT_ITERATIONS) -> np.ndarray:
+    """Fill the pixels where ``valid`` is False: values (h, w) float, valid (h, w) bool -> (h, w) float64.
+
+    Samples keep their values; with no sample at all the result is 0. ``iterations`` red-black
+    Gauss-Seidel sweeps follow the pull at the finest level, twice as many at each coarser one.
+    """
+    v = np.asarray(values, dtype=np.float64)
+    m = np.asarray(valid, dtype=bool)
+    if v.shape != m.shape or v.ndim != 2:
+        raise ValueError(f"values and valid must be (h, w) arrays of one shape, got {v.shape} and {m.shape}")
+    if not m.any():
+        return np.zeros_like(v)
+    return _push_pull_np(v, m, int(iterations))
+
+
+def _push_pull_np(v, m, iterations):
+    h, w = v.shape
+    if m.all() or (h == 1 and w == 1):
+        return np.where(m, v, 0.0)
+    yy, xx = np.indices((h, w))
+    quincunx = (yy + xx) % 2 == 0
+    even = (yy % 2 == 0) & (xx % 2 == 0)
+    # push, step 1: the quincunx lattice gathers its axial neighbours
+    num, den = _gather(np.where(m, v, 0.0), m.astype(np.float64), _AXIAL)
+    qm = quincunx & (den > 0)
+    qv = np.where(qm, num / np.where(den > 0, den, 1.0), 0.0)
+    # push, step 2: the even lattice gathers its diagonal neighbours (all on the quincunx lattice)
+    num, den = _gather(qv, qm.astype(np.float64), _DIAGONAL)
+    cm = (den > 0)[::2, ::2]
+    cv = np.where(cm, num[::2, ::2] / np.where(cm, den[::2, ::2], 1.0), 0.0)
+    coarse = _push_pull_np(cv, cm, min(2 * iterations, _MAX_ITERATIONS))
+    # pull: even pixels from the coarse level, odd-odd ones from their diagonals, the rest from axial neighbours
+    q = np.zeros((h, w))
+    q[::2, ::2] = coarse
+    q = np.where(qm, qv, q)
+    q = np.where(quincunx & ~even & ~qm, _mean_inside(np.where(even, q, 0.0), _DIAGONAL), q)
+    full = np.where(quincunx, q, _mean_inside(np.where(quincunx, q, 0.0), _AXIAL))
+    return _smooth_np(np.where(m, v, full), m, iterations)

@@ -68,7 +68,7 @@ def test_without_time_or_motion_flow_changes_nothing(sim, name):
     for t in (3.0, 2.9):    # at the frame's own time, and before it (never back in time)
         np.testing.assert_array_equal(_show(sim, name, {"motion": "flow"}, pose, frame, t),
                                       _show(sim, name, {"motion": "static"}, pose, frame, t))
-    assert sim.textures.flow is not None and sim.textures.flow.moves
+    assert sim.textures.flow is not None and sim.textures.flow.count > 0
 
 
 def test_the_textures_are_restored_for_the_methods_that_show_the_frame_as_decoded(sim):

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from pibr.client.frame_textures import DEPTH_SLACK_CODES
-from pibr.client.surface_grid import (ALL_CONNECTED, E, W, build_surface_grid, check_tile, corner_directions,
-                                      pixel_connectivity)
+from pibr.client.surface_grid import (ALL_CONNECTED, E, W, _classify, _connectivity, _direction, build_surface_grid,
+                                      check_tile, pixel_directions)
 from pibr.protocol.depth import DepthQuantizer
 from pibr.protocol.depth_codecs import h264_quantizer
 from pibr.protocol.projection import pixel_centers, unproject
@@ -54,6 +54,21 @@ def _cells_per_tile(grid, tile):
     return counts
 
 
+def _corner_directions(w, h):
+    """(h + 1, w + 1, 3) unit camera-space directions of the pixel corners, from the grid kernels'
+    own formula (surface_grid._direction, which places the grid's corners)."""
+    return np.array([[_direction(float(x), float(y), w, h) for x in range(w + 1)] for y in range(h + 1)])
+
+
+def _pixel_connectivity(distance, epsilon, code_scale, slack_codes, sky_distance=None, void_margin=1):
+    """(h, w) uint8: each pixel's connectedness to its 8 neighbours, as build_surface_grid computes
+    it (bit d: ``DIRECTIONS[d]``; neighbours outside the image count as connected)."""
+    d = np.ascontiguousarray(distance, dtype=np.float64)
+    sky = -1.0 if sky_distance is None else float(sky_distance)
+    kind, code = _classify(d, sky, int(void_margin) if sky_distance is None else 0, float(code_scale))
+    return _connectivity(kind, code, pixel_directions(d.shape[1], d.shape[0]), float(epsilon), float(slack_codes))
+
+
 # -- the quadtree and grid on the CPU ---------------------------------------------------------
 
 
@@ -62,7 +77,7 @@ def test_kernel_directions_are_the_protocols():
     x = np.arange(w + 1) / w * 2 - 1
     y = 1 - np.arange(h + 1) / h * 2
     t = np.stack(np.meshgrid(x, y), axis=-1).reshape(-1, 2)
-    np.testing.assert_allclose(corner_directions(w, h), unproject(t).reshape(h + 1, w + 1, 3), atol=1e-12)
+    np.testing.assert_allclose(_corner_directions(w, h), unproject(t).reshape(h + 1, w + 1, 3), atol=1e-12)
 
 
 def _codes(distance):
@@ -121,7 +136,7 @@ def test_depth_step_splits_cells_and_detaches_the_sides():
     assert (g.bits[(x1 < step) | (x0 > step)] == ALL_CONNECTED).all()
     assert (g.levels[(x1 == step) | (x0 == step)] <= 2).all()   # small cells along the step,
     assert g.count < 0.01 * w * h                               # few elsewhere
-    conn = pixel_connectivity(d, 0.02, **H264_ARGS, sky_distance=SKY)
+    conn = _pixel_connectivity(d, 0.02, **H264_ARGS, sky_distance=SKY)
     assert (conn[:, step - 1] & (1 << E) == 0).all() and (conn[:, step] & (1 << W) == 0).all()
 
 
@@ -287,6 +302,13 @@ def _show(sim, method, pose, frame):
     return rgb, holes
 
 
+def _read_warp(m):
+    """The grid warp's last image before hole filling, (h, w, 4) float32 (rgb, distance; 0 = hole),
+    row 0 first as stored (a method with hole filling)."""
+    w, h = m.target.size
+    return np.frombuffer(m.target.read(), np.float32).reshape(h, w, 4).copy()
+
+
 def _moved(pose, right=0.15, back=0.05):
     from pibr.protocol.pose import Pose
 
@@ -369,7 +391,7 @@ def test_turned_away_from_the_frame(sim, yaw, pitch):
     m = _grid(sim)
     try:
         rgb, holes = _show(sim, m, turned, frame)
-        warp = m.read_warp()
+        warp = _read_warp(m)
     finally:
         m.release()
     assert np.isfinite(warp).all()

@@ -7,11 +7,12 @@ import pytest
 
 from pibr.bench.simulation import Simulation, bench_server_config, load_proxies
 from pibr.bench.metrics import dssim, ssim
-from pibr.bench.motion_eval import masked_quality
 from pibr.protocol.messages import PayloadKind
 from pibr.protocol.pose import Pose, quat_from_axis_angle
 from pibr.scenes.registry import load_scene
 from pibr.server.renderer import RenderTarget
+
+from ..bench.motion_quality import masked_quality
 
 pytestmark = pytest.mark.gl
 

@@ -12,13 +12,14 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from pibr.protocol.errors import ConfigError, TraceError
-from pibr.protocol.pose import (left_handed_to_right_handed, quat_angle, quat_from_axis_angle,
-                                quat_normalize, quat_rotate, quat_to_matrix)
 from pibr.common.traces.canonical import CANONICAL_HEADER, read_canonical_csv, write_canonical_csv
-from pibr.common.traces.loading import builtin_traces, load_trace
-from pibr.protocol.trace import HeadTrace, yaw_pitch
 from pibr.common.traces.importers import import_csv, import_pred6dof, parse_columns
+from pibr.common.traces.loading import builtin_traces, load_trace
 from pibr.common.traces.synthesis import synthesize
+from pibr.protocol.pose import quat_angle, quat_from_axis_angle, quat_normalize, quat_rotate, quat_to_matrix
+from pibr.protocol.trace import HeadTrace, yaw_pitch
+
+from ..protocol.pose_reference import left_handed_to_right_handed
 
 PRED6DOF_HEADER = "timestamp,x,y,z,qx,qy,qz,qw"
 

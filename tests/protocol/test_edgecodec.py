@@ -23,6 +23,8 @@ from pibr.protocol.edgecodec.regular import nearest_index, sample_positions
 from pibr.protocol.errors import CodecError
 from pibr.protocol.pose import Pose, quat_from_axis_angle
 
+from . import arith_reference as arith_ref
+from . import edgecodec_reference
 from .codec_fuzz import decode_or_codec_error
 from .golden_edge import (GOLDEN_DIR, cluttered_codes, HEIGHT, NAMES, POSE, QUANTIZER, WIDTH, golden_payload, piecewise_planar,
                           piecewise_planar_codes)
@@ -41,21 +43,21 @@ def _random_ops(seed: int, n: int):
     kinds = rng.choice(4, size=n, p=[0.6, 0.1, 0.15, 0.15])
     bit_ctx = rng.integers(0, 40, n)
     slot = rng.integers(0, n_slots, n) * arith.INT_SLOT + 40
-    ctxs = np.where(kinds == arith.OP_BIT, bit_ctx, slot)
+    ctxs = np.where(kinds == arith_ref.OP_BIT, bit_ctx, slot)
     skew = rng.random(n) < rng.choice([0.02, 0.3, 0.5], n)
     mags = np.minimum(rng.geometric(rng.choice([0.5, 0.05, 0.001], n)) - 1, (1 << (arith.KMAX + 1)) - 2)
-    values = np.where(kinds <= arith.OP_RAW, skew.astype(np.int64), mags)
-    values = np.where(kinds == arith.OP_SINT, values * rng.choice([-1, 1], n), values)
+    values = np.where(kinds <= arith_ref.OP_RAW, skew.astype(np.int64), mags)
+    values = np.where(kinds == arith_ref.OP_SINT, values * rng.choice([-1, 1], n), values)
     return kinds, ctxs, values, 40 + n_slots * arith.INT_SLOT
 
 
 @pytest.mark.parametrize("seed", range(6))
 def test_reference_and_numba_coders_give_identical_bytes(seed):
     kinds, ctxs, values, n_ctx = _random_ops(seed, 3000 + 1000 * seed)
-    ref = arith.encode_ops_python(kinds, ctxs, values, n_ctx)
-    fast = arith.encode_ops_numba(kinds, ctxs, values, n_ctx)
+    ref = arith_ref.encode_ops_python(kinds, ctxs, values, n_ctx)
+    fast = arith_ref.encode_ops_numba(kinds, ctxs, values, n_ctx)
     assert ref == fast
-    for decode in (arith.decode_ops_python, arith.decode_ops_numba):
+    for decode in (arith_ref.decode_ops_python, arith_ref.decode_ops_numba):
         out, ok = decode(ref, kinds, ctxs, n_ctx)
         assert ok
         np.testing.assert_array_equal(out, values)
@@ -64,11 +66,11 @@ def test_reference_and_numba_coders_give_identical_bytes(seed):
 def test_integer_extremes_round_trip():
     top = (1 << (arith.KMAX + 1)) - 1
     values = np.array([0, 1, 2, top - 1, top, 0, -top, top, -1, 1 << 16, -(1 << 16)], dtype=np.int64)
-    kinds = np.where(values < 0, arith.OP_SINT, np.array([arith.OP_UINT, arith.OP_SINT] * 6)[:len(values)])
+    kinds = np.where(values < 0, arith_ref.OP_SINT, np.array([arith_ref.OP_UINT, arith_ref.OP_SINT] * 6)[:len(values)])
     ctxs = np.zeros(len(values), dtype=np.int64)
-    data = arith.encode_ops_numba(kinds, ctxs, values, arith.INT_SLOT)
-    assert data == arith.encode_ops_python(kinds, ctxs, values, arith.INT_SLOT)
-    out, ok = arith.decode_ops_numba(data, kinds, ctxs, arith.INT_SLOT)
+    data = arith_ref.encode_ops_numba(kinds, ctxs, values, arith.INT_SLOT)
+    assert data == arith_ref.encode_ops_python(kinds, ctxs, values, arith.INT_SLOT)
+    out, ok = arith_ref.decode_ops_numba(data, kinds, ctxs, arith.INT_SLOT)
     assert ok
     np.testing.assert_array_equal(out, values)
 
@@ -79,13 +81,13 @@ def test_long_runs_drive_probabilities_to_their_limits():
     for fill in (0, 1):
         bits = np.full(n, fill, dtype=np.uint8)
         bits[n // 2] = 1 - fill  # one surprise at the floor probability, then the run goes on
-        data = arith.encode_bits_numba(bits, ctxs, 1)
+        data = arith_ref.encode_bits_numba(bits, ctxs, 1)
         assert len(data) < 40  # ~1e-4 bit per certain symbol, ~15 bits for the surprise
-        out, ok = arith.decode_bits_numba(data, ctxs, 1)
+        out, ok = arith_ref.decode_bits_numba(data, ctxs, 1)
         assert ok
         np.testing.assert_array_equal(out, bits)
     short = np.zeros(20000, dtype=np.uint8)
-    assert arith.encode_bits_python(short, ctxs[:20000], 1) == arith.encode_bits_numba(short, ctxs[:20000], 1)
+    assert arith_ref.encode_bits_python(short, ctxs[:20000], 1) == arith_ref.encode_bits_numba(short, ctxs[:20000], 1)
 
 
 def test_models_with_priors_agree():
@@ -93,16 +95,17 @@ def test_models_with_priors_agree():
     prior = rng.random(16)
     bits = (rng.random(5000) < 0.2).astype(np.uint8)
     ctxs = rng.integers(0, 16, 5000)
-    enc, model = arith.RangeEncoder(), arith.AdaptiveBitModel.from_state(arith.new_model(16, prior, 3))
+    enc, model = arith_ref.RangeEncoder(), arith_ref.AdaptiveBitModel.from_state(arith.new_model(16, prior, 3))
     for b, c in zip(bits.tolist(), ctxs.tolist()):
-        arith.encode_bit(enc, model, c, b)
+        arith_ref.encode_bit(enc, model, c, b)
     buf = np.zeros(4096, np.uint8)
-    es = arith._encode_bits_kernel(buf, arith.new_model(16, prior, 3), arith.RATE_SHIFT, bits, ctxs.astype(np.int64))
+    es = arith_ref._encode_bits_kernel(buf, arith.new_model(16, prior, 3), arith.RATE_SHIFT, bits,
+                                       ctxs.astype(np.int64))
     assert enc.finish() == arith.encoder_bytes(es, buf)
 
 
 def test_model_probability_stays_within_coder_range():
-    m = arith.AdaptiveBitModel(2)
+    m = arith_ref.AdaptiveBitModel(2)
     for _ in range(5000):
         m.update(0, 1)
         m.update(1, 0)
@@ -111,19 +114,19 @@ def test_model_probability_stays_within_coder_range():
 
 
 def test_empty_stream_is_empty_and_decodes():
-    assert arith.encode_ops_python(np.zeros(0, int), np.zeros(0, int), np.zeros(0, int), 1) == b""
-    out, ok = arith.decode_ops_numba(b"", np.zeros(0, int), np.zeros(0, int), 1)
+    assert arith_ref.encode_ops_python(np.zeros(0, int), np.zeros(0, int), np.zeros(0, int), 1) == b""
+    out, ok = arith_ref.decode_ops_numba(b"", np.zeros(0, int), np.zeros(0, int), 1)
     assert ok and len(out) == 0
 
 
 @FUZZ
 @given(st.binary(max_size=64))
 def test_decoder_on_random_bytes_is_bounded(data):
-    kinds = np.full(500, arith.OP_SINT)
+    kinds = np.full(500, arith_ref.OP_SINT)
     ctxs = np.zeros(500, dtype=np.int64)
-    out, ok = arith.decode_ops_numba(data, kinds, ctxs, arith.INT_SLOT)
+    out, ok = arith_ref.decode_ops_numba(data, kinds, ctxs, arith.INT_SLOT)
     assert np.all(np.abs(out) < (1 << (arith.KMAX + 1)))
-    ref, ok_ref = arith.decode_ops_python(data, kinds, ctxs, arith.INT_SLOT)
+    ref, ok_ref = arith_ref.decode_ops_python(data, kinds, ctxs, arith.INT_SLOT)
     np.testing.assert_array_equal(out, ref)
     assert ok == ok_ref
 
@@ -193,22 +196,23 @@ def _hand_coded_edge_image(h, w, occ, pixel_on):
     from pibr.protocol.edgecodec import edges as edge_module
 
     tctx = temporal_context(None, h, w)
-    model = arith.AdaptiveBitModel.from_state(edge_module._model(True))
-    enc = arith.RangeEncoder()
+    model = arith_ref.AdaptiveBitModel.from_state(edge_module._model(True))
+    enc = arith_ref.RangeEncoder()
     tmax = np.zeros(occ.shape, np.uint8)  # the largest temporal context per block
     edge_module.block_maps(tctx, tctx, h, w, 3, None, tmax)
     for by in range(occ.shape[0]):
         for bx in range(occ.shape[1]):
             c = edge_module._block_ctx(occ, tmax, by, bx, edge_module._occ_offset(True))
-            arith.encode_bit(enc, model, c, int(occ[by, bx]))
+            arith_ref.encode_bit(enc, model, c, int(occ[by, bx]))
     pad = edge_module.PAD
     img = np.zeros((h + 2 * pad, w + 2 * pad), np.uint8)
-    for phase, (py, px) in enumerate(edge_module.PASS_PHASES):
+    for phase, (py, px) in enumerate(edgecodec_reference.PASS_PHASES):
         for y in range(py, h, 2):
             for x in range(px, w, 2):
                 if occ[y >> 3, x >> 3]:
                     bit = int((y, x) == pixel_on)
-                    arith.encode_bit(enc, model, edge_module._ctx_pass(img, tctx, phase, pad + y, pad + x, True), bit)
+                    c = edgecodec_reference.ctx_pass(img, tctx, phase, pad + y, pad + x, True)
+                    arith_ref.encode_bit(enc, model, c, bit)
                     img[pad + y, pad + x] = bit
     return enc.finish()
 
@@ -629,7 +633,7 @@ def test_compiled_temporal_helpers_and_assembly_match_numpy(shape):
 
 @pytest.mark.parametrize("shape", [(1, 1), (1, 2), (2, 1), (1, 6), (6, 1), (2, 2), (2, 9), (3, 3), (3, 8), (9, 4), (31, 47)])
 def test_compiled_laplacian_matches_its_numpy_definition(shape):
-    from pibr.protocol.edgecodec.codec import laplacian_numpy
+    from .edgecodec_reference import laplacian_numpy
 
     rng = np.random.default_rng(shape[0] * 31 + shape[1])
     y, x = np.indices(shape)
@@ -660,7 +664,7 @@ def test_compiled_warp_matches_its_numpy_definition(min_code):
                         quat_from_axis_angle(rng.normal(size=3), rng.uniform(-3, 3)))
         for a, b in ((prev, cur), (prev, prev)):
             got = warp_samples(s, a, b, q)
-            want = codec_module.warp_samples_numpy(s, a, b, q)
+            want = edgecodec_reference.warp_samples_numpy(s, a, b, q)
             np.testing.assert_array_equal(got.values, want.values)
             np.testing.assert_array_equal(got.edges, want.edges)
         assert got.values.dtype == np.int32

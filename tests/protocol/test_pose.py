@@ -4,9 +4,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from pibr.protocol.errors import InvalidPose
-from pibr.protocol.pose import (Pose, left_handed_to_right_handed, quat_from_axis_angle, quat_from_euler,
-                                quat_from_matrix, quat_multiply, quat_normalize, quat_rotate, quat_slerp,
-                                quat_to_matrix)
+from pibr.protocol.pose import (Pose, quat_from_axis_angle, quat_from_euler, quat_from_matrix, quat_multiply,
+                                quat_normalize, quat_rotate, quat_slerp, quat_to_matrix)
+
+from .pose_reference import left_handed_to_right_handed
 
 quats = st.lists(st.floats(-1, 1), min_size=4, max_size=4).filter(lambda q: np.linalg.norm(q) > 1e-3)
 
