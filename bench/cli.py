@@ -7,6 +7,7 @@ import argparse
 from pibr.client.cli import parse_methods
 from pibr.common import arguments
 from pibr.protocol.depth_codecs import DEPTH_CODECS
+from pibr.protocol.motion_flow import FLOW_CODERS
 
 #: The benchmarks' primary view (bench/simulation.py BENCH_VIEW_SIZE, repeated here so that
 #: ``pibr --help`` needs no GL or codec import; a test keeps them equal).
@@ -339,7 +340,7 @@ def register(sub) -> None:
                                     "1024x1024)")
     _output_size(dy, (480, 270))
     dy.add_argument("--depth-codec", choices=tuple(DEPTH_CODECS), default="h264")
-    dy.add_argument("--flow-coder", choices=("blocks", "edges"), default=None,
+    dy.add_argument("--flow-coder", choices=tuple(FLOW_CODERS), default=None,
                     help="the motion flow the flow methods receive (default: the server's); both are measured")
     _out(dy)
     dy.set_defaults(func=_command("cmd_bench_dynamic"))

@@ -386,8 +386,8 @@ class ProxyTarget(Target):
         from pibr.protocol.framing import encode_frame
         from pibr.protocol.messages import ProxyChunk
         from pibr.protocol.proxy import BundleInfo, ProxyObject, compress_bundle, encode_bundle, split_chunks
-        from pibr.scenes.description import box_mesh
         from pibr.scenes.lod import simplify_encaging
+        from pibr.scenes.primitives import box as box_mesh
         from pibr.scenes.registry import load_scene
 
         objects = []

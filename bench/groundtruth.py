@@ -14,7 +14,8 @@ class GroundTruth:
 
     def __init__(self, scene, width: int, height: int, fov_deg: float, ctx=None):
         from pibr.common.gl import create_context
-        from pibr.server.renderer import Renderer, RenderTarget
+        from pibr.server.render_target import RenderTarget
+        from pibr.server.renderer import Renderer
 
         self._own_ctx = ctx is None
         self.ctx = create_context() if ctx is None else ctx

@@ -33,7 +33,7 @@ def measure_motion(scene, windows, modes=MODES, latency_ms: float = 128.0, rate_
     -> {"modes": {mode: {dssim_mean, psnr_mean, moving_dssim_mean, moving_psnr_mean,
     moving_frames, frames, ms_median, per_window: {label: {...}}}}, "series": {mode: [[t, dssim,
     moving dssim or None], ...] per window label}, ...}."""
-    from pibr.server.renderer import RenderTarget
+    from pibr.server.render_target import RenderTarget
 
     from .simulation import Simulation, bench_server_config, load_proxies
 

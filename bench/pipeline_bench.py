@@ -59,7 +59,8 @@ def bench_server(scene_spec="room", trace="pred6dof-1", frames=40, view_size=BEN
     from pibr.common.gl import create_context
     from pibr.scenes.registry import load_scene
     from pibr.server.pipeline import SessionPipeline
-    from pibr.server.renderer import MAX_EDGE_ANGLE_DEG, RenderTarget, Renderer
+    from pibr.server.render_target import RenderTarget
+    from pibr.server.renderer import MAX_EDGE_ANGLE_DEG, Renderer
 
     from .metrics import psnr
 

@@ -100,7 +100,7 @@ class Simulation:
         from pibr.common.gl import create_context
         from pibr.protocol.depth_codecs import DEPTH_CODECS
         from pibr.server.pipeline import SessionPipeline
-        from pibr.server.renderer import RenderTarget
+        from pibr.server.render_target import RenderTarget
 
         server = server if server is not None else bench_server_config()
         if depth_streams is not None and DEPTH_CODECS[server.depth_codec].in_atlas:

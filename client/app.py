@@ -33,18 +33,18 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
+from pibr.common.gl import GLThread
 from pibr.protocol.depth_codecs import DEPTH_CODECS
 from pibr.protocol.errors import ConfigError, MalformedMessage, UnexpectedMessage
-from pibr.common.gl import GLThread
-from pibr.protocol.messages import (FRAMES_DECODED, MAX_BANDWIDTH_KBPS, Clock, Frame, Hello, OutputConfig,
-                                    PayloadKind, PoseMsg, ProxyChunk, Stats)
+from pibr.protocol.messages import (FRAMES_DECODED, Clock, Frame, Hello, OutputConfig, PayloadKind, PoseMsg,
+                                    ProxyChunk, Stats)
 from pibr.protocol.pose import Pose
-from pibr.protocol.tls import ClientTLS
 
+from .config import ClientConfig
 from .connection import ClientConnection
 from .depth_decoders import make_depth_decoder
 from .frame_textures import FrameTextures
-from .methods import make_method, method_names, needs_proxies, quadtree_threshold
+from .methods import make_method, needs_proxies, quadtree_threshold
 from .recorder import POSE_FIELDS, MethodRecorder
 from .video import H264Decoder
 
@@ -52,80 +52,6 @@ log = logging.getLogger(__name__)
 
 #: Sequence number of the poses a real-clock client sends while it warms up, before its clock.
 WARMUP_SEQ = (1 << 32) - 1
-
-
-@dataclass
-class ClientConfig:
-    host: str = "127.0.0.1"
-    port: int = 7451
-    trace: str = "pred6dof-1"
-    rate_hz: float = 60.0
-    clock: str = "virtual"
-    methods: tuple = ("rotation",)
-    out_dir: str = "out"
-    width: int = 960
-    height: int = 540
-    fov_deg: float = 90.0
-    start_s: float = 0.0
-    duration_s: float | None = None
-    anchor: str = "start"    # how the trace window is placed in the scene (pibr.common.traces.placement)
-    preroll_s: float = 0.5
-    scene: str = ""
-    depth_codec: str = ""
-    bandwidth_kbps: float = 0.0   # stated to the server in the Hello (0: not stated)
-    record: bool = True
-    lossless: bool = True
-    video: bool = True       # False: records only (no MP4 / lossless copy), the least work per tick
-    warmup_s: float = 60.0   # real clock: longest wait for the first frame before the clock starts
-    receive_timeout_s: float = 30.0  # longest silence from the server while waiting for it
-    progress: str = "bar"    # bar, lines (machine-readable on stdout), none
-    tau: float = 0.1         # proxy IBR: relative depth error accepted as the same surface
-    lod_pixels: float = 6.0  # proxy IBR: on-screen edge length that selects an object's LoD
-    lod_level: str | None = None  # proxy IBR: force original, proxy or box for every object
-    options: dict = field(default_factory=dict)  # other methods' knobs (client/cli.py METHOD_KNOBS)
-    token: str | None = field(default=None, repr=False)  # the server's (or relay's) access token; never recorded
-    tls: ClientTLS | None = None                 # connect with TLS, verifying the server this way
-
-    def __post_init__(self):
-        if self.clock not in ("virtual", "real"):
-            raise ConfigError(f"clock must be virtual or real, got {self.clock!r}")
-        if not self.methods:
-            raise ConfigError("name at least one method")
-        for m in self.methods:
-            if m not in method_names():
-                raise ConfigError(f"unknown method {m!r}; choose from {', '.join(method_names())}")
-        if len(set(self.methods)) != len(self.methods):
-            raise ConfigError("a method is named twice")
-        if not (1 <= self.rate_hz <= 1000):
-            raise ConfigError(f"output rate must be in 1..1000 Hz, got {self.rate_hz}")
-        if self.duration_s is not None and self.duration_s <= 0:
-            raise ConfigError(f"duration must be positive, got {self.duration_s}")
-        if not (0 <= self.bandwidth_kbps <= MAX_BANDWIDTH_KBPS):
-            raise ConfigError(f"bandwidth must be in 0..{MAX_BANDWIDTH_KBPS:g} kbit/s (0: not stated), "
-                              f"got {self.bandwidth_kbps}")
-        from pibr.common.traces.placement import ANCHORS
-
-        if self.anchor not in ANCHORS:
-            raise ConfigError(f"anchor must be one of {', '.join(ANCHORS)}, got {self.anchor!r}")
-        if not (0 < self.receive_timeout_s <= 86400):
-            raise ConfigError(f"receive timeout must be in (0, 86400] s, got {self.receive_timeout_s}")
-        if self.preroll_s < 0:
-            raise ConfigError("preroll must be >= 0")
-        if not (0 < self.tau < 10):
-            raise ConfigError(f"tau must be in (0, 10), got {self.tau}")
-        if not (self.lod_pixels > 0):
-            raise ConfigError(f"LoD pixel target must be positive, got {self.lod_pixels}")
-        if self.lod_level not in (None, "original", "proxy", "box"):
-            raise ConfigError(f"LoD level must be original, proxy or box, got {self.lod_level!r}")
-        if self.progress not in ("bar", "lines", "none"):
-            raise ConfigError(f"progress must be bar, lines or none, got {self.progress!r}")
-        OutputConfig(self.width, self.height, self.fov_deg, self.rate_hz)
-        if self.token is not None:
-            from pibr.protocol.access import check_token_text
-
-            check_token_text(self.token)
-        if not (16 <= self.width <= 8192 and 16 <= self.height <= 8192 and 1 <= self.fov_deg <= 170):
-            raise ConfigError(f"output {self.width}x{self.height} at {self.fov_deg} degrees is out of range")
 
 
 def _check_atlas(session) -> None:

@@ -143,12 +143,13 @@ def method_knobs(args) -> dict:
 def cmd_client(args) -> int:
     from pibr.protocol.access import resolve_token
 
-    from .app import ClientConfig, run_client
+    from .app import run_client
+    from .config import ClientConfig
 
     host, port = parse_host_port(args.connect)
     tls = None
     if args.tls_ca is not None or args.tls_pin is not None:
-        from pibr.protocol.tls import ClientTLS
+        from pibr.common.tls import ClientTLS
 
         tls = ClientTLS(args.tls_ca, args.tls_pin)
     cfg = arguments.config_from_args(

@@ -14,7 +14,7 @@ from pibr.protocol.errors import AccessDenied, PeerTimeout, RemoteError, TLSErro
 from pibr.protocol.framing import DEFAULT_MAX_MESSAGE_SIZE
 from pibr.protocol.messages import Bye, Error, Hello, Message, Welcome
 from pibr.protocol.session import SessionConfig
-from pibr.protocol.tls import ClientTLS, open_connection
+from pibr.common.tls import ClientTLS, open_connection
 
 log = logging.getLogger(__name__)
 

@@ -27,16 +27,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .edgecodec.flow import FlowSamples, decode_flow_edges, encode_flow_edges
-from .edgecodec.motion import decode_motion, encode_motion
 from .errors import CodecError
 
 _HEAD = struct.Struct("<BHH")
 HEAD_BYTES = _HEAD.size
-FLOW_CODERS = ("blocks", "edges")
-DEFAULT_FLOW_CODER = "blocks"
-_IDS = {"blocks": 1, "edges": 2}
-_NONE = 0
+_NONE = 0   # the head's coder byte when nothing moves in the view
 
 
 @dataclass
@@ -49,7 +44,60 @@ class DecodedFlow:
     width: int
     height: int
     dense: tuple | None = None
-    samples: FlowSamples | None = None
+    samples: object = None   # edgecodec.flow.FlowSamples
+
+
+# The coders' kernels are compiled (numba) and imported when a coder runs, so that naming the
+# coders (command lines, settings) costs nothing.
+
+def _encode_blocks(flow, moving, scale, decoded, **options) -> tuple[bytes, dict]:
+    from .edgecodec.motion import encode_motion
+
+    section, dense, mov = encode_motion(flow, moving, scale, decoded=decoded, **options)   # reads moving pixels only
+    return section, {"dense": (dense, mov)}
+
+
+def _decode_blocks(section, w: int, h: int) -> dict:
+    from .edgecodec.motion import decode_motion
+
+    try:
+        return {"dense": decode_motion(section, h, w)}
+    except CodecError as exc:   # the block coder's messages name the edge codec it lives in
+        raise CodecError(f"motion flow: {exc}".replace("edge codec: ", "")) from None
+
+
+def _encode_edges(flow, moving, scale, decoded, **options) -> tuple[bytes, dict]:
+    from .edgecodec.flow import encode_flow_edges
+
+    flow = np.where(moving[..., None], np.nan_to_num(np.asarray(flow, dtype=np.float64)), 0.0)
+    section, samples = encode_flow_edges(flow, moving, scale, **options)
+    return section, {"samples": samples}
+
+
+def _decode_edges(section, w: int, h: int) -> dict:
+    from .edgecodec.flow import decode_flow_edges
+
+    return {"samples": decode_flow_edges(section, h, w)}
+
+
+@dataclass(frozen=True)
+class FlowCoder:
+    """One way the flow travels: its ``id`` in the payload's head, ``encode(flow, moving, scale,
+    decoded, **options) -> (section, DecodedFlow fields)`` and ``decode(section, w, h) -> fields``."""
+
+    name: str
+    id: int
+    encode: object
+    decode: object
+
+
+#: The flow coders by name (``pibr serve --flow-coder``).
+FLOW_CODERS: dict[str, FlowCoder] = {c.name: c for c in (
+    FlowCoder("blocks", 1, _encode_blocks, _decode_blocks),
+    FlowCoder("edges", 2, _encode_edges, _decode_edges),
+)}
+DEFAULT_FLOW_CODER = "blocks"
+_BY_ID = {c.id: c for c in FLOW_CODERS.values()}
 
 
 def encode_motion_flow(flow, moving, coder: str = DEFAULT_FLOW_CODER, scale: int = 8, decoded: bool = True,
@@ -60,7 +108,7 @@ def encode_motion_flow(flow, moving, coder: str = DEFAULT_FLOW_CODER, scale: int
     options go to the coder (``blocks``: block_log2; ``edges``: threshold, spacing_log2, q)."""
     moving = np.asarray(moving, dtype=bool)
     h, w = moving.shape
-    if coder not in _IDS:
+    if coder not in FLOW_CODERS:
         raise ValueError(f"unknown flow coder {coder!r}; choose from {', '.join(FLOW_CODERS)}")
     if not (1 <= w <= 0xFFFF and 1 <= h <= 0xFFFF):
         raise ValueError(f"view size {w}x{h} outside 1..65535")
@@ -69,12 +117,9 @@ def encode_motion_flow(flow, moving, coder: str = DEFAULT_FLOW_CODER, scale: int
         raise ValueError(f"flow must have shape ({h}, {w}, 2), got {flow.shape}")
     if not moving.any():
         return _HEAD.pack(_NONE, w, h), _still(w, h) if decoded else None
-    if coder == "blocks":   # reads the flow of moving pixels only
-        section, dense, mov = encode_motion(flow, moving, scale, decoded=decoded, **options)
-        return _HEAD.pack(_IDS[coder], w, h) + section, DecodedFlow(coder, w, h, dense=(dense, mov)) if decoded else None
-    flow = np.where(moving[..., None], np.nan_to_num(np.asarray(flow, dtype=np.float64)), 0.0)
-    section, samples = encode_flow_edges(flow, moving, scale, **options)
-    return _HEAD.pack(_IDS[coder], w, h) + section, DecodedFlow(coder, w, h, samples=samples) if decoded else None
+    spec = FLOW_CODERS[coder]
+    section, fields = spec.encode(flow, moving, scale, decoded, **options)
+    return _HEAD.pack(spec.id, w, h) + section, DecodedFlow(coder, w, h, **fields) if decoded else None
 
 
 def _still(w, h) -> DecodedFlow:
@@ -96,12 +141,7 @@ def decode_motion_flow(payload, width: int, height: int) -> DecodedFlow:
         if len(section):
             raise CodecError(f"motion flow: {len(section)} bytes after a head that says nothing moves")
         return _still(w, h)
-    if coder == _IDS["blocks"]:
-        try:
-            flow, moving = decode_motion(section, h, w)
-        except CodecError as exc:   # the block coder's messages name the edge codec it lives in
-            raise CodecError(f"motion flow: {exc}".replace("edge codec: ", "")) from None
-        return DecodedFlow("blocks", w, h, dense=(flow, moving))
-    if coder == _IDS["edges"]:
-        return DecodedFlow("edges", w, h, samples=decode_flow_edges(section, h, w))
-    raise CodecError(f"motion flow: unknown coder {coder}")
+    if coder not in _BY_ID:
+        raise CodecError(f"motion flow: unknown coder {coder}")
+    spec = _BY_ID[coder]
+    return DecodedFlow(spec.name, w, h, **spec.decode(section, w, h))

@@ -61,16 +61,25 @@ class ProxyObject:
     proxy: tuple
 
     def box_mesh(self) -> tuple:
-        """The bounding box as (8, 3) vertices and (12, 3) outward-wound faces."""
-        lo, hi = self.bounds
-        v = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])],
-                     np.float32)
-        f = np.array([[0, 1, 3], [0, 3, 2], [4, 6, 7], [4, 7, 5], [0, 4, 5], [0, 5, 1],
-                      [2, 3, 7], [2, 7, 6], [0, 2, 6], [0, 6, 4], [1, 5, 7], [1, 7, 3]], np.uint32)
-        return v, f
+        """The bounding box as (8, 3) vertices and (12, 3) outward-wound faces (:func:`closed_box`)."""
+        return closed_box(*self.bounds)
 
     def level(self, name: str) -> tuple:
         return {"original": self.original, "proxy": self.proxy}.get(name) or self.box_mesh()
+
+
+def closed_box(lo, hi) -> tuple:
+    """The axis-aligned box from corner ``lo`` (3,) to ``hi`` (3,) as a proxy's box level: (8, 3)
+    float32 vertices shared by its sides (vertex index 4 * (x is hi) + 2 * (y is hi) + (z is hi))
+    and (12, 3) uint32 faces wound counter-clockwise seen from outside, so it bounds a volume."""
+    v = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])], np.float32)
+    f = np.array([[0, 1, 3], [0, 3, 2],      # -X
+                  [4, 6, 7], [4, 7, 5],      # +X
+                  [0, 4, 5], [0, 5, 1],      # -Y
+                  [2, 3, 7], [2, 7, 6],      # +Y
+                  [0, 2, 6], [0, 6, 4],      # -Z
+                  [1, 5, 7], [1, 7, 3]], np.uint32)     # +Z
+    return v, f
 
 
 def is_closed(faces: np.ndarray) -> bool:

@@ -115,6 +115,7 @@ from pibr.protocol.pose import Pose, quat_from_axis_angle, quat_from_euler, quat
 from pibr.protocol.proxy import MAX_OBJECTS
 from pibr.protocol.session import FAR_RANGE, NEAR_RANGE
 
+from .primitives import box
 from .scene import Animation, Light, Material, Mesh, Scene, SceneObject
 
 DESCRIPTION_SUFFIXES = (".toml", ".json")
@@ -509,7 +510,7 @@ class _Builder:
             size = np.array(self.vector(t.get("size", (1.0,) * n), f"{key}.size", n))
             if np.any(size < MIN_POSITIVE):
                 self.fail(f"{key}.size", f"must be positive (at least {MIN_POSITIVE:g}), got {_show(t['size'])}")
-            mesh = box_mesh(size * scale) if kind == "box" else plane_mesh(size * scale[[0, 2]])
+            mesh = box(size * scale) if kind == "box" else plane_mesh(size * scale[[0, 2]])
         else:
             radius = self.number(t.get("radius", 0.5), f"{key}.radius", positive=True)
             segments = self.integer(t.get("segments", 32), f"{key}.segments", 3, MAX_SEGMENTS)
@@ -584,29 +585,6 @@ def _orient(vertices, faces, normals) -> np.ndarray:
     faces = faces.copy()
     faces[along < 0] = faces[along < 0][:, [0, 2, 1]]
     return faces
-
-
-def box_mesh(size) -> Mesh:
-    """Axis-aligned box of ``size`` (3,) metres: 24 vertices (flat normals per side), 12 triangles."""
-    half = np.asarray(size, dtype=np.float64) / 2
-    verts, norms, uvs, faces = [], [], [], []
-    for axis in range(3):
-        for sign in (-1.0, 1.0):
-            n = np.zeros(3)
-            n[axis] = sign
-            a, b = [k for k in range(3) if k != axis]
-            base = len(verts)
-            for u, w in ((0, 0), (1, 0), (1, 1), (0, 1)):
-                p = np.zeros(3)
-                p[axis] = sign * half[axis]
-                p[a] = (2 * u - 1) * half[a]
-                p[b] = (2 * w - 1) * half[b]
-                verts.append(p)
-                norms.append(n)
-                uvs.append((u, w))
-            faces += [(base, base + 1, base + 2), (base, base + 2, base + 3)]
-    v, n, f = np.array(verts), np.array(norms), np.array(faces)
-    return Mesh(v, _orient(v, f, n), n, np.array(uvs, dtype=np.float64))
 
 
 def plane_mesh(size) -> Mesh:

@@ -43,7 +43,7 @@ from typing import Callable
 import numpy as np
 
 from pibr.protocol.errors import SceneError
-from pibr.protocol.proxy import is_closed, signed_volume
+from pibr.protocol.proxy import closed_box, is_closed, signed_volume
 
 from .mesh_queries import closest_points_on_mesh, winding_numbers
 from .scene import Mesh
@@ -111,23 +111,15 @@ class LodResult:
 # ----------------------------------------------------------------------------- geometry helpers
 
 def box_mesh(lo, hi, min_extent: float = 0.0) -> Mesh:
-    """Axis-aligned box from corners (3,) ``lo`` to ``hi`` as 8 vertices and 12 outward triangles.
+    """The proxy's box level (protocol/proxy.py :func:`closed_box`, as the client builds it from
+    the bounds) from corners (3,) ``lo`` to ``hi``: 8 vertices and 12 outward triangles.
 
     Sides shorter than ``min_extent`` are widened about their centre, so a flat object's box
     still has a (thin) inside.
     """
     lo, hi = np.asarray(lo, dtype=np.float64), np.asarray(hi, dtype=np.float64)
     centre, half = (lo + hi) / 2, np.maximum((hi - lo) / 2, min_extent / 2)
-    lo, hi = centre - half, centre + half
-    v = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
-    # vertex index = 4 * (x is hi) + 2 * (y is hi) + (z is hi)
-    faces = np.array([[0, 1, 3], [0, 3, 2],      # -X
-                      [4, 6, 7], [4, 7, 5],      # +X
-                      [0, 4, 5], [0, 5, 1],      # -Y
-                      [2, 3, 7], [2, 7, 6],      # +Y
-                      [0, 2, 6], [0, 6, 4],      # -Z
-                      [1, 5, 7], [1, 7, 3]])     # +Z
-    return Mesh(v.astype(np.float32), faces.astype(np.uint32))
+    return Mesh(*closed_box(centre - half, centre + half))
 
 
 def is_watertight(faces: np.ndarray) -> bool:

@@ -62,7 +62,7 @@ class Server(TrackedListener):
         await self.get_coverage(scene)
         tls = None
         if self.config.tls_cert is not None:
-            from pibr.protocol.tls import certificate_fingerprint, server_context
+            from pibr.common.tls import certificate_fingerprint, server_context
 
             tls = server_context(self.config.tls_cert, self.config.tls_key)
             log.info("pibr server: TLS certificate sha256 %s", certificate_fingerprint(self.config.tls_cert))

@@ -45,7 +45,7 @@ def _token(args):
 
 def _print_fingerprint(command: str, cert_file: str | None) -> None:
     if cert_file is not None:
-        from pibr.protocol.tls import certificate_fingerprint
+        from pibr.common.tls import certificate_fingerprint
 
         fp = certificate_fingerprint(cert_file)
         print(f"pibr {command}: TLS certificate sha256 {fp} (clients may pin it: --tls-pin {fp})", flush=True)
@@ -104,7 +104,7 @@ def register(sub) -> None:
     p.add_argument("--edge-perceptual", action="store_true",
                    help="edge codec: weight edges by their visibility in the colour (contrast transducer)")
     p.add_argument("--edge-no-temporal", action="store_true", help="edge codec: no temporal context")
-    p.add_argument("--flow-coder", choices=FLOW_CODERS, default=DEFAULT_FLOW_CODER,
+    p.add_argument("--flow-coder", choices=tuple(FLOW_CODERS), default=DEFAULT_FLOW_CODER,
                    help="motion flow of scenes that move: the moving mask and 8x8 block means (blocks), or "
                         "Pajak et al.'s edge samples diffused on the client (edges) ('pibr bench dynamic' "
                         f"measures both; default {DEFAULT_FLOW_CODER})")
@@ -191,7 +191,7 @@ def cmd_relay(args) -> int:
         raise ConfigError(str(exc)) from None
     upstream_tls = None
     if args.upstream_tls_ca is not None or args.upstream_tls_pin is not None:
-        from pibr.protocol.tls import ClientTLS
+        from pibr.common.tls import ClientTLS
 
         upstream_tls = ClientTLS(args.upstream_tls_ca, args.upstream_tls_pin)
     if not 1 <= args.buffer_mib <= 1 << 20:

@@ -111,7 +111,7 @@ class ServerConfig:
         if not (1 <= self.max_in_flight <= 1000):
             raise ConfigError(f"frames in flight must be in 1..1000, got {self.max_in_flight}")
         check_listen_access("server", self.host, self.token)
-        from pibr.protocol.tls import check_server_files
+        from pibr.common.tls import check_server_files
 
         check_server_files(self.tls_cert, self.tls_key, "server")
         if not (0 <= self.edge.kbps <= 1e6):

@@ -105,7 +105,8 @@ class CoverageProbe:
         """``renderer``: a :class:`~pibr.server.renderer.Renderer` of ``scene`` on ``ctx`` to share (the
         server's); it stays its owner's to release. None: the probe makes its own."""
         from pibr.common.gl import create_context
-        from pibr.server.renderer import PEEL_TOLERANCE, RenderTarget, Renderer
+        from pibr.server.render_target import RenderTarget
+        from pibr.server.renderer import PEEL_TOLERANCE, Renderer
 
         self._own = ctx is None
         self.ctx = create_context() if ctx is None else ctx

@@ -20,7 +20,8 @@ from pibr.protocol.pose import Pose
 
 from .object_poses import object_poses_payload
 from .packer import AtlasPacker, CpuAtlasPacker
-from .renderer import PEEL_TOLERANCE, RenderTarget, Renderer, edge_angle_for_width
+from .render_target import RenderTarget
+from .renderer import PEEL_TOLERANCE, Renderer, edge_angle_for_width
 
 
 @dataclass

@@ -49,7 +49,7 @@ from pibr.protocol.errors import AccessDenied, ConfigError, ProtocolError, TLSEr
 from pibr.protocol.framing import DEFAULT_MAX_MESSAGE_SIZE, HEADER_SIZE, FrameReader, RawFrame, encode_frame
 from pibr.common.link import LinkModel, LinkParams
 from pibr.protocol.messages import Clock, Error, Hello, ProxyChunk, Welcome, parse_message
-from pibr.protocol.tls import ClientTLS, check_server_files
+from pibr.common.tls import ClientTLS, check_server_files
 
 from .byte_queue import ByteBudgetQueue
 from .listener import TrackedListener
@@ -142,7 +142,7 @@ class _Pair:
         self.clock = self.hello.clock
         up_seed, down_seed = link_seeds(cfg.seed, self.hello)
         self.up_model, self.down_model = LinkModel(cfg.up, seed=up_seed), LinkModel(cfg.down, seed=down_seed)
-        from pibr.protocol.tls import open_connection
+        from pibr.common.tls import open_connection
 
         try:
             s_reader, s_writer = await open_connection(*cfg.upstream, cfg.upstream_tls, timeout=cfg.hello_timeout_s,
@@ -282,7 +282,7 @@ class Relay(TrackedListener):
         c = self.config
         tls = None
         if c.tls_cert is not None:
-            from pibr.protocol.tls import server_context
+            from pibr.common.tls import server_context
 
             tls = server_context(c.tls_cert, c.tls_key)
         host, port = await self.listen(*c.listen, ssl=tls, ssl_handshake_timeout=c.hello_timeout_s)

@@ -16,7 +16,8 @@ angle from its eye, and skips chunks of triangles wholly behind its camera (exac
 smaller view (the extra view) may ask for longer edges (``edge_angle_for_width``).
 Every render target stores colour (RGBA8) and radial distance (R32F, 0 = sky).
 Images are top-row-first everywhere (see protocol/projection.py): passes flip NDC y, so a
-framebuffer read returns rows in image order.
+framebuffer read returns rows in image order. The GLSL is in shaders.py, the render targets
+and their readbacks in render_target.py.
 """
 from __future__ import annotations
 
@@ -24,14 +25,14 @@ import logging
 from dataclasses import dataclass, field
 
 import numpy as np
-from numba import njit
 
 from pibr.protocol.pose import Pose
 from pibr.protocol.projection import GLSL as PROJECTION_GLSL
-from pibr.scenes.scene import MAX_LIGHTS, Scene
+from pibr.scenes.scene import Scene
 from pibr.scenes.tessellate import levels_for_view_region, subdivide
 
-from . import cube_faces
+from . import cube_faces, shaders
+from .render_target import RenderTarget
 
 log = logging.getLogger(__name__)
 
@@ -40,6 +41,12 @@ DEFAULT_PROJECTION = "vertex"
 #: Largest angle one rasterised edge may span in the wide-angle projection. At 1024 px over
 #: 180 degrees a 6 degree chord bends by 0.08 degrees, under half a pixel.
 MAX_EDGE_ANGLE_DEG = 6.0
+#: Relative distance tolerance of depth peeling. Across one primary texel (1/512 rad at
+#: 1024 px) a surface seen at 85 degrees from its normal changes distance by about
+#: 1/512 * tan(85 deg) = 2.2 %; 3 % keeps such a surface out of the extra view while
+#: surfaces 3 % behind (3 cm at 1 m) are still peeled into it. ``pibr bench coverage``
+#: reports the redundancy left.
+PEEL_TOLERANCE = 0.03
 #: Depth-buffer units a decal layer is drawn in front of the layer below (polygon offset).
 DECAL_OFFSET_UNITS = 4.0
 
@@ -52,307 +59,6 @@ def edge_angle_for_width(angle_deg: float, reference_width: int, width: int) -> 
     one ``reference_width`` wide: a chord spanning angle a strays from the projected curve by
     about a^2 / 8 radians, so a half-size view takes sqrt(2) times longer edges."""
     return float(angle_deg) * float(np.sqrt(reference_width / width))
-
-
-def _vec3(v) -> str:
-    return "vec3(%s)" % ", ".join(repr(float(x)) for x in v)
-
-
-def shading_glsl(lights) -> str:
-    """GLSL ``vec3 shade(world_pos, normal, uv, vcolor)`` with the scene's lights written in as
-    constants: a loop over uniform arrays costs llvmpipe more than the rest of the pass."""
-    terms = []
-    for light in lights[:MAX_LIGHTS]:
-        color = _vec3(np.asarray(light.color[:3], dtype=np.float64) * light.intensity)
-        if light.kind == "ambient":
-            terms.append(f"    light += {color};")
-        elif light.kind == "directional":
-            terms.append(f"    light += {color} * max(dot(n, {_vec3(-np.asarray(light.direction))}), 0.0);")
-        else:
-            terms.append(
-                f"    {{ vec3 d = {_vec3(light.position)} - world_pos; float dist = length(d);\n"
-                f"      float fall = clamp(1.0 - dist / {float(light.range)!r}, 0.0, 1.0);\n"
-                f"      light += {color} * max(dot(n, d / max(dist, 1e-6)), 0.0) * fall * fall; }}")
-    return """
-uniform vec4 u_base_color;
-uniform bool u_has_texture;
-uniform sampler2D u_texture;
-uniform vec3 u_eye;
-
-vec3 shade(vec3 world_pos, vec3 normal, vec2 uv, vec4 vcolor) {
-    vec3 n = normalize(normal);
-    if (dot(n, u_eye - world_pos) < 0.0) n = -n;   // two-sided: light the side we see
-    vec4 albedo = u_base_color * vcolor;
-    if (TEXTURED) {
-        vec3 t = texture(u_texture, uv).rgb;
-        albedo.rgb *= t * t;                          // sRGB -> linear (gamma 2)
-    }
-    vec3 light = vec3(0.0);
-%s
-    return sqrt(clamp(albedo.rgb * light, 0.0, 1.0));  // linear -> sRGB (gamma 2)
-}
-""" % "\n".join(terms)
-
-
-#: The fragment shader's per-object switch (TEXTURED) is compiled in as a constant, one program
-#: per kind an object needs: llvmpipe runs the body of a branch on a uniform for every fragment
-#: (masked), so untextured objects paid for a texture lookup. ``Renderer(specialise=False)`` keeps
-#: one program with a uniform switch.
-_SPECIALISED = "#define TEXTURED %s\n"
-_UNIFORM_SWITCHES = "#define TEXTURED u_has_texture\n"
-
-_FRAGMENT = """
-#version 410
-%(defines)s
-in vec3 v_cam;
-in vec3 v_prev_cam;
-in vec3 v_world;
-in vec3 v_normal;
-in vec2 v_uv;
-in vec4 v_color;
-layout(location = 0) out vec4 f_color;
-layout(location = 1) out float f_dist;
-%(shading)s
-%(projection)s
-#ifdef PEEL
-// Depth peeling against the primary view (Reinert et al.): a fragment of the extra view is
-// dropped when the primary view already shows the same surface point, i.e. when one of the
-// four primary texels around its back-projection stores a distance within a relative
-// tolerance of the fragment's own distance to the primary camera.
-uniform sampler2D u_peel_dist;    // primary view's radial distance (top row first), 0 = sky
-uniform mat4 u_peel_from_cam;     // this camera's space -> primary camera space
-uniform vec2 u_peel_size;         // primary view size in pixels
-uniform float u_peel_tolerance;   // relative
-const float PEELED_DEPTH = 0.99999;   // behind every kept fragment, in front of the cleared 1
-uniform vec3 u_sky_color;
-bool seen_by_primary(vec3 cam) {
-    vec3 p = (u_peel_from_cam * vec4(cam, 1.0)).xyz;
-    if (p.z > 0.0) return false;                  // behind the primary camera
-    vec3 t = wa_project(p);
-    // the 2x2 texels bilinear filtering would read, clamped at the edges (one fetch)
-    vec4 d = textureGather(u_peel_dist, wa_uv(t.xy), 0);
-    vec4 hit = vec4(greaterThan(d, vec4(0.0))) * vec4(lessThan(abs(d - t.z), vec4(u_peel_tolerance * t.z)));
-    return dot(hit, hit) > 0.0;
-}
-#endif
-void main() {
-#ifdef PEEL_MARK
-    // A peeled fragment is not dropped: it marks its pixel (distance PEELED) from behind every
-    // kept fragment, so the view tells "nothing new here" from sky (nothing at all). Writing
-    // gl_FragDepth costs the early depth test: the extra view took a third longer here.
-    if (seen_by_primary(v_cam)) {
-        f_color = vec4(u_sky_color, 1.0);          // as an empty pixel: codes smoothly
-        f_dist = -1.0;
-        gl_FragDepth = PEELED_DEPTH;
-        return;
-    }
-    gl_FragDepth = gl_FragCoord.z;
-#elif defined(PEEL)
-    if (seen_by_primary(v_cam)) discard;
-#endif
-    f_color = vec4(shade(v_world, v_normal, v_uv, v_color), 1.0);
-    f_dist = length(v_cam);
-}
-"""
-
-# Moving objects' motion, drawn after every object's colour and distance into the motion attachment
-# (a framebuffer of its own on the same depth buffer), where the depth test finds their visible
-# fragments (see Renderer._draw_motion): the motion the camera does not explain, where this surface
-# point was one server frame ago, seen from the current camera (rows grow downwards, t'_y upwards).
-_MOTION_FRAGMENT = """
-#version 410
-in vec3 v_cam;
-in vec3 v_prev_cam;
-layout(location = 0) out vec4 f_motion;   // (dx, dy) pixels, object index, moving flag (1)
-uniform float u_object_index;             // the object's index in the scene
-uniform vec2 u_half_px;                   // pixels per unit of t' (wide views)
-%(projection)s
-void main() {
-    f_motion = vec4((wa_project(v_cam).xy - wa_project(v_prev_cam).xy) * vec2(1.0, -1.0) * u_half_px,
-                    u_object_index, 1.0);
-}
-"""
-
-#: Relative distance tolerance of depth peeling. Across one primary texel (1/512 rad at
-#: 1024 px) a surface seen at 85 degrees from its normal changes distance by about
-#: 1/512 * tan(85 deg) = 2.2 %; 3 % keeps such a surface out of the extra view while
-#: surfaces 3 % behind (3 cm at 1 m) are still peeled into it. ``pibr bench coverage``
-#: reports the redundancy left.
-PEEL_TOLERANCE = 0.03
-
-_COMMON_VS_UNIFORMS = """
-uniform mat4 u_model;
-uniform mat4 u_model_view;
-uniform mat4 u_prev_model_view;   // where the object was one server frame ago (moving objects)
-uniform mat3 u_normal_matrix;
-uniform float u_near;
-uniform float u_far;
-in vec3 in_position;
-in vec3 in_normal;
-in vec2 in_uv;
-in vec4 in_color;
-"""
-
-_WIDE_VERTEX_VS = """
-#version 410
-%(uniforms)s
-%(projection)s
-out vec3 v_cam;
-out vec3 v_prev_cam;
-out vec3 v_world;
-out vec3 v_normal;
-out vec2 v_uv;
-out vec4 v_color;
-out float gl_ClipDistance[1];
-void main() {
-    vec3 cam = (u_model_view * vec4(in_position, 1.0)).xyz;
-    v_cam = cam;
-    v_prev_cam = (u_prev_model_view * vec4(in_position, 1.0)).xyz;
-    v_world = (u_model * vec4(in_position, 1.0)).xyz;
-    v_normal = u_normal_matrix * in_normal;
-    v_uv = in_uv;
-    v_color = in_color;
-    vec3 t = wa_project_extended(cam);
-    gl_Position = vec4(t.x, -t.y, 2.0 * (t.z - u_near) / (u_far - u_near) - 1.0, 1.0);
-    gl_ClipDistance[0] = 1.5 - abs(t.x);   // cut where x' jumps from +2 to -2 behind the camera
-}
-""" % {"uniforms": _COMMON_VS_UNIFORMS, "projection": PROJECTION_GLSL}
-
-_TESS_VS = """
-#version 410
-%(uniforms)s
-out vec3 c_cam;
-out vec3 c_prev_cam;
-out vec3 c_world;
-out vec3 c_normal;
-out vec2 c_uv;
-out vec4 c_color;
-void main() {
-    c_cam = (u_model_view * vec4(in_position, 1.0)).xyz;
-    c_prev_cam = (u_prev_model_view * vec4(in_position, 1.0)).xyz;
-    c_world = (u_model * vec4(in_position, 1.0)).xyz;
-    c_normal = u_normal_matrix * in_normal;
-    c_uv = in_uv;
-    c_color = in_color;
-}
-""" % {"uniforms": _COMMON_VS_UNIFORMS}
-
-_TESS_TCS = """
-#version 410
-layout(vertices = 3) out;
-uniform float u_max_angle;
-uniform float u_max_level;
-uniform float u_max_screen_edge;   // pixels
-uniform vec2 u_half_size;          // pixels per unit of t'
-%(projection)s
-in vec3 c_cam[];
-in vec3 c_prev_cam[];
-in vec3 c_world[];
-in vec3 c_normal[];
-in vec2 c_uv[];
-in vec4 c_color[];
-out vec3 e_cam[];
-out vec3 e_prev_cam[];
-out vec3 e_world[];
-out vec3 e_normal[];
-out vec2 e_uv[];
-out vec4 e_color[];
-// A function of the edge alone, symmetric in its ends: both triangles sharing an edge
-// split it identically, so the tessellated mesh has no cracks. Two limits: the angle the
-// edge spans (bends in the projection), and its length on screen, which near the poles and
-// the hemisphere's rim grows much faster than the angle.
-float edge_level(vec3 a, vec3 b) {
-    float la = length(a);
-    float lb = length(b);
-    if (la < 1e-6 || lb < 1e-6) return u_max_level;
-    float ang = acos(clamp(dot(a, b) / (la * lb), -1.0, 1.0));
-    vec2 pa = wa_project_extended(a).xy;
-    vec2 pb = wa_project_extended(b).xy;
-    float screen = length((pa - pb) * u_half_size);
-    return clamp(ceil(max(ang / u_max_angle, screen / u_max_screen_edge)), 1.0, u_max_level);
-}
-void main() {
-    e_cam[gl_InvocationID] = c_cam[gl_InvocationID];
-    e_prev_cam[gl_InvocationID] = c_prev_cam[gl_InvocationID];
-    e_world[gl_InvocationID] = c_world[gl_InvocationID];
-    e_normal[gl_InvocationID] = c_normal[gl_InvocationID];
-    e_uv[gl_InvocationID] = c_uv[gl_InvocationID];
-    e_color[gl_InvocationID] = c_color[gl_InvocationID];
-    if (gl_InvocationID == 0) {
-        if (c_cam[0].z > 0.0 && c_cam[1].z > 0.0 && c_cam[2].z > 0.0) {
-            gl_TessLevelOuter[0] = 0.0;   // entirely behind the camera: drop the patch
-            gl_TessLevelOuter[1] = 0.0;
-            gl_TessLevelOuter[2] = 0.0;
-            gl_TessLevelInner[0] = 0.0;
-        } else {
-            float l0 = edge_level(c_cam[1], c_cam[2]);
-            float l1 = edge_level(c_cam[2], c_cam[0]);
-            float l2 = edge_level(c_cam[0], c_cam[1]);
-            gl_TessLevelOuter[0] = l0;
-            gl_TessLevelOuter[1] = l1;
-            gl_TessLevelOuter[2] = l2;
-            gl_TessLevelInner[0] = max(l0, max(l1, l2));
-        }
-    }
-}
-""" % {"projection": PROJECTION_GLSL}
-
-_TESS_TES = """
-#version 410
-layout(triangles, equal_spacing, ccw) in;
-uniform float u_near;
-uniform float u_far;
-in vec3 e_cam[];
-in vec3 e_prev_cam[];
-in vec3 e_world[];
-in vec3 e_normal[];
-in vec2 e_uv[];
-in vec4 e_color[];
-out vec3 v_cam;
-out vec3 v_prev_cam;
-out vec3 v_world;
-out vec3 v_normal;
-out vec2 v_uv;
-out vec4 v_color;
-out float gl_ClipDistance[1];
-%(projection)s
-void main() {
-    vec3 b = gl_TessCoord;
-    vec3 cam = b.x * e_cam[0] + b.y * e_cam[1] + b.z * e_cam[2];
-    v_cam = cam;
-    v_prev_cam = b.x * e_prev_cam[0] + b.y * e_prev_cam[1] + b.z * e_prev_cam[2];
-    v_world = b.x * e_world[0] + b.y * e_world[1] + b.z * e_world[2];
-    v_normal = b.x * e_normal[0] + b.y * e_normal[1] + b.z * e_normal[2];
-    v_uv = b.x * e_uv[0] + b.y * e_uv[1] + b.z * e_uv[2];
-    v_color = b.x * e_color[0] + b.y * e_color[1] + b.z * e_color[2];
-    vec3 t = wa_project_extended(cam);
-    gl_Position = vec4(t.x, -t.y, 2.0 * (t.z - u_near) / (u_far - u_near) - 1.0, 1.0);
-    gl_ClipDistance[0] = 1.5 - abs(t.x);   // cut where x' jumps from +2 to -2 behind the camera
-}
-""" % {"projection": PROJECTION_GLSL}
-
-_PERSPECTIVE_VS = """
-#version 410
-%(uniforms)s
-uniform mat4 u_projection;
-out vec3 v_cam;
-out vec3 v_prev_cam;
-out vec3 v_world;
-out vec3 v_normal;
-out vec2 v_uv;
-out vec4 v_color;
-void main() {
-    vec4 cam = u_model_view * vec4(in_position, 1.0);
-    v_cam = cam.xyz;
-    v_prev_cam = cam.xyz;
-    v_world = (u_model * vec4(in_position, 1.0)).xyz;
-    v_normal = u_normal_matrix * in_normal;
-    v_uv = in_uv;
-    v_color = in_color;
-    gl_Position = u_projection * cam;
-    gl_Position.y = -gl_Position.y;   // top-row-first images
-}
-""" % {"uniforms": _COMMON_VS_UNIFORMS}
 
 
 def perspective_matrix(fov_x_deg: float, aspect: float, near: float, far: float) -> np.ndarray:
@@ -476,107 +182,6 @@ class _GPUObject:
 LOD_BANDS = (0.0, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0, 32.0)
 
 
-#: every float16 bit pattern -> its float32 value (numpy's exact conversion)
-_HALF_TO_FLOAT = np.arange(1 << 16, dtype=np.uint32).astype(np.uint16).view(np.float16).astype(np.float32)
-
-
-@njit(cache=True, nogil=True)
-def _moving_motion(raw, half_to_float, motion, moving):
-    """raw (h, w, 4) uint16 half floats (dx, dy, index, moving flag) -> motion (h, w, 2) float32,
-    0 where the flag is not above 0.5, and moving (h, w) bool."""
-    h, w = moving.shape
-    for j in range(h):
-        for i in range(w):
-            # flag > 0.5 on the bits: above 0x3800 (0.5), up to 0x7c00 (+inf; NaN and negatives above)
-            m = 0x3800 < raw[j, i, 3] <= 0x7C00
-            moving[j, i] = m
-            if m:
-                motion[j, i, 0] = half_to_float[raw[j, i, 0]]
-                motion[j, i, 1] = half_to_float[raw[j, i, 1]]
-            else:
-                motion[j, i, 0] = np.float32(0.0)
-                motion[j, i, 1] = np.float32(0.0)
-
-
-class RenderTarget:
-    """Colour (RGBA8) + radial distance (R32F, 0 = sky) + depth buffer of ``width`` x ``height``;
-    with ``motion``, also the motion of moving objects (RGBA16F: dx, dy pixels, object index,
-    moving flag), in a framebuffer of its own on the same depth buffer (Renderer._draw_motion)."""
-
-    def __init__(self, ctx, width: int, height: int, motion: bool = False):
-        self.ctx, self.width, self.height = ctx, width, height
-        self.color = ctx.texture((width, height), 4)
-        self.distance = ctx.texture((width, height), 1, dtype="f4")
-        self.motion = ctx.texture((width, height), 4, dtype="f2") if motion else None
-        for t in (self.color, self.distance, self.motion):
-            if t is not None:
-                t.filter = (ctx.NEAREST, ctx.NEAREST)
-                t.repeat_x = t.repeat_y = False
-        self.depth = ctx.depth_renderbuffer((width, height))
-        self.fbo = ctx.framebuffer(color_attachments=[self.color, self.distance], depth_attachment=self.depth)
-        self.motion_fbo = self.all_fbo = None   # all_fbo: the three, for a pass that writes all at once
-        if motion:
-            self.motion_fbo = ctx.framebuffer(color_attachments=[self.motion], depth_attachment=self.depth)
-            self.motion_fbo.depth_mask = False   # it only tests the main pass's depth (and its clear keeps it)
-            self.all_fbo = ctx.framebuffer(color_attachments=[self.color, self.distance, self.motion],
-                                           depth_attachment=self.depth)
-
-    def read_color(self) -> np.ndarray:
-        """(height, width, 3) uint8, row 0 on top."""
-        data = self.fbo.read(components=3, attachment=0, alignment=1)
-        return np.frombuffer(data, np.uint8).reshape(self.height, self.width, 3)
-
-    def read_distance(self) -> np.ndarray:
-        """(height, width) float32 radial distance, 0 where nothing was hit."""
-        data = self.fbo.read(components=1, attachment=1, dtype="f4", alignment=1)
-        return np.frombuffer(data, np.float32).reshape(self.height, self.width)
-
-    def read_rgba_into(self, out: np.ndarray) -> np.ndarray:
-        """Colour into ``out``, (height, width, 4) uint8 C-contiguous, row 0 on top (alpha 255):
-        the texture's own format, so the read is a copy with no conversion."""
-        self._check_out(out, (self.height, self.width, 4), np.uint8)
-        self.fbo.read_into(out, components=4, attachment=0, alignment=1)
-        return out
-
-    def read_distance_into(self, out: np.ndarray) -> np.ndarray:
-        """:meth:`read_distance` into ``out``, (height, width) float32 C-contiguous."""
-        self._check_out(out, (self.height, self.width), np.float32)
-        self.fbo.read_into(out, components=1, attachment=1, dtype="f4", alignment=1)
-        return out
-
-    @staticmethod
-    def _check_out(out: np.ndarray, shape: tuple, dtype) -> None:
-        if out.shape != shape or out.dtype != dtype or not out.flags.c_contiguous:
-            raise ValueError(f"need a C-contiguous {shape} {np.dtype(dtype).name} array, got {out.shape} {out.dtype}")
-
-    def read_motion(self) -> tuple[np.ndarray, np.ndarray]:
-        """(motion (height, width, 2) float32 pixels, moving (height, width) bool)."""
-        data = self.motion_fbo.read(components=4, dtype="f2", alignment=1)
-        m = np.frombuffer(data, np.float16).reshape(self.height, self.width, 4).astype(np.float32)
-        return np.ascontiguousarray(m[:, :, :2]), m[:, :, 3] > 0.5
-
-    def read_moving_motion(self) -> tuple[np.ndarray, np.ndarray]:
-        """:meth:`read_motion` with the motion zeroed where nothing moves: (motion (height, width, 2)
-        float32, moving (height, width) bool), new arrays. One pass over the raw half floats."""
-        data = self.motion_fbo.read(components=4, dtype="f2", alignment=1)
-        raw = np.frombuffer(data, np.uint16).reshape(self.height, self.width, 4)
-        motion = np.empty((self.height, self.width, 2), np.float32)
-        moving = np.empty((self.height, self.width), np.bool_)
-        _moving_motion(raw, _HALF_TO_FLOAT, motion, moving)
-        return motion, moving
-
-    def read_moving_index(self) -> np.ndarray:
-        """(height, width) int32: the scene index of the moving object each pixel shows, -1 elsewhere."""
-        data = self.motion_fbo.read(components=4, dtype="f2", alignment=1)
-        m = np.frombuffer(data, np.float16).reshape(self.height, self.width, 4).astype(np.float32)
-        return np.where(m[:, :, 3] > 0.5, np.rint(m[:, :, 2]), -1).astype(np.int32)
-
-    def release(self) -> None:
-        for r in (self.fbo, self.motion_fbo, self.all_fbo, self.color, self.distance, self.depth, self.motion):
-            if r is not None:
-                r.release()
-
-
 class Renderer:
     """Draws one scene. Create and use on the GL thread (see pibr.common.gl)."""
 
@@ -597,25 +202,25 @@ class Renderer:
         self.max_edge_angle = np.radians(max_edge_angle_deg)
         self.max_edge_angle_deg = float(max_edge_angle_deg)
         self.tess_max_level = tess_max_level
-        #: one program per pass and object kind (textured): see _SPECIALISED; moving: the motion pass
+        #: one program per pass and object kind (textured): see shaders.SPECIALISED; moving: the motion pass
         self.specialise = specialise
         self.tess_max_screen_edge = tess_max_screen_edge
-        shading = shading_glsl(scene.lights)
-        self._fragment = {name: _FRAGMENT % {"shading": shading, "defines": defines + "@SWITCHES@",
+        shading = shaders.shading_glsl(scene.lights)
+        self._fragment = {name: shaders.FRAGMENT % {"shading": shading, "defines": defines + "@SWITCHES@",
                                              "projection": PROJECTION_GLSL}
                           for name, defines in (("plain", ""), ("peel", "#define PEEL\n"),
                                                 ("mark", "#define PEEL\n#define PEEL_MARK\n"))}
-        self._fragment["motion"] = _MOTION_FRAGMENT % {"projection": PROJECTION_GLSL}
+        self._fragment["motion"] = shaders.MOTION_FRAGMENT % {"projection": PROJECTION_GLSL}
         #: pass name -> (vertex, tess control, tess evaluation shader, fragment variant); compiled when
         #: first drawn, per (pass, textured, moving) key (see :meth:`_program`)
-        cube_vs = cube_faces.CUBE_VS % {"uniforms": _COMMON_VS_UNIFORMS}
-        self._passes = {"perspective": (_PERSPECTIVE_VS, None, None, "plain"),
-                        "vertex": (_WIDE_VERTEX_VS, None, None, "plain"),
-                        "vertex_peel": (_WIDE_VERTEX_VS, None, None, "peel"),
-                        "vertex_peel_mark": (_WIDE_VERTEX_VS, None, None, "mark"),
-                        "tess": (_TESS_VS, _TESS_TCS, _TESS_TES, "plain"),
-                        "tess_peel": (_TESS_VS, _TESS_TCS, _TESS_TES, "peel"),
-                        "tess_peel_mark": (_TESS_VS, _TESS_TCS, _TESS_TES, "mark"),
+        cube_vs = cube_faces.CUBE_VS % {"uniforms": shaders.COMMON_VS_UNIFORMS}
+        self._passes = {"perspective": (shaders.PERSPECTIVE_VS, None, None, "plain"),
+                        "vertex": (shaders.WIDE_VERTEX_VS, None, None, "plain"),
+                        "vertex_peel": (shaders.WIDE_VERTEX_VS, None, None, "peel"),
+                        "vertex_peel_mark": (shaders.WIDE_VERTEX_VS, None, None, "mark"),
+                        "tess": (shaders.TESS_VS, shaders.TESS_TCS, shaders.TESS_TES, "plain"),
+                        "tess_peel": (shaders.TESS_VS, shaders.TESS_TCS, shaders.TESS_TES, "peel"),
+                        "tess_peel_mark": (shaders.TESS_VS, shaders.TESS_TCS, shaders.TESS_TES, "mark"),
                         "cube": (cube_vs, None, None, "plain")}
         for name in ("perspective", "vertex", "tess", "cube"):   # the moving objects' motion (_draw_motion)
             self._passes[name + "_motion"] = self._passes[name][:3] + ("motion",)
@@ -721,9 +326,9 @@ class Renderer:
         name, textured, _ = key
         vs, tcs, tes, variant = self._passes[name]
         if textured is None:
-            defines = _UNIFORM_SWITCHES
+            defines = shaders.UNIFORM_SWITCHES
         else:
-            defines = _SPECIALISED % ("true" if textured else "false")
+            defines = shaders.SPECIALISED % ("true" if textured else "false")
         prog = self.ctx.program(vertex_shader=vs, tess_control_shader=tcs, tess_evaluation_shader=tes,
                                 fragment_shader=self._fragment[variant].replace("@SWITCHES@", defines))
         if tcs is not None:

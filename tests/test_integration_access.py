@@ -7,7 +7,7 @@ import pytest
 
 from pibr.bench.processes import run_pipeline
 from pibr.client.recorder import read_records
-from pibr.protocol.tls import certificate_fingerprint
+from pibr.common.tls import certificate_fingerprint
 
 from .tlsfiles import tls_files  # noqa: F401 (fixture)
 

@@ -6,7 +6,8 @@ import math
 import numpy as np
 import pytest
 
-from pibr.client.app import ClientConfig, run_client
+from pibr.client.app import run_client
+from pibr.client.config import ClientConfig
 from pibr.client.recorder import RECORD_FIELDS, read_records
 from pibr.protocol.errors import ConfigError
 from pibr.server.app import Server

@@ -5,7 +5,8 @@ import json
 import numpy as np
 import pytest
 
-from pibr.client.app import Client, ClientConfig, run_client
+from pibr.client.app import Client, run_client
+from pibr.client.config import ClientConfig
 from pibr.protocol.errors import ConfigError, MalformedMessage
 from pibr.protocol.messages import Frame, PayloadKind
 from pibr.protocol.object_poses import ObjectPoses, encode_object_poses

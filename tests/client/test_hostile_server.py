@@ -5,7 +5,8 @@ import tracemalloc
 
 import pytest
 
-from pibr.client.app import ClientConfig, run_client
+from pibr.client.app import run_client
+from pibr.client.config import ClientConfig
 from pibr.protocol.errors import MalformedMessage, PeerTimeout
 from pibr.protocol.messages import Hello, ProxyChunk, Welcome
 from pibr.protocol.proxy import BundleInfo, encode_bundle, split_chunks

@@ -8,7 +8,8 @@ import asyncio
 import numpy as np
 import pytest
 
-from pibr.client.app import WARMUP_SEQ, Client, ClientConfig
+from pibr.client.app import Client, WARMUP_SEQ
+from pibr.client.config import ClientConfig
 from pibr.client.connection import ServerClosed
 from pibr.protocol.messages import FRAMES_DECODED, Bye, Frame, Hello, PayloadKind, PoseMsg, Stats, Welcome
 from pibr.protocol.pose import Pose

@@ -10,7 +10,7 @@ from pibr.bench.metrics import dssim, ssim
 from pibr.protocol.messages import PayloadKind
 from pibr.protocol.pose import Pose, quat_from_axis_angle
 from pibr.scenes.registry import load_scene
-from pibr.server.renderer import RenderTarget
+from pibr.server.render_target import RenderTarget
 
 from ..bench.motion_quality import masked_quality
 

@@ -7,7 +7,7 @@ from pibr.protocol import access
 from pibr.protocol.access import (check_listen_access, is_loopback, resolve_token, token_matches)
 from pibr.protocol.errors import ConfigError, MalformedMessage
 from pibr.protocol.messages import MAX_TOKEN, Hello
-from pibr.protocol.tls import ClientTLS, certificate_fingerprint, parse_pin, server_context
+from pibr.common.tls import ClientTLS, certificate_fingerprint, parse_pin, server_context
 
 from ..tlsfiles import tls_files  # noqa: F401 (fixture)
 

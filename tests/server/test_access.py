@@ -6,14 +6,15 @@ import logging
 
 import pytest
 
-from pibr.client.app import ClientConfig, run_client
+from pibr.client.app import run_client
+from pibr.client.config import ClientConfig
 from pibr.client.connection import ClientConnection, ServerClosed
 from pibr.protocol import access
 from pibr.protocol.connection import Connection
 from pibr.protocol.errors import AccessDenied, ConfigError, TLSError
 from pibr.protocol.framing import encode_frame
 from pibr.protocol.messages import Error, Hello, OutputConfig
-from pibr.protocol.tls import ClientTLS, certificate_fingerprint, open_connection
+from pibr.common.tls import ClientTLS, certificate_fingerprint, open_connection
 from pibr.server.config import ServerConfig
 
 from ..loopback import running_server

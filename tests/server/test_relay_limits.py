@@ -13,7 +13,7 @@ from pibr.protocol.errors import AccessDenied, ConfigError, RemoteError, TLSErro
 from pibr.protocol.framing import HEADER_SIZE, encode_frame
 from pibr.common.link import LinkParams
 from pibr.protocol.messages import Clock, Error, Frame, Hello, PoseMsg, Welcome
-from pibr.protocol.tls import ClientTLS, certificate_fingerprint, open_connection, server_context
+from pibr.common.tls import ClientTLS, certificate_fingerprint, open_connection, server_context
 from pibr.server.relay import Relay, RelayConfig
 
 from ..tlsfiles import tls_files  # noqa: F401 (fixture)

@@ -47,7 +47,8 @@ def test_chunk_boxes_contain_their_faces_and_runs_keep_order():
 def test_culling_changes_no_pixel():
     """Primary (with motion) and peeled extra view, with and without culling: identical bytes."""
     from pibr.common.gl import create_context
-    from pibr.server.renderer import RenderTarget, Renderer
+    from pibr.server.render_target import RenderTarget
+    from pibr.server.renderer import Renderer
 
     scene = load_scene("room")
     ctx = create_context()
@@ -204,7 +205,8 @@ def test_cube_projection_matches_the_vertex_projection():
     distance and motion agree with the vertex projection up to resampling blur at silhouettes."""
     from pibr.bench.metrics import psnr
     from pibr.common.gl import create_context
-    from pibr.server.renderer import RenderTarget, Renderer
+    from pibr.server.render_target import RenderTarget
+    from pibr.server.renderer import Renderer
 
     scene = load_scene("room")
     ctx = create_context()
@@ -237,7 +239,8 @@ def test_cube_projection_matches_the_vertex_projection():
 def test_wide_views_sample_the_nearest_mip_and_leave_perspective_views_trilinear():
     from pibr.bench.metrics import psnr
     from pibr.common.gl import create_context
-    from pibr.server.renderer import RenderTarget, Renderer
+    from pibr.server.render_target import RenderTarget
+    from pibr.server.renderer import Renderer
 
     scene = load_scene("room")
     ctx = create_context()
@@ -279,7 +282,8 @@ def test_specialised_programs_change_no_pixel(ctx):
     """One program per object kind (textured, moving) against one program with uniform switches:
     primary with motion, both peeled extra views, the tessellation path and a perspective view with
     moving-object indices give identical bytes, and the room really uses several kinds."""
-    from pibr.server.renderer import RenderTarget, Renderer
+    from pibr.server.render_target import RenderTarget
+    from pibr.server.renderer import Renderer
 
     scene = load_scene("room")
     offset = extra_offset_pose(1.5, 1.8, 15.0)
@@ -317,7 +321,7 @@ def test_specialised_programs_change_no_pixel(ctx):
 def test_moving_motion_equals_read_motion_masked(ctx):
     """The one-pass readback equals read_motion with the motion zeroed where nothing moves, bit for
     bit, for flags around 0.5, infinities, NaN, negative zero and subnormal half motions."""
-    from pibr.server.renderer import RenderTarget
+    from pibr.server.render_target import RenderTarget
 
     target = RenderTarget(ctx, 64, 32, motion=True)
     rng = np.random.default_rng(9)
@@ -347,7 +351,8 @@ def test_motion_pass_flags_the_moving_surfaces_and_gives_their_motion(ctx):
     frame interval ago, reprojected: checked against the scene's animation on the CPU."""
     from pibr.protocol.projection import pixel_centers, project, to_pixels, unproject
     from pibr.scenes.mesh_queries import closest_points_on_mesh
-    from pibr.server.renderer import RenderTarget, Renderer
+    from pibr.server.render_target import RenderTarget
+    from pibr.server.renderer import Renderer
 
     scene = load_scene("dynamic")
     renderer = Renderer(ctx, scene)

@@ -171,7 +171,8 @@ def test_format_plan_names_every_aspect():
 
 @pytest.mark.gl
 async def test_plan_reaches_the_clients_session_json(tmp_path):
-    from pibr.client.app import ClientConfig, run_client
+    from pibr.client.app import run_client
+    from pibr.client.config import ClientConfig
 
     from ..loopback import running_server
 

@@ -23,7 +23,7 @@ import re
 import ssl
 from dataclasses import dataclass
 
-from .errors import ConfigError, TLSError
+from pibr.protocol.errors import ConfigError, TLSError
 
 MIN_VERSION = ssl.TLSVersion.TLSv1_2
 #: Hex digits of a fingerprint shown in a pin mismatch: enough to tell two apart, not the whole.
