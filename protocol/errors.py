@@ -26,6 +26,15 @@
 
 Every :class:`ProtocolError` carries a numeric ``code`` that goes on the wire in an
 ``Error`` message, so the peer learns what was wrong before the connection closes.
+
+The peer ending a session is no error of ours; :mod:`pibr.protocol.sides` raises these when
+the session takes the end of it::
+
+    SessionEnded
+    ├── ClientClosed             the client said Bye, reported an Error or closed its stream
+    │                            (the server's view)
+    └── ServerClosed             the server said Bye or closed its stream (the client's view;
+                                 an Error from the server is a RemoteError)
 """
 from __future__ import annotations
 
@@ -125,6 +134,19 @@ ERROR_CODES = {
                 MalformedMessage, TruncatedMessage, UnexpectedMessage, InvalidPose, SceneError,
                 CodecError, ConfigError, AccessDenied, PeerTimeout)
 }
+
+
+class SessionEnded(Exception):
+    """The peer ended the session: it said ``Bye``, reported an ``Error`` or closed its stream.
+    The message says which (and the peer's reason or error)."""
+
+
+class ClientClosed(SessionEnded):
+    """The client ended the session (``Bye``, ``Error`` or end of stream)."""
+
+
+class ServerClosed(SessionEnded):
+    """The server ended the session (``Bye`` or end of stream)."""
 
 
 class RemoteError(PibrError):
