@@ -34,10 +34,9 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from pibr.common.gl import GLThread
-from pibr.protocol.depth_codecs import DEPTH_CODECS
-from pibr.protocol.errors import ConfigError, MalformedMessage, UnexpectedMessage
+from pibr.protocol.errors import ConfigError, UnexpectedMessage
 from pibr.protocol.messages import (FRAMES_DECODED, Clock, Frame, Hello, OutputConfig, PayloadKind, PoseMsg,
-                                    ProxyChunk, Stats)
+                                    Stats)
 from pibr.protocol.pose import Pose
 
 from .config import ClientConfig
@@ -52,23 +51,6 @@ log = logging.getLogger(__name__)
 
 #: Sequence number of the poses a real-clock client sends while it warms up, before its clock.
 WARMUP_SEQ = (1 << 32) - 1
-
-
-def _check_atlas(session) -> None:
-    """Before anything is allocated at the atlas's size: it must be the protocol's layout of the
-    announced views (protocol.atlas.build_layout), so a Welcome cannot make it bigger than they need."""
-    from pibr.protocol.atlas import build_layout
-
-    extra = None if session.extra is None else (session.extra.width, session.extra.height)
-    try:
-        expected = build_layout((session.primary.width, session.primary.height), extra,
-                                depth_in_atlas=DEPTH_CODECS[session.depth_codec].in_atlas)
-    except ValueError as exc:
-        raise MalformedMessage(f"Welcome.config: the views have no atlas layout ({exc})") from None
-    if session.atlas != expected:
-        raise MalformedMessage(f"Welcome.config.atlas: {session.atlas.width}x{session.atlas.height} with "
-                               f"{session.atlas.rects} is not the layout of its views ({expected.width}x"
-                               f"{expected.height} with {expected.rects})")
 
 
 @dataclass
@@ -223,12 +205,10 @@ class Client:
                       bandwidth_kbps=cfg.bandwidth_kbps,
                       quadtree_threshold=quadtree_threshold(cfg.methods, cfg.options), token=cfg.token or "")
         try:
+            # the Welcome is checked against the Hello (clock, atlas layout, proxies) when taken
             self.session = await self.conn.handshake(hello)
             t_welcome = time.monotonic()
             handshake_ms = (t_welcome - t_hello) * 1e3
-            if self.session.clock != cfg.clock:
-                raise UnexpectedMessage(f"server runs the {self.session.clock} clock, we asked for {cfg.clock}")
-            _check_atlas(self.session)
             if hello.want_proxies:
                 await self._receive_proxies(t_welcome)
             self._decoder = H264Decoder(self.session.atlas.width, self.session.atlas.height)
@@ -279,18 +259,14 @@ class Client:
             self._depth_decoder.close()
 
     async def _receive_proxies(self, t_welcome: float) -> None:
-        """The proxy bundle follows the Welcome: collect, decompress and parse it (off the loop)."""
-        from pibr.protocol.proxy import BundleAssembler, BundleInfo, decode_bundle, decompress_bundle
+        """The proxy bundle follows the Welcome: collect, decompress and parse it (off the loop). The
+        connection's side takes nothing but the announced chunks meanwhile, and collects them."""
+        from pibr.protocol.proxy import decode_bundle, decompress_bundle
 
-        if not self.session.proxies:
-            raise UnexpectedMessage("asked for proxies, but the server's Welcome announces none")
-        info = BundleInfo.from_json(self.session.proxies)
-        assembler = BundleAssembler(info)
+        assembler = self.conn.side.proxies
+        info = assembler.info
         while not assembler.complete:
-            env = await self.conn.recv()
-            if not isinstance(env.message, ProxyChunk):
-                raise UnexpectedMessage(f"expected ProxyChunk, got {env.message.NAME}")
-            assembler.add(env.message)
+            await self.conn.recv()
         t_received = time.monotonic()
         data = assembler.data()
         loop = asyncio.get_running_loop()
@@ -409,23 +385,18 @@ class Client:
         }
 
     async def _run_virtual(self, trace, interval_us, n_ticks, preroll, progress) -> None:
-        horizon = None
+        side = self.conn.side   # side.horizon_us: every later server message has a virtual time >= this
         inbox: deque = deque()
         for tick in range(-preroll, n_ticks):
             t_us = tick * interval_us
             pose = self._pose_at(trace, t_us / 1e6)
             await self.conn.send(PoseMsg(tick + preroll, t_us, pose), vtime_us=t_us, flush=False)
             await self.conn.send(Clock(), vtime_us=t_us + interval_us)
-            while horizon is None or horizon <= t_us:
-                env = await self.conn.recv()
-                if horizon is not None and env.vtime_us < horizon:
-                    raise UnexpectedMessage(f"server's virtual time went backwards ({env.vtime_us} < {horizon})")
-                horizon = env.vtime_us
+            while side.horizon_us is None or side.horizon_us <= t_us:
+                env = await self.conn.recv()    # a frame, clock or stats, its time checked by the side
                 if isinstance(env.message, Frame):
                     self._wire_sizes[env.message.frame_id] = env.wire_size
                     inbox.append(env)
-                elif not isinstance(env.message, (Clock, Stats)):
-                    raise UnexpectedMessage(f"unexpected {env.message.NAME} from the server")
             usable = []
             while inbox and inbox[0].vtime_us <= t_us:
                 env = inbox.popleft()
@@ -533,12 +504,10 @@ class Client:
     async def _read_frames(self, inbox: "FrameInbox", origin: float) -> None:
         loop = asyncio.get_running_loop()
         while True:
-            env = await self.conn.recv()
+            env = await self.conn.recv()    # a frame, clock or stats (the side refuses anything else)
             if isinstance(env.message, Frame):
                 self._wire_sizes[env.message.frame_id] = env.wire_size
                 await inbox.put(env.message, int((loop.time() - origin) * 1e6), env.wire_size)
-            elif not isinstance(env.message, (Clock, Stats)):
-                raise UnexpectedMessage(f"unexpected {env.message.NAME} from the server")
 
     async def _decode_frames(self, inbox: "FrameInbox") -> None:
         taken = 0

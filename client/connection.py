@@ -1,26 +1,25 @@
 """The client's side of a session: connect, handshake, send poses, receive messages.
 
-An asyncio adapter over the sans-I/O :class:`~pibr.protocol.connection.Connection`.
+An asyncio adapter over the sans-I/O :class:`~pibr.protocol.sides.ClientSide`, which owns the
+connection and the session's message order (the Welcome first, then the proxies when asked for,
+then frames and clocks; virtual time never backwards). This adapter reads, writes and times out.
 """
 from __future__ import annotations
 
 import asyncio
 import logging
 import ssl
-from collections import deque
 
-from pibr.protocol.connection import Connection, Envelope
-from pibr.protocol.errors import AccessDenied, PeerTimeout, RemoteError, TLSError, UnexpectedMessage
-from pibr.protocol.framing import DEFAULT_MAX_MESSAGE_SIZE
-from pibr.protocol.messages import Bye, Error, Hello, Message, Welcome
-from pibr.protocol.session import SessionConfig
 from pibr.common.tls import ClientTLS, open_connection
+from pibr.protocol.connection import Envelope
+from pibr.protocol.errors import (AccessDenied, PeerTimeout, ProtocolError, RemoteError,
+                                  ServerClosed, TLSError)  # ServerClosed: still importable from here
+from pibr.protocol.framing import DEFAULT_MAX_MESSAGE_SIZE
+from pibr.protocol.messages import Bye, Hello, Message, Welcome
+from pibr.protocol.session import SessionConfig
+from pibr.protocol.sides import ClientSide
 
 log = logging.getLogger(__name__)
-
-
-class ServerClosed(Exception):
-    """The server ended the session (Bye or end of stream)."""
 
 
 class ClientConnection:
@@ -30,14 +29,23 @@ class ClientConnection:
     def __init__(self, reader, writer, max_message_size: int = DEFAULT_MAX_MESSAGE_SIZE,
                  receive_timeout_s: float | None = None, peer: str = "the server"):
         self.reader, self.writer = reader, writer
-        self.conn = Connection(max_message_size)
-        self._pending: deque[Envelope] = deque()
-        self.welcome: Welcome | None = None
-        self.config: SessionConfig | None = None
+        #: the session's message order (sans-I/O); ``conn``, its connection, carries our messages
+        self.side = ClientSide(max_message_size)
+        self.conn = self.side.conn
         self.bytes_received = 0
         self.tls: ClientTLS | None = None
         self.receive_timeout_s = receive_timeout_s
         self.peer = peer
+
+    @property
+    def welcome(self) -> Welcome | None:
+        """The server's Welcome, once the handshake has taken it."""
+        return self.side.welcome
+
+    @property
+    def config(self) -> SessionConfig | None:
+        """The session's parameters from the Welcome."""
+        return self.side.config
 
     @classmethod
     async def open(cls, host: str, port: int, timeout: float = 10.0, tls: ClientTLS | None = None,
@@ -56,13 +64,19 @@ class ClientConnection:
             await self.writer.drain()
 
     async def recv(self, timeout: float | None = None) -> Envelope:
-        """Next message; raises RemoteError on the server's Error, ServerClosed at its end and
+        """Next message, as the side allows it now; raises RemoteError on the server's Error,
+        ServerClosed at its end, ProtocolError on bad input or a message out of order, and
         PeerTimeout when the server sends nothing for ``timeout`` (default: the receive timeout)."""
         timeout = self.receive_timeout_s if timeout is None else timeout
-        while not self._pending:
-            if self.conn.failed:
-                await self._flush_quietly()
-                raise self.conn.error
+        while True:
+            try:
+                env = self.side.next_event()
+            except ProtocolError as exc:
+                if exc is self.conn.error:   # the stream broke: tell the server why before raising
+                    await self._flush_quietly()
+                raise
+            if env is not None:
+                return env
             read = self.reader.read(1 << 16)
             try:
                 data = await (asyncio.wait_for(read, timeout) if timeout else read)
@@ -71,25 +85,19 @@ class ClientConnection:
             except asyncio.TimeoutError:
                 raise PeerTimeout(f"{self.peer} sent nothing for {timeout:g} s") from None
             if not data:
-                self.conn.receive_eof()
-                if self.conn.error is not None:
-                    raise self.conn.error
-                raise ServerClosed("server closed the connection")
+                self.side.receive_eof()
+                continue
             self.bytes_received += len(data)
-            self.conn.receive_data(data)
-            self._pending.extend(self.conn.events_received())
-        env = self._pending.popleft()
-        if isinstance(env.message, Error):
-            raise RemoteError(env.message.code, env.message.text)
-        if isinstance(env.message, Bye):
-            raise ServerClosed(f"server said bye ({env.message.reason or 'no reason'})")
-        return env
+            self.side.receive_data(data)
 
     async def handshake(self, hello: Hello, timeout: float = 120.0) -> SessionConfig:
-        """Send Hello, wait for Welcome (the server may first load and prepare the scene)."""
-        await self.send(hello)
+        """Send Hello, wait for Welcome (the server may first load and prepare the scene). The side
+        checks the Welcome against the Hello (protocol, clock, atlas, proxies announced when asked for)."""
+        self.side.send_hello(hello)
+        self.writer.write(self.conn.data_to_send())
+        await self.writer.drain()
         try:
-            env = await self.recv(max(timeout, self.receive_timeout_s or 0))
+            await self.recv(max(timeout, self.receive_timeout_s or 0))
         except PeerTimeout as exc:
             raise PeerTimeout(f"{exc} after our Hello: no Welcome") from None
         except RemoteError as exc:
@@ -101,12 +109,6 @@ class ClientConnection:
                 raise ServerClosed("server closed the connection without answering the Hello; if it serves TLS, "
                                    "connect with --tls-ca FILE or --tls-pin SHA256") from None
             raise
-        if not isinstance(env.message, Welcome):
-            raise UnexpectedMessage(f"expected Welcome, got {env.message.NAME}")
-        self.welcome = env.message
-        if self.welcome.protocol != hello.protocol:
-            raise UnexpectedMessage(f"server speaks protocol {self.welcome.protocol}, we speak {hello.protocol}")
-        self.config = SessionConfig.from_json(self.welcome.config)
         return self.config
 
     async def _flush_quietly(self) -> None:

@@ -26,6 +26,15 @@
 
 Every :class:`ProtocolError` carries a numeric ``code`` that goes on the wire in an
 ``Error`` message, so the peer learns what was wrong before the connection closes.
+
+The peer ending a session is no error of ours; :mod:`pibr.protocol.sides` raises these when
+the session takes the end of it::
+
+    SessionEnded
+    ├── ClientClosed             the client said Bye, reported an Error or closed its stream
+    │                            (the server's view)
+    └── ServerClosed             the server said Bye or closed its stream (the client's view;
+                                 an Error from the server is a RemoteError)
 """
 from __future__ import annotations
 
@@ -116,6 +125,19 @@ class TLSError(PibrError, ConnectionError):
 
 class GLUnavailable(PibrError, RuntimeError):
     """No OpenGL context could be created; the message names the backend and how to install it."""
+
+
+class SessionEnded(Exception):
+    """The peer ended the session: it said ``Bye``, reported an ``Error`` or closed its stream.
+    The message says which (and the peer's reason or error)."""
+
+
+class ClientClosed(SessionEnded):
+    """The client ended the session (``Bye``, ``Error`` or end of stream)."""
+
+
+class ServerClosed(SessionEnded):
+    """The server ended the session (``Bye`` or end of stream)."""
 
 
 class RemoteError(PibrError):

@@ -7,7 +7,8 @@ little-endian. Every parse error is a :class:`MalformedMessage` naming the messa
 
 A session: client ``Hello`` -> server ``Welcome`` (or ``Error``) -> server ``ProxyChunk``s
 (when asked for) -> client ``Pose``/``Clock`` and server ``Frame``/``Clock`` -> either side
-``Bye``. ``Stats`` may flow either way at any time.
+``Bye``. ``Stats`` may flow either way at any time. Each end's order is checked by
+:mod:`.sides`.
 """
 from __future__ import annotations
 

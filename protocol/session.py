@@ -20,7 +20,7 @@ import math
 from dataclasses import dataclass, field
 
 from . import bounded_json
-from .atlas import ALIGN, MAX_VIEW_PIXELS, MAX_VIEW_SIDE, AtlasLayout, check_view_size
+from .atlas import ALIGN, MAX_VIEW_PIXELS, MAX_VIEW_SIDE, AtlasLayout, build_layout, check_view_size
 from .depth_codecs import DEPTH_CODECS
 from .errors import JSONError, MalformedMessage
 from .pose import Pose
@@ -238,3 +238,19 @@ def _check_atlas_views(atlas: AtlasLayout, primary: ViewConfig, extra: ViewConfi
         if r is not None and (r[2], r[3]) != (view.width, view.height):
             raise MalformedMessage(f"Welcome.config.atlas: rectangle {name} is {r[2]}x{r[3]}, its view "
                                    f"{view.width}x{view.height}")
+
+
+def check_atlas_layout(session: SessionConfig) -> None:
+    """Before anything is allocated at the atlas's size: it must be the protocol's layout of the
+    announced views (:func:`~pibr.protocol.atlas.build_layout`), so a Welcome cannot make it bigger
+    than they need."""
+    extra = None if session.extra is None else (session.extra.width, session.extra.height)
+    try:
+        expected = build_layout((session.primary.width, session.primary.height), extra,
+                                depth_in_atlas=DEPTH_CODECS[session.depth_codec].in_atlas)
+    except ValueError as exc:
+        raise MalformedMessage(f"Welcome.config: the views have no atlas layout ({exc})") from None
+    if session.atlas != expected:
+        raise MalformedMessage(f"Welcome.config.atlas: {session.atlas.width}x{session.atlas.height} with "
+                               f"{session.atlas.rects} is not the layout of its views ({expected.width}x"
+                               f"{expected.height} with {expected.rects})")

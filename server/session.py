@@ -1,9 +1,10 @@
 """One client's session: handshake, then frames on the virtual or the real clock.
 
-The session drives the sans-I/O :class:`~pibr.protocol.connection.Connection` with its own
-socket. Rendering runs on the server's GL thread and encoding in its worker pool, both shared
-fairly between sessions (fair_queue.py); a slow or misbehaving client only ever stalls its own
-session. Any protocol error closes this connection with an ``Error`` naming the problem.
+The session drives the sans-I/O :class:`~pibr.protocol.sides.ServerSide` (its connection and
+the session's message order: the Hello first, then poses and clocks, time never backwards) with
+its own socket. Rendering runs on the server's GL thread and encoding in its worker pool, both
+shared fairly between sessions (fair_queue.py); a slow or misbehaving client only ever stalls its
+own session. Any protocol error closes this connection with an ``Error`` naming the problem.
 
 Deadlines no peer can stretch: the whole Hello within ``hello_timeout_s`` of connecting (a
 connection counts toward ``max_sessions`` only once its Hello is valid; until then the server
@@ -20,12 +21,10 @@ import ssl
 import time
 from collections import deque
 
-from pibr.protocol.access import token_matches
-from pibr.protocol.connection import Connection, Envelope
-from pibr.protocol.errors import (AccessDenied, ConfigError, PeerTimeout, ProtocolError, SceneError,
-                                  UnexpectedMessage, UnsupportedVersion)
-from pibr.protocol.messages import (FRAMES_DECODED, PROTOCOL_VERSION, Bye, Clock, Error, Hello, PoseMsg, Stats,
-                                    Welcome)
+from pibr.protocol.connection import Envelope
+from pibr.protocol.errors import ClientClosed, ConfigError, PeerTimeout, ProtocolError, SceneError
+from pibr.protocol.messages import FRAMES_DECODED, Bye, Clock, Error, Hello, PoseMsg, Welcome
+from pibr.protocol.sides import ServerSide
 
 from .pipeline import EncodedFrame
 
@@ -34,14 +33,12 @@ log = logging.getLogger(__name__)
 READ_CHUNK = 1 << 16
 
 
-class SessionClosed(Exception):
-    """The peer ended the session (Bye, Error or end of stream)."""
-
-
 class Session:
     def __init__(self, server, reader: asyncio.StreamReader, writer: asyncio.StreamWriter, session_id: int):
         self.server, self.reader, self.writer, self.id = server, reader, writer, session_id
-        self.conn = Connection(server.config.max_message_size)
+        #: the session's message order (sans-I/O); ``conn``, its connection, carries our messages
+        self.side = ServerSide(server.config.token, server.config.max_message_size)
+        self.conn = self.side.conn
         self.peer = writer.get_extra_info("peername")
         self.pipeline = None            # the session's SessionPipeline (server/pipeline.py), after the Hello
         self.config = None
@@ -49,8 +46,6 @@ class Session:
         self.frames_skipped = 0
         self.frames_held = 0            # real clock: ticks not rendered while the client caught up
         self.tick_overruns = 0
-        self.client_stats: dict = {}
-        self._pending: deque = deque()
         self.idle_timeout_s: float | None = None   # set by the Hello's clock
         self._accepted = asyncio.get_running_loop().time()
         self._hello_deadline: asyncio.Timeout | None = None
@@ -71,8 +66,8 @@ class Session:
                 raise PeerTimeout(f"the client read nothing for {self.idle_timeout_s:g} s") from None
 
     async def _recv(self) -> Envelope:
-        """Next pose or clock (or other message) from the client; raises SessionClosed at its end,
-        ProtocolError on bad input and PeerTimeout when none arrives within the idle timeout
+        """Next pose or clock from the client; raises ClientClosed at its end, ProtocolError on bad
+        input or a message out of order, and PeerTimeout when none arrives within the idle timeout
         (``Stats`` do not count: they are taken in passing)."""
         try:
             async with asyncio.timeout(self.idle_timeout_s):
@@ -83,28 +78,14 @@ class Session:
             raise PeerTimeout(f"no message from the client for {self.idle_timeout_s:g} s (idle timeout)") from None
 
     async def _next_message(self) -> Envelope:
-        while True:
-            self._pending.extend(self.conn.events_received())
-            if self._pending:
-                env = self._pending.popleft()
-                msg = env.message
-                if isinstance(msg, Error):
-                    raise SessionClosed(f"client reported error {msg.code}: {msg.text}")
-                if isinstance(msg, Bye):
-                    raise SessionClosed(f"client said bye ({msg.reason or 'no reason'})")
-                if isinstance(msg, Stats):
-                    self.client_stats.update(msg.values)
-                    continue
-                return env
-            if self.conn.failed:
-                raise self.conn.error
+        """The next message the side lets the session take, reading as long as it needs bytes."""
+        while (env := self.side.next_event()) is None:
             data = await self.reader.read(READ_CHUNK)
-            if not data:
-                self.conn.receive_eof()
-                if self.conn.error is not None:
-                    raise self.conn.error
-                raise SessionClosed("client closed the connection")
-            self.conn.receive_data(data)
+            if data:
+                self.side.receive_data(data)
+            else:
+                self.side.receive_eof()
+        return env
 
     # ------------------------------------------------------------------ lifecycle
 
@@ -119,7 +100,7 @@ class Session:
                 await self._run_virtual()
             else:
                 await self._run_real()
-        except SessionClosed as exc:
+        except ClientClosed as exc:
             log.info("session %d: %s", self.id, exc)
         except ProtocolError as exc:
             log.warning("session %d: protocol error from %s: %s", self.id, self.peer, exc)
@@ -163,7 +144,8 @@ class Session:
                  self.tick_overruns)
 
     async def _receive_hello(self) -> Hello:
-        """The client's Hello, whole within ``hello_timeout_s`` of connecting, however it trickles in."""
+        """The client's Hello, whole within ``hello_timeout_s`` of connecting, however it trickles in
+        (the side refuses any other first message, a bad token and another protocol version)."""
         limit = self.server.config.hello_timeout_s
         try:
             async with asyncio.timeout_at(self._accepted + limit) as self._hello_deadline:
@@ -176,15 +158,7 @@ class Session:
             raise PeerTimeout(f"no complete Hello within {limit:g} s of connecting") from None
         finally:
             self._hello_deadline = None
-        hello = env.message
-        if not isinstance(hello, Hello):
-            raise UnexpectedMessage(f"expected Hello as the first message, got {hello.NAME}")
-        token = self.server.config.token
-        if token is not None and not token_matches(token, hello.token):   # before anything else is told
-            raise AccessDenied("bad or missing token")
-        if hello.protocol != PROTOCOL_VERSION:
-            raise UnsupportedVersion(f"client speaks protocol {hello.protocol}, this server speaks {PROTOCOL_VERSION}")
-        return hello
+        return env.message
 
     async def _set_up(self, hello: Hello) -> None:
         """Prepare the session, send the Welcome (and the proxies when asked for)."""
@@ -241,7 +215,7 @@ class Session:
         # A client's clock runs ahead of the next frame by its own tick and the link's delays; past
         # this it only makes the session render frames nobody waits for, as fast as it can.
         max_lead_us = int(round(self.server.config.max_clock_lead_s * 1e6)) + interval + delay
-        horizon = None          # every later client message has a virtual time >= this
+        side = self.side        # side.horizon_us: every later client message has a virtual time >= this
         poses = deque()         # (arrival vtime, PoseMsg) not yet in effect
         current = None
         promised = None
@@ -255,31 +229,22 @@ class Session:
                 promised = vtime_us
 
         async def receive() -> None:
-            nonlocal horizon
-            env = await self._recv()
-            if horizon is not None and env.vtime_us < horizon:
-                raise UnexpectedMessage(f"virtual time went backwards ({env.vtime_us} us after {horizon} us)")
-            if k is not None and env.vtime_us - k * interval > max_lead_us:
-                lead = (env.vtime_us - k * interval) / 1e6
-                raise UnexpectedMessage(f"the client's clock ({env.vtime_us} us) runs {lead:g} s ahead of the next "
-                                        f"frame ({k * interval} us), more than the {max_lead_us / 1e6:g} s allowed")
-            horizon = env.vtime_us
+            side.next_frame(None if k is None else k * interval, max_lead_us)
+            env = await self._recv()    # a pose or a clock, its time checked by the side
             if isinstance(env.message, PoseMsg):
                 poses.append((env.vtime_us, env.message))
-            elif not isinstance(env.message, Clock):
-                raise UnexpectedMessage(f"unexpected {env.message.NAME} from the client")
 
         while True:
             if k is None:
                 if poses:   # first tick at or after the first pose arrives
                     k = -(-poses[0][0] // interval)
                     continue
-                if horizon is not None:  # no frame before a pose arrives, and none arrives before horizon
-                    await promise(-(-horizon // interval) * interval + delay)
+                if side.horizon_us is not None:  # no frame before a pose arrives, and none arrives before horizon
+                    await promise(-(-side.horizon_us // interval) * interval + delay)
                 await receive()
                 continue
             t_k = k * interval
-            while horizon <= t_k:
+            while side.horizon_us <= t_k:
                 await promise(t_k + delay)
                 await receive()
             while poses and poses[0][0] <= t_k:
@@ -293,7 +258,7 @@ class Session:
         """Real clock: ``max_in_flight`` frames sent are not decoded yet by a client that reports
         what it decoded (``FRAMES_DECODED``). A new frame now would only queue behind them and
         be stale when shown; the next tick renders the newest pose instead."""
-        decoded = self.client_stats.get(FRAMES_DECODED)
+        decoded = self.side.client_stats.get(FRAMES_DECODED)
         return decoded is not None and self.frames_sent - decoded >= self.server.config.max_in_flight
 
     def _previous_frame_unsent(self, now: float) -> bool:
@@ -326,7 +291,7 @@ class Session:
                 if wait > 0:
                     done, _ = await asyncio.wait({receiver}, timeout=wait)
                 if receiver.done():
-                    receiver.result()  # re-raises the receiver's error, or SessionClosed
+                    receiver.result()  # re-raises the receiver's error, or ClientClosed
                     return
                 if newest[0] is not None:
                     if self._previous_frame_unsent(loop.time()):
@@ -345,16 +310,14 @@ class Session:
             receiver.cancel()
             try:
                 await receiver
-            except (asyncio.CancelledError, SessionClosed, ProtocolError, ConnectionError):
+            except (asyncio.CancelledError, ClientClosed, ProtocolError, ConnectionError):
                 pass  # its outcome, if it mattered, was raised above
 
     async def _receive_poses(self, newest: list) -> None:
         while True:
-            env = await self._recv()
+            env = await self._recv()    # a pose or a clock (the side refuses anything else)
             if isinstance(env.message, PoseMsg):
                 newest[0] = env.message
-            elif not isinstance(env.message, Clock):
-                raise UnexpectedMessage(f"unexpected {env.message.NAME} from the client")
 
     def stats(self) -> dict:
         return {"frames_sent": self.frames_sent, "frames_skipped": self.frames_skipped,
