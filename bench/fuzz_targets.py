@@ -499,7 +499,7 @@ class TraceTarget(Target):
             write_canonical_csv(trace, canonical)
             with open(canonical, "rb") as f:
                 canonical_bytes = f.read()
-        ref = resources.files("pibr.protocol.data").joinpath("traces/pred6dof/1.csv")
+        ref = resources.files("pibr.common.traces").joinpath("data/pred6dof/1.csv")
         pred = b"\n".join(ref.read_bytes().splitlines()[:20]) + b"\n"
         euler = ["time;px;py;pz;yaw;pitch;roll"] + [
             f"{1000 + 16.7 * i:.1f},{0.01 * i:.4f},{1.6 + 0.001 * i:.4f},{-0.02 * i:.4f},{2.0 * i:.2f},{-1.0 * i:.2f},0"

@@ -29,7 +29,7 @@ def test_docker_compose_commands_are_valid_pibr_invocations():
     relay = parser.parse_args(services["relay"]["command"])
     assert relay.up_ms + relay.down_ms == 128
     client = parser.parse_args(services["client"]["command"])
-    assert client.method == ("none", "rotation", "proxy")     # the project's main method, beside its baselines
+    assert client.methods == ("none", "rotation", "proxy")     # the project's main method, beside its baselines
 
 
 def test_docker_image_installs_the_whole_project():

@@ -10,6 +10,16 @@ from pibr.server.pipeline import SessionPipeline
 
 pytestmark = pytest.mark.gl
 
+
+@pytest.fixture
+def gl_ctx():
+    """A context of the test's own (current on this thread, no state shared with other tests)."""
+    from pibr.common.gl import create_context
+
+    ctx = create_context()
+    yield ctx
+    ctx.release()
+
 HELLO = Hello(output=OutputConfig(160, 90, 90.0, 30.0))
 
 
