@@ -9,6 +9,8 @@ from pibr.common import arguments
 from pibr.protocol.depth_codecs import DEPTH_CODECS
 from pibr.protocol.motion_flow import FLOW_CODERS
 
+from . import commands   # the runners: they import what they run when they run
+
 #: The benchmarks' primary view (bench/simulation.py BENCH_VIEW_SIZE, repeated here so that
 #: ``pibr --help`` needs no GL or codec import; a test keeps them equal).
 BENCH_VIEW_SIZE = (1024, 1024)
@@ -93,16 +95,6 @@ def _out(p, default="out/bench"):
     p.add_argument("--out", default=default, help=f"output directory (default {default})")
 
 
-def _command(name: str):
-    """The runner of a command (bench/commands.py), imported when the command runs, not to parse."""
-    def run(args) -> int:
-        from . import commands
-
-        return getattr(commands, name)(args)
-    run.__name__ = name
-    return run
-
-
 def register(sub) -> None:
     from pibr.client.object_motion import CLIENT_MOTION_MODES
 
@@ -131,7 +123,7 @@ def register(sub) -> None:
     d.add_argument("--motion", choices=CLIENT_MOTION_MODES, default=None,
                    help="how the client brings moving objects to the display time (see 'pibr client --help'; "
                         "try --scene dynamic --motion flow)")
-    d.set_defaults(func=_command("cmd_demo"))
+    d.set_defaults(func=commands.cmd_demo)
 
     e = sub.add_parser("evaluate", help="score a client recording against ground truth",
                        description="Render ground truth for every displayed tick of a 'pibr client' recording and "
@@ -141,7 +133,7 @@ def register(sub) -> None:
     e.add_argument("--flip-every", type=arguments.non_negative_int, default=1)
     e.add_argument("--workers", type=arguments.positive_int, default=2, help="metric worker processes (default 2)")
     e.add_argument("--no-video", action="store_true", help="skip side_by_side.mp4")
-    e.set_defaults(func=_command("cmd_evaluate"))
+    e.set_defaults(func=commands.cmd_evaluate)
 
     b = sub.add_parser("bench", help="benchmarks: speed, size and quality trades",
                        description="Benchmarks print a table and write JSON (and plots) to --out.")
@@ -167,7 +159,7 @@ def register(sub) -> None:
                    help="compare every variant's primary view with a 2-degree reference render")
     s.add_argument("--bitrate-kbps", type=arguments.positive, default=16000.0)
     _out(s)
-    s.set_defaults(func=_command("cmd_bench_server"))
+    s.set_defaults(func=commands.cmd_bench_server)
     c = bs.add_parser("client", help="client ms per frame by stage")
     _scene(c)
     c.add_argument("--trace", default="pred6dof-1")
@@ -176,7 +168,7 @@ def register(sub) -> None:
     _output_size(c, help="client output size (default 960x540)")
     c.add_argument("--method", type=parse_methods, default=("none", "rotation", "proxy"))
     _out(c)
-    c.set_defaults(func=_command("cmd_bench_client"))
+    c.set_defaults(func=commands.cmd_bench_client)
 
     cov = bs.add_parser("coverage", help="pixels no transmitted view covers: primary, peeling, offset, both",
                         description="Reproduces Reinert et al.'s Figure 4: the fraction of displayed pixels that no "
@@ -191,7 +183,7 @@ def register(sub) -> None:
     cov.add_argument("--offset", type=arguments.offset, default=None, metavar="F,U,TILT",
                      help="extra view offset (default: the scene's, else Reinert et al.'s 1.5,1.8,15)")
     _out(cov)
-    cov.set_defaults(func=_command("cmd_bench_coverage"))
+    cov.set_defaults(func=commands.cmd_bench_coverage)
 
     i = bs.add_parser("ibr", help="none / rotation / proxy against ground truth, proxy speed against a floor",
                       description="Quality of the client methods at the given latency on real traces (in one "
@@ -212,7 +204,7 @@ def register(sub) -> None:
                    help="output sizes of the speed comparison with the floor (default 960x540,1280x720; '' for none)")
     i.add_argument("--speed-frames", type=arguments.positive_int, default=20, help="frames timed per size (default 20)")
     _out(i)
-    i.set_defaults(func=_command("cmd_bench_ibr"))
+    i.set_defaults(func=commands.cmd_bench_ibr)
 
     cd = bs.add_parser("codec", help="depth codecs on rate-distortion curves at equal bitrate",
                        description="Bits per frame against disparity PSNR and 1 % outliers of the edge codec over its "
@@ -237,7 +229,7 @@ def register(sub) -> None:
                     help="small run: 256x256 view, 1 s of the first two windows, 3 thresholds, 1 end-to-end window")
     cd.add_argument("--plot", default=None, help="also write the chart here (e.g. docs/depth_rd.png)")
     _out(cd)
-    cd.set_defaults(func=_command("cmd_bench_codec"))
+    cd.set_defaults(func=commands.cmd_bench_codec)
 
     cs = bs.add_parser("codec-speed", help="the edge codec's CPU ms stage by stage, bytes and PSNR, vs a baseline",
                        description="Encode and decode (with diffusion) of the edge codec on rendered frames along "
@@ -252,7 +244,7 @@ def register(sub) -> None:
     cs.add_argument("--baseline", default=None, metavar="CHECKOUT",
                     help="a pibr source tree to compare against, e.g. a git worktree of main")
     _out(cs)
-    cs.set_defaults(func=_command("cmd_bench_codec_speed"))
+    cs.set_defaults(func=commands.cmd_bench_codec_speed)
 
     ps = bs.add_parser("proxy-speed", help="proxy's CPU ms against the passes it replaced, --no-carve and the floor",
                        description="CPU ms of proxy's passes in one run: the default carving, carve_all (the passes "
@@ -268,7 +260,7 @@ def register(sub) -> None:
     ps.add_argument("--frames", type=arguments.positive_int, default=12, help="display samples (default 12)")
     ps.add_argument("--repeats", type=arguments.positive_int, default=3, help="renders of each sample (default 3)")
     _out(ps)
-    ps.set_defaults(func=_command("cmd_bench_proxy_speed"))
+    ps.set_defaults(func=commands.cmd_bench_proxy_speed)
 
     pa = bs.add_parser("pareto", help="every method and knob: client ms against DSSIM (Reinert et al.'s Figure 9)",
                        description="Runs every client method with each of its knobs (and a zero-latency oracle) on "
@@ -292,7 +284,7 @@ def register(sub) -> None:
     pa.add_argument("--flip-every", type=arguments.non_negative_int, default=4, help="FLIP on every Nth scored frame, 0: never")
     pa.add_argument("--depth-codec", choices=tuple(DEPTH_CODECS), default="h264")
     _out(pa)
-    pa.set_defaults(func=_command("cmd_bench_pareto"))
+    pa.set_defaults(func=commands.cmd_bench_pareto)
 
     tr = bs.add_parser("trade", help="each knob swept with the others at their defaults: quality against bits and ms",
                        description="Sweeps colour bitrate, x264 preset, keyframe interval, primary and extra view "
@@ -314,7 +306,7 @@ def register(sub) -> None:
     tr.add_argument("--flip-every", type=arguments.non_negative_int, default=4, help="FLIP on every Nth scored tick, 0: never")
     tr.add_argument("--seed", type=arguments.non_negative_int, default=0, help="jitter seed (default 0)")
     _out(tr)
-    tr.set_defaults(func=_command("cmd_bench_trade"))
+    tr.set_defaults(func=commands.cmd_bench_trade)
 
     dy = bs.add_parser("dynamic", help="moving objects at the display time: static, velocity, accel, flow and the "
                                        "oracle per latency; both flow coders",
@@ -343,7 +335,7 @@ def register(sub) -> None:
     dy.add_argument("--flow-coder", choices=tuple(FLOW_CODERS), default=None,
                     help="the motion flow the flow methods receive (default: the server's); both are measured")
     _out(dy)
-    dy.set_defaults(func=_command("cmd_bench_dynamic"))
+    dy.set_defaults(func=commands.cmd_bench_dynamic)
 
     sp = bs.add_parser("split", help="a one-mesh level, whole against cut into pieces: LoD, client ms, DSSIM",
                        description="Generates a one-mesh atrium (167k triangles) and serves it whole and cut into "
@@ -353,7 +345,7 @@ def register(sub) -> None:
     sp.add_argument("--stride", type=arguments.positive_int, default=6, help="score every Nth displayed tick (default 6)")
     _output_size(sp)
     _out(sp)
-    sp.set_defaults(func=_command("cmd_bench_split"))
+    sp.set_defaults(func=commands.cmd_bench_split)
 
     lo = bs.add_parser("lod", help="encaging level-of-detail proxies: triangles, enclosure, time per object",
                        description="Generate (or read from the cache) every object's encaging proxy and report the "
@@ -365,7 +357,7 @@ def register(sub) -> None:
     lo.add_argument("--no-cache", action="store_true",
                     help="generate every proxy afresh (timing this machine) instead of reading the LoD cache")
     _out(lo)
-    lo.set_defaults(func=_command("cmd_bench_lod"))
+    lo.set_defaults(func=commands.cmd_bench_lod)
 
     rt = bs.add_parser("realtime", help="server, relay and client processes on the wall clock: fps, missed "
                                         "deadlines, frame age, CPU; and the cost per session",
@@ -394,7 +386,7 @@ def register(sub) -> None:
     rt.add_argument("--extra-view", choices=("auto", "on", "off"), default=None,
                     help="the server's extra view (default: the server's, auto)")
     _out(rt)
-    rt.set_defaults(func=_command("cmd_bench_realtime"))
+    rt.set_defaults(func=commands.cmd_bench_realtime)
 
     from .hostile import KINDS
 
@@ -418,7 +410,7 @@ def register(sub) -> None:
     _view_size(so, (256, 256), help="the server's primary view size (default 256x256: many sessions on two cores)")
     so.add_argument("--seed", type=int, default=0)
     _out(so)
-    so.set_defaults(func=_command("cmd_bench_soak"))
+    so.set_defaults(func=commands.cmd_bench_soak)
 
     fz = bs.add_parser("fuzz", help="mutation fuzzing of every parser a peer or a file feeds: documented errors only",
                        description="Mutates valid inputs (bytes, text, JSON and TOML structure) of the wire decoder, "
@@ -437,7 +429,7 @@ def register(sub) -> None:
     fz.add_argument("--replay", default=None, metavar="FILE",
                     help="run one saved input (OUT/fuzz_inputs/PARSER-KIND-INDEX.*) again and show what it raises")
     _out(fz)
-    fz.set_defaults(func=_command("cmd_bench_fuzz"))
+    fz.set_defaults(func=commands.cmd_bench_fuzz)
 
     o = bs.add_parser("optimize-offset", help="search the extra view's offset for the fewest holes",
                       description="Exhaustive (or coarse-to-fine) search over forward offset, height and tilt of "
@@ -457,7 +449,7 @@ def register(sub) -> None:
     _view_size(o, (512, 512))
     _output_size(o, (192, 108))
     _out(o)
-    o.set_defaults(func=_command("cmd_bench_offset"))
+    o.set_defaults(func=commands.cmd_bench_offset)
 
 
 def _trade_knobs(text: str) -> tuple:

@@ -37,6 +37,7 @@ import time
 import numpy as np
 
 from .results import write_result
+from .simulation import BENCH_VIEW_SIZE
 
 #: Edge codec significance thresholds of the rate sweep (code units; 3.5 is the default).
 DEFAULT_THRESHOLDS = (2.0, 3.5, 8.0, 16.0, 32.0, 64.0, 128.0)
@@ -146,7 +147,7 @@ def matched_pairs(curves: dict) -> list[dict]:
     return rows
 
 
-def run_codec_bench(scene_spec="room", windows=None, window_s=2.0, fps=10.0, view_size=(1024, 1024),
+def run_codec_bench(scene_spec="room", windows=None, window_s=2.0, fps=10.0, view_size=BENCH_VIEW_SIZE,
                     thresholds=DEFAULT_THRESHOLDS, log_bits=DEFAULT_LOG_BITS, totals_kbps=DEFAULT_TOTALS_KBPS,
                     out_dir="out/bench", progress=True, with_end_to_end=True, out_size=(960, 540),
                     e2e_windows=2, e2e_log_bits=10, plot_path=None) -> dict:
@@ -294,7 +295,7 @@ def run_codec_bench(scene_spec="room", windows=None, window_s=2.0, fps=10.0, vie
 
 
 def end_to_end(scene_spec="room", windows=None, totals_kbps=DEFAULT_TOTALS_KBPS, rate_hz=30.0, latency_ms=128.0,
-               view_size=(1024, 1024), out_size=(960, 540), stride=3, log_bits=10, with_10bit=True,
+               view_size=BENCH_VIEW_SIZE, out_size=(960, 540), stride=3, log_bits=10, with_10bit=True,
                edge_share=0.2, codecs=None, progress=True) -> dict:
     """Client DSSIM of ``proxy`` at equal *total* bitrate, per depth codec and total: the 8-bit
     disparity in the atlas gets the whole total; every other codec's colour gets the total minus

@@ -22,6 +22,7 @@ import tempfile
 import numpy as np
 
 from .results import write_result
+from .simulation import BENCH_VIEW_SIZE
 
 _WORKER = os.path.join(os.path.dirname(os.path.abspath(__file__)), "codec_speed_worker.py")
 
@@ -109,7 +110,7 @@ def summarize(rows: list[dict]) -> dict:
             "decoder_matches_encoder": all(r["encoder_view_matches"] for r in rows)}
 
 
-def run_codec_speed(scene_spec="room", windows=None, window_s=1.0, fps=10.0, view_size=(1024, 1024),
+def run_codec_speed(scene_spec="room", windows=None, window_s=1.0, fps=10.0, view_size=BENCH_VIEW_SIZE,
                     baseline: str | None = None, out_dir="out/bench", progress=True) -> dict:
     from .windows import EVALUATION_WINDOWS, Window, windows_json
 

@@ -27,6 +27,7 @@ from pibr.protocol.pose import Pose
 from pibr.server.coverage import COVERAGE_TOLERANCE, CoverageProbe
 
 from .results import write_result
+from .simulation import BENCH_VIEW_SIZE
 
 VARIANTS = ("primary", "peel_no_offset", "offset_no_peel", "offset_peel")
 VARIANT_LABELS = {"primary": "primary only", "peel_no_offset": "extra: peeling, no offset",
@@ -67,7 +68,7 @@ def measure_coverage(probe: CoverageProbe, samples, offset: Pose, variants=VARIA
     return out
 
 
-def run_coverage_bench(scene_spec="room", windows=None, latency_ms=128.0, rate_hz=30.0, view_size=(1024, 1024),
+def run_coverage_bench(scene_spec="room", windows=None, latency_ms=128.0, rate_hz=30.0, view_size=BENCH_VIEW_SIZE,
                        out_size=(320, 180), offset=None, stride=2, out_dir="out/bench", progress=True) -> dict:
     """``pibr bench coverage``: JSON and plot of the four variants' missing-pixel fractions,
     per window (default: the evaluation windows of bench/windows.py)."""

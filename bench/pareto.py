@@ -35,7 +35,7 @@ from pibr.server.coverage import camera_rays
 
 from .metrics import frame_metrics, nearly_uniform, pixels_per_degree
 from .results import write_result
-from .simulation import geometric_holes
+from .simulation import BENCH_VIEW_SIZE, geometric_holes
 from .variants import ORACLE, Variant, pareto_front
 from .windows import EVALUATION_WINDOWS, describe_windows, windows_json
 
@@ -110,7 +110,7 @@ class _Quality:
         return out
 
 
-def measure_scene(scene, variants, windows, latency_ms=128.0, rate_hz=30.0, stride=8, view_size=(1024, 1024),
+def measure_scene(scene, variants, windows, latency_ms=128.0, rate_hz=30.0, stride=8, view_size=BENCH_VIEW_SIZE,
                   out_size=(960, 540), speed_sizes=((960, 540), (1280, 720)), speed_frames=12, flip_every=4,
                   depth_codec="h264", workers=1, bar=None) -> dict:
     """Quality and speed of every variant on one scene; see the module docstring."""
@@ -229,7 +229,7 @@ def _measure_speed(scene, variants, samples, proxies, view_size, sizes, frames, 
 
 
 def run_pareto_bench(scenes=("room",), methods=None, windows=EVALUATION_WINDOWS, latency_ms=128.0,
-                     rate_hz=30.0, stride=8, view_size=(1024, 1024), out_size=(960, 540),
+                     rate_hz=30.0, stride=8, view_size=BENCH_VIEW_SIZE, out_size=(960, 540),
                      speed_sizes=((960, 540), (1280, 720)), speed_frames=12, flip_every=4, depth_codec="h264",
                      workers=1, out_dir="out/bench", progress=True) -> dict:
     from pibr.scenes.registry import load_scene

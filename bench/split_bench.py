@@ -19,6 +19,7 @@ import time
 import numpy as np
 
 from .results import write_result
+from .simulation import BENCH_VIEW_SIZE
 
 
 def atrium_mesh():
@@ -73,7 +74,7 @@ def write_atrium(directory: str) -> dict:
 
 
 def run_split_bench(out_dir="out/bench", traces=("synth-walk", "synth-look"), start_s=5.0, duration_s=6.0,
-                    rate_hz=30.0, latency_ms=128.0, stride=6, view_size=(1024, 1024), out_size=(960, 540),
+                    rate_hz=30.0, latency_ms=128.0, stride=6, view_size=BENCH_VIEW_SIZE, out_size=(960, 540),
                     progress=True) -> dict:
     from pibr.scenes.registry import load_scene
 

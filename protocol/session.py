@@ -173,7 +173,7 @@ class SessionConfig:
             except Exception as exc:
                 raise MalformedMessage(f"{p}: bad extra_offset ({exc})") from None
         codec = o.get("depth_codec", "h264")
-        if codec not in DEPTH_CODECS:
+        if not isinstance(codec, str) or codec not in DEPTH_CODECS:
             raise MalformedMessage(f"{p}: depth_codec must be one of {', '.join(DEPTH_CODECS)}, got {codec!r:.40}")
         proxies = o.get("proxies")
         if proxies is not None:

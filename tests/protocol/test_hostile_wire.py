@@ -171,6 +171,15 @@ def test_atlas_and_depth_settings_must_fit_the_views(change, match):
         SessionConfig.from_json(o)
 
 
+@pytest.mark.parametrize("codec", [["edge"], {"h264": 1}, 12, None, "jpeg"])
+def test_a_depth_codec_that_is_no_name_is_refused(codec):
+    """Found by ``pibr bench fuzz`` when the codecs became a registry: a list is no codec name."""
+    o = _config()
+    o["depth_codec"] = codec
+    with pytest.raises(MalformedMessage, match="depth_codec must be one of h264, edge"):
+        SessionConfig.from_json(o)
+
+
 def test_edge_codec_bits_must_be_decodable():
     o = _config("edge")
     o["depth_bits"] = 8

@@ -143,15 +143,16 @@ _PEEL_BY_FETCHES = """    vec3 t = wa_project(p);
 @pytest.mark.parametrize("mark_peeled", [True, False])
 def test_peeling_by_gather_equals_peeling_by_four_fetches(monkeypatch, mark_peeled):
     import pibr.server.renderer as R
+    import pibr.server.shaders as S
     from pibr.common.gl import create_context
 
-    start = R._FRAGMENT.index("    vec3 t = wa_project(p);\n    // the 2x2")
-    end = R._FRAGMENT.index("}\n#endif", start) + 1
+    start = S.FRAGMENT.index("    vec3 t = wa_project(p);\n    // the 2x2")
+    end = S.FRAGMENT.index("}\n#endif", start) + 1
     scene = load_scene("room")
     ctx = create_context()
     try:
         gather = R.Renderer(ctx, scene, "vertex")
-        monkeypatch.setattr(R, "_FRAGMENT", R._FRAGMENT[:start] + _PEEL_BY_FETCHES + R._FRAGMENT[end:])
+        monkeypatch.setattr(S, "FRAGMENT", S.FRAGMENT[:start] + _PEEL_BY_FETCHES + S.FRAGMENT[end:])
         fetches = R.Renderer(ctx, scene, "vertex")
         primary = R.RenderTarget(ctx, 256, 256)
         extra = R.RenderTarget(ctx, 128, 128)
