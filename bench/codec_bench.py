@@ -311,7 +311,7 @@ def end_to_end(scene_spec="room", windows=None, totals_kbps=DEFAULT_TOTALS_KBPS,
     from pibr.common.replay import display_samples
 
     from .depth_codecs import ViewDepthStreams
-    from pibr.server.depth_encoders import EdgeSettings
+    from pibr.server.config import EdgeSettings
 
     from .simulation import Simulation, bench_server_config, evaluate_methods, load_proxies, summarize
     from .windows import EVALUATION_WINDOWS, Window, windows_json

@@ -63,7 +63,7 @@ def plan_for(spec: str, output=(960, 540), fov_deg: float = 90.0, bandwidth_kbps
     from pibr.server.scene_plan import cached_extra_view, decide_proxies
     from pibr.server.session_plan import extra_offset_for, scene_plan
 
-    from pibr.server.depth_encoders import EdgeSettings
+    from pibr.server.config import EdgeSettings
 
     cfg = ServerConfig(extra_view=extra_view, depth_codec=depth_codec, view_size=view_size, bitrate_kbps=bitrate_kbps,
                        edge=EdgeSettings(kbps=edge_kbps))

@@ -160,11 +160,10 @@ def register(sub) -> None:
 
 
 def cmd_serve(args) -> int:
-    from .app import run_server
-    from .config import ServerConfig
-    from .depth_encoders import EdgeSettings
-
     from pibr.scenes.registry import with_up
+
+    from .app import run_server
+    from .config import EdgeSettings, ServerConfig
 
     config = arguments.config_from_args(
         ServerConfig, args, scene=with_up(args.scene, args.up), peel_marker=not args.no_peel_marker,

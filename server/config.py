@@ -11,7 +11,6 @@ from pibr.protocol.framing import DEFAULT_MAX_MESSAGE_SIZE
 from pibr.protocol.motion_flow import DEFAULT_FLOW_CODER, FLOW_CODERS
 from pibr.protocol.pose import dual_view_offset
 
-from .depth_encoders import EdgeSettings
 from .proxies import ProxySettings
 from .renderer import DEFAULT_PROJECTION, MAX_EDGE_ANGLE_DEG, PROJECTIONS
 
@@ -29,6 +28,16 @@ DEFAULT_MAX_IN_FLIGHT = 3
 
 #: Reinert et al.'s offset: 1.5 m forward, 1.8 m up, tilted 15 degrees down.
 PAPER_EXTRA_OFFSET = (1.5, 1.8, 15.0)
+
+
+@dataclass
+class EdgeSettings:
+    """The edge codec's settings (server/depth_encoders.py)."""
+
+    kbps: float = 0.0          # target for all depth streams together; 0: fixed threshold
+    temporal: bool = True
+    intra_every: int = 30
+    perceptual: bool = False
 
 
 @dataclass

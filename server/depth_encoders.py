@@ -14,8 +14,6 @@ keyframes.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
 from pibr.protocol.depth import DepthQuantizer
@@ -23,6 +21,7 @@ from pibr.protocol.depth_codecs import DEPTH_CODECS, edge_quantizer
 from pibr.protocol.edgecodec.codec import DEFAULT_THRESHOLD, EdgeEncoder, EncodeStats, warp_samples
 from pibr.protocol.pose import Pose
 
+from .config import EdgeSettings
 from .edge_extract import RateController, extract_edge_samples
 
 
@@ -61,14 +60,6 @@ class EdgeDepthStream:
         self._prev = (enc.samples, pose)
         self.frames += 1
         return enc.payload, enc.stats
-
-
-@dataclass
-class EdgeSettings:
-    kbps: float = 0.0          # target for all depth streams together; 0: fixed threshold
-    temporal: bool = True
-    intra_every: int = 30
-    perceptual: bool = False
 
 
 class EdgeDepthEncoder:

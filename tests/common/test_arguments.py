@@ -28,7 +28,7 @@ def test_config_from_args_takes_the_fields_arguments_name_and_overrides_win():
 def test_the_server_config_comes_from_its_command_line():
     from pibr.cli import build_parser
     from pibr.server.config import ServerConfig
-    from pibr.server.depth_encoders import EdgeSettings
+    from pibr.server.config import EdgeSettings
 
     args = build_parser().parse_args(["serve", "--fps", "5", "--view-size", "512x256", "--no-peel-marker",
                                       "--edge-kbps", "800", "--max-in-flight", "2", "--depth-codec", "edge"])
