@@ -1,7 +1,8 @@
 """``pibr bench server`` and ``pibr bench client``: ms per frame by stage, and bitrate.
 
 Both run the real pipeline in one process (no sockets, so the numbers are the stages'
-own cost): the server's renderer, atlas packer and libx264 encoder along a real head
+own cost): the server's session pipeline (server/pipeline.py: renderer, atlas packer, libx264
+and, as a session of that scene needs, the depth and motion encoders) along a real head
 trace; the client's H.264 decoder, texture upload and each method's display pass on the
 stream the server pipeline produced. Timings here are noisy: compare within one run.
 """
@@ -86,7 +87,7 @@ def bench_server(scene_spec="room", trace="pred6dof-1", frames=40, view_size=BEN
             pipeline = SessionPipeline(cfg, scene, Hello(), deterministic=True).open(ctx, renderer)
             spec = pipeline.spec
             stages = {"render": [], "readback": [], "pack": [], "encode": []}
-            sizes, keys = [], []
+            sizes, totals, keys = [], [], []   # H.264 bytes, every payload's, keyframe or not
             accuracy = {"psnr": [], "off": []}
             for i, (t, pose) in enumerate(poses):
                 p = pipeline.produce(pose, t)
@@ -105,7 +106,8 @@ def bench_server(scene_spec="room", trace="pred6dof-1", frames=40, view_size=BEN
                 stages["readback"].append(p.readback_ms)
                 stages["pack"].append(p.pack_ms)
                 stages["encode"].append(encode_ms)
-                sizes.append(encoded.nbytes)
+                sizes.append(len(encoded.video))
+                totals.append(encoded.nbytes)
                 keys.append(encoded.keyframe)
             pipeline.release()
             total = [sum(v) for v in zip(*stages.values())]
@@ -118,6 +120,7 @@ def bench_server(scene_spec="room", trace="pred6dof-1", frames=40, view_size=BEN
                 "view_size": list(view_size), "atlas": [spec.layout.width, spec.layout.height],
                 **{f"{k}_ms": _median(v) for k, v in stages.items()}, "total_ms": _median(total),
                 "kbps": float(np.mean(sizes) * 8 * fps / 1000), "frame_bytes_mean": float(np.mean(sizes)),
+                "total_kbps": float(np.mean(totals) * 8 * fps / 1000),   # with depth, poses and motion
                 "keyframe_bytes": float(np.mean([s for s, k in zip(sizes, keys) if k])) if any(keys) else None,
                 "triangles": scene.triangle_count, "rasterised_triangles":
                     renderer.tessellated_triangles if projection == "vertex" else scene.triangle_count,
