@@ -347,6 +347,25 @@ def register(sub) -> None:
     _out(sp)
     sp.set_defaults(func=commands.cmd_bench_split)
 
+    lv = bs.add_parser("levels", help="the deadline controller's quality levels: ms and DSSIM of each",
+                       description="Draws every quality level of each method (client/deadline.py: render scale, "
+                                   "no inpainting, coarser proxies, the rotation fallback) on the same display ticks "
+                                   "of the evaluation windows, in one process: wall and CPU ms (this machine) and "
+                                   "DSSIM, PSNR and own holes against ground truth (every machine). Writes "
+                                   "levels.json, whose costs_ms 'pibr client --cost-table' takes.")
+    _scene(lv)
+    lv.add_argument("--method", type=parse_methods, default=("proxy", "rotation"),
+                    help="methods whose levels to measure (default proxy,rotation)")
+    _windows_option(lv)
+    _latency(lv)
+    _rate(lv)
+    lv.add_argument("--stride", type=arguments.positive_int, default=10,
+                    help="score every Nth displayed tick (default 10)")
+    _output_size(lv)
+    _view_size(lv)
+    _out(lv)
+    lv.set_defaults(func=commands.cmd_bench_levels)
+
     lo = bs.add_parser("lod", help="encaging level-of-detail proxies: triangles, enclosure, time per object",
                        description="Generate (or read from the cache) every object's encaging proxy and report the "
                                    "triangle counts, the fraction of original vertices enclosed and the time taken.")

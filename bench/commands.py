@@ -241,3 +241,14 @@ def cmd_bench_offset(args) -> int:
     print(f"use it: pibr serve --extra-offset {b['forward']:g},{b['up']:g},{b['tilt']:g}")
     print(f"written: {args.out}/offset_search.json, {args.out}/offset_search.png")
     return 0
+
+
+def cmd_bench_levels(args) -> int:
+    from .levels_bench import print_levels_table, run_levels_bench
+
+    r = run_levels_bench(scene_spec=args.scene, methods=args.method, windows=args.windows, latency_ms=args.latency_ms,
+                         rate_hz=args.rate, stride=args.stride, view_size=args.view_size, out_size=args.size,
+                         out_dir=args.out)
+    print_levels_table(r)
+    print(f"written: {args.out}/levels.json (its costs_ms: pibr client --cost-table {args.out}/levels.json)")
+    return 0

@@ -41,9 +41,10 @@ from pibr.protocol.pose import Pose
 
 from .config import ClientConfig
 from .connection import ClientConnection
+from .deadline import OFF, DeadlineController, levels_for, read_cost_table
 from .depth_decoders import make_depth_decoder
 from .frame_textures import FrameTextures
-from .methods import make_method, needs_proxies, quadtree_threshold
+from .methods import needs_proxies, quadtree_threshold
 from .recorder import POSE_FIELDS, MethodRecorder
 from .video import H264Decoder
 
@@ -51,6 +52,8 @@ log = logging.getLogger(__name__)
 
 #: Sequence number of the poses a real-clock client sends while it warms up, before its clock.
 WARMUP_SEQ = (1 << 32) - 1
+#: Timed renders of every quality level before the wall clock starts (after one that compiles it).
+CALIBRATION_RENDERS = 3
 
 
 @dataclass
@@ -128,6 +131,12 @@ class Client:
         self._frame_bytes: list[int] = []
         #: frame id -> wire size of the frames received and not decoded yet
         self._wire_sizes: dict[int, int] = {}
+        #: the quality levels' controller (client/deadline.py), None with --deadline off
+        self.deadline: DeadlineController | None = None
+        self._levels: dict = {}          # method -> its levels, best first (one with --deadline off)
+        self._chosen: dict = {}          # method -> (level, reason) of the tick being drawn
+        self._record_ms: list[float] = []   # per tick: reading the images back for the recorders
+        self._calibration: dict = {}        # method -> median ms of each level before the clock started
 
     # ------------------------------------------------------------------ set-up
 
@@ -140,6 +149,29 @@ class Client:
             raise ConfigError(f"--start {start} s leaves nothing of trace {trace.name!r} ({trace.duration:.2f} s)")
         return trace, end - start
 
+    def _set_up_deadline(self) -> None:
+        """The quality levels of every method and, unless --deadline says off, their controller:
+        on by default on the wall clock (fitted to what the ticks take); on the virtual clock only
+        with a cost table (its choices then depend on the table alone, not on this machine)."""
+        cfg = self.cfg
+        costs = read_cost_table(cfg.cost_table) if cfg.cost_table else None
+        on = cfg.deadline == "on" or (cfg.deadline == "auto" and (cfg.clock == "real" or costs is not None))
+        if on and cfg.clock == "virtual" and costs is None:
+            raise ConfigError("--deadline on with the virtual clock needs --cost-table: its choices must not "
+                              "depend on how fast this machine is")
+        if not on:
+            self._levels = {m: levels_for(m)[:1] for m in cfg.methods}
+            return
+        self._levels = {m: levels_for(m) for m in cfg.methods}
+        self.deadline = DeadlineController(self._levels, 1e3 / cfg.rate_hz, costs=costs,
+                                           adapt=cfg.clock == "real")
+
+    def _choose_levels(self) -> dict:
+        """The levels of this tick: the controller's, or the top ones (--deadline off)."""
+        if self.deadline is None:
+            return {m: (0, OFF) for m in self.cfg.methods}
+        return self.deadline.choose()
+
     def _pose_at(self, trace, t_s: float) -> Pose:
         local = trace.pose_at(self.cfg.start_s + min(max(t_s, 0.0), self._duration))
         if self._placement is None:
@@ -149,43 +181,75 @@ class Client:
         return self._placement.compose(local)
 
     def _gl_setup(self, ctx):
+        """The frame textures, every method at each of its quality levels (one level each with
+        --deadline off), and the output target."""
         from .output_target import OutputTarget
+        from .render_scale import make_level
 
         out = OutputConfig(self.cfg.width, self.cfg.height, self.cfg.fov_deg, self.cfg.rate_hz)
         textures = FrameTextures(ctx, self.session)
         options = {"tau": self.cfg.tau, "lod_target_px": self.cfg.lod_pixels, "lod_level": self.cfg.lod_level,
                    "poses": self.poses, **self.cfg.options}
-        methods = [make_method(name, ctx, out, self.session, proxies=self.proxies, **options)
-                   for name in self.cfg.methods]
+        methods = {name: [make_level(ctx, lv, out, self.session, self.proxies, **options) for lv in self._levels[name]]
+                   for name in self.cfg.methods}
         target = OutputTarget(ctx, self.cfg.width, self.cfg.height)
         self._gl_state = (textures, methods, target)
-        self._method_info = {name: {"uses_extra_view": bool(m.uses_extra_view)}
-                             for name, m in zip(self.cfg.methods, methods)}
+        self._method_info = {name: {"uses_extra_view": bool(ms[0].uses_extra_view)} for name, ms in methods.items()}
 
-    def _gl_render(self, ctx, pose: Pose, decoded: _Decoded | None, scene_t: float):
-        """Upload the newest frame if new, render every method; -> [(rgb, hole fraction, ms)]."""
+    def _gl_render(self, ctx, pose: Pose, decoded: _Decoded | None, scene_t: float, chosen: dict | None = None,
+                   read: bool = True):
+        """Upload the newest frame if new, render every method at its chosen level (``chosen``:
+        method -> (level, reason); None: the top levels) -> [(rgb or None, hole fraction, ms)],
+        with the wall ms of reading the images back in ``self._record_ms`` (``read``: for the recorders)."""
         textures, methods, target = self._gl_state
         if decoded is not None and textures.frame_id != decoded.frame.frame_id:
             textures.upload(decoded.image, decoded.frame.frame_id, decoded.distances, decoded.flow)
-        out = []
-        for m in methods:
+        out, read_ms = [], 0.0
+        for name, instances in methods.items():
+            m = instances[chosen[name][0] if chosen else 0]
             target.begin()
             t0 = time.perf_counter()
             if decoded is not None:
                 m.render(pose, decoded.frame, textures, scene_t)
             ctx.finish()
-            ms = (time.perf_counter() - t0) * 1e3
-            rgba = target.read()
-            hole = float(np.count_nonzero(rgba[:, :, 3] == 0)) / (rgba.shape[0] * rgba.shape[1])
-            out.append((rgba[:, :, :3], hole, ms))
+            t1 = time.perf_counter()
+            rgb, hole = None, float("nan")
+            if read:
+                rgba = target.read()
+                hole = float(np.count_nonzero(rgba[:, :, 3] == 0)) / (rgba.shape[0] * rgba.shape[1])
+                rgb = rgba[:, :, :3]
+                read_ms += (time.perf_counter() - t1) * 1e3
+            out.append((rgb, hole, (t1 - t0) * 1e3))
+        if read:
+            self._record_ms.append(read_ms)
         return out
+
+    def _gl_calibrate(self, ctx, pose: Pose, decoded: _Decoded, renders: int) -> dict:
+        """Draw every level of every method ``renders`` times, untimed the first (it compiles
+        shader variants) -> method -> [ms per level]: the wall clock's first cost estimates."""
+        textures, methods, target = self._gl_state
+        costs = {}
+        for name, instances in methods.items():
+            costs[name] = []
+            for m in instances:
+                times = []
+                for k in range(renders + 1):
+                    target.begin()
+                    t0 = time.perf_counter()
+                    m.render(pose, decoded.frame, textures, 0.0)
+                    ctx.finish()
+                    if k:
+                        times.append((time.perf_counter() - t0) * 1e3)
+                costs[name].append(times)
+        return costs
 
     def _gl_release(self, ctx):
         if self._gl_state is None:
             return
         textures, methods, target = self._gl_state
-        for m in methods:
-            m.release()
+        for instances in methods.values():
+            for m in instances:
+                m.release()
         textures.release()
         target.release()
         self._gl_state = None
@@ -219,12 +283,14 @@ class Client:
                     from .motion_flow import MotionFlowDecoder
 
                     self._motion_decoder = MotionFlowDecoder(self.session.primary.width, self.session.primary.height)
+            self._set_up_deadline()
             self.gl = await loop.run_in_executor(None, GLThread, "pibr-client-gl")
             await self.gl.run(self._gl_setup)
             if cfg.record:
-                for m in cfg.methods:
+                for m in cfg.methods:   # on the wall clock the videos are encoded after the run
                     self.recorders[m] = MethodRecorder(cfg.out_dir, m, cfg.width, cfg.height, cfg.rate_hz,
-                                                       lossless=cfg.lossless, video=cfg.video)
+                                                       lossless=cfg.lossless, video=cfg.video,
+                                                       defer=cfg.clock == "real")
             interval_us = int(round(1e6 / cfg.rate_hz))
             n_ticks = max(1, int(math.floor(self._duration * cfg.rate_hz + 1e-9)))
             preroll = int(math.ceil(cfg.preroll_s * cfg.rate_hz))
@@ -349,19 +415,32 @@ class Client:
         flow, moving = self._motion_decoder.decode(payload)
         return primary_flow_frame(self.session, image, distances, flow, moving, frame.scene_t_us / 1e6)
 
-    async def _display(self, tick: int, t_us: int, pose: Pose) -> None:
+    async def _display(self, tick: int, t_us: int, pose: Pose) -> float:
         """Render all methods for the tick and record them. Recorded times are in client time;
         ``scene_t`` is the scene-animation (server) time the ground truth must show."""
         offset = self._server_offset_us
         decoded = self._newest
-        results = await self.gl.run(self._gl_render, pose, decoded, (t_us + offset) / 1e6)
+        chosen = self._chosen = self._choose_levels()
+        # without a controller the tick's budget is still its interval, and nothing is predicted (0)
+        budget = self.deadline.budget_ms if self.deadline is not None else 1e3 / self.cfg.rate_hz
+        predicted = {m: (self.deadline.predicted(m, k) if self.deadline is not None else None)
+                     for m, (k, _) in chosen.items()}
+        results = await self.gl.run(self._gl_render, pose, decoded, (t_us + offset) / 1e6, chosen,
+                                    bool(self.recorders))
+        drawn = sum(ms for _, _, ms in results)
         for name, (rgb, hole, ms) in zip(self.cfg.methods, results):
+            level, reason = chosen[name]
+            if self.deadline is not None and decoded is not None:
+                self.deadline.observe(name, level, ms)
             rec = self.recorders.get(name)
             if rec is None:
                 continue
             record = self._record(tick, t_us, pose, decoded, ms, hole, missed=0)
+            record.update(level=level, level_reason=reason, budget_ms=budget,
+                          predicted_ms=0.0 if predicted[name] is None else predicted[name])
             rec.submit(rgb, record)
             self._last_shown[name] = record
+        return drawn
 
     def _record(self, tick: int, t_us: int, pose: Pose, decoded, client_ms: float, hole: float, missed: int) -> dict:
         """One row of ``<method>.records.csv``: the tick, its pose, and the frame shown (if any)."""
@@ -379,6 +458,7 @@ class Client:
             "frame_arrival_t": float("nan") if f is None else arrival_us / 1e6,
             "age_ms": float("nan") if f is None else (t_us - pose_t_us) / 1e3,
             "client_ms": client_ms, "hole_fraction": hole, "missed": missed,
+            "level": 0, "level_reason": OFF, "budget_ms": 1e3 / self.cfg.rate_hz, "predicted_ms": 0.0,
             "frame_scene_t": float("nan") if f is None else f.scene_t_us / 1e6,
             **dict(zip((f"frame_{k}" for k in POSE_FIELDS),
                        [float("nan")] * 7 if f is None else f.primary_pose.as_array())),
@@ -443,7 +523,17 @@ class Client:
             if receiver.done():
                 receiver.result()
                 raise UnexpectedMessage("server stopped sending before the first frame")
-        await self.gl.run(self._gl_render, pose, self._newest, 0.0)
+        if self.deadline is None:
+            await self.gl.run(self._gl_render, pose, self._newest, 0.0, None, False)
+            return
+        # every level drawn once to compile it, then timed: the controller's first estimates
+        costs = await self.gl.run(self._gl_calibrate, pose, self._newest, CALIBRATION_RENDERS)
+        for name, per_level in costs.items():
+            for level, times in enumerate(per_level):
+                for ms in times:
+                    self.deadline.observe(name, level, ms)
+        self._calibration = {name: [round(float(np.median(t)), 3) for t in per_level]
+                             for name, per_level in costs.items()}
 
     async def _tick_real(self, trace, interval_us, n_ticks, preroll, progress, receiver, zero) -> None:
         loop = asyncio.get_running_loop()
@@ -458,10 +548,13 @@ class Client:
                 raise UnexpectedMessage("server stopped sending before the trace ended")
             t_us = tick * interval_us
             pose = self._pose_at(trace, t_us / 1e6)
+            started = loop.time()
             await self.conn.send(PoseMsg(tick + preroll, int((loop.time() - zero) * 1e6), pose), vtime_us=t_us)
             if tick >= 0:
-                await self._display(tick, t_us, pose)
+                drawn = await self._display(tick, t_us, pose)
                 progress.step()
+                if self.deadline is not None:   # the tick's work besides drawing: the controller's margin
+                    self.deadline.observe_overhead((loop.time() - started) * 1e3 - drawn)
             # Ticks whose deadline passed while we worked (the pre-roll's too, which may
             # run into the first displayed ticks) are not displayed afresh.
             next_tick = max(tick + 1, math.floor((loop.time() - zero) * 1e6 / interval_us) + 1)
@@ -529,9 +622,22 @@ class Client:
             "result": asdict(result),
             "proxies": self.proxy_stats or None,
             "methods": self._method_info,
+            # the quality levels chosen and why (client/deadline.py); None with --deadline off
+            "deadline": None if self.deadline is None else {**self.deadline.summary(),
+                                                            "calibration_ms": self._calibration},
+            # what recording cost each tick on the client's clock (reading the images back and
+            # handing them over; on the wall clock the videos are encoded after the run)
+            "record_ms": _percentiles(self._record_ms),
         }
         with open(os.path.join(self.cfg.out_dir, "session.json"), "w") as f:
             json.dump(info, f, indent=2, default=str)
+
+
+def _percentiles(values) -> dict | None:
+    if not values:
+        return None
+    v = np.asarray(values, float)
+    return {"median": float(np.median(v)), "p95": float(np.percentile(v, 95)), "ticks": len(v)}
 
 
 class FrameInbox:

@@ -9,6 +9,8 @@ from pibr.common import arguments
 from pibr.common.address import parse_host_port
 from pibr.protocol.depth_codecs import DEPTH_CODECS
 
+from .deadline import DEADLINE_MODES
+
 
 def parse_methods(text: str) -> tuple:
     """argparse type: comma-separated method names, each one the client knows."""
@@ -59,6 +61,15 @@ def register(sub) -> None:
                    help="proxy: finest LoD whose edges cover at least this many pixels (default 6)")
     p.add_argument("--lod-level", choices=("original", "proxy", "box"), default=None,
                    help="proxy: draw this level for every object instead of choosing by distance")
+    p.add_argument("--deadline", choices=DEADLINE_MODES, default="auto",
+                   help="keep the output rate by drawing each method at the best quality level whose predicted "
+                        "cost fits the tick (render scale, no inpainting, coarser proxies, at last rotation): auto "
+                        "(default) on the wall clock, and on the virtual clock when --cost-table gives the costs; "
+                        "on; off (always the best level)")
+    p.add_argument("--cost-table", default=None, metavar="FILE",
+                   help="each level's cost in ms (JSON: method -> level -> ms, or a session.json of an earlier "
+                        "wall-clock run, which records what it measured): on the virtual clock the levels are "
+                        "then chosen from it alone, the same on every machine")
     p.add_argument("--progress", choices=("bar", "lines", "none"), default="bar")
     p.add_argument("--receive-timeout-s", type=arguments.positive, default=30.0, metavar="S",
                    help="give up when the server sends nothing for S seconds while the client waits for it "

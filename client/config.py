@@ -1,12 +1,14 @@
 """Client settings (``pibr client`` options), validated once at start-up."""
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
 
 from pibr.common.tls import ClientTLS
 from pibr.protocol.errors import ConfigError
 from pibr.protocol.messages import MAX_BANDWIDTH_KBPS, OutputConfig
 
+from .deadline import DEADLINE_MODES
 from .methods import method_names
 
 
@@ -38,6 +40,8 @@ class ClientConfig:
     tau: float = 0.1         # proxy IBR: relative depth error accepted as the same surface
     lod_pixels: float = 6.0  # proxy IBR: on-screen edge length that selects an object's LoD
     lod_level: str | None = None  # proxy IBR: force original, proxy or box for every object
+    deadline: str = "auto"   # quality levels chosen to keep the output rate (client/deadline.py): auto, on, off
+    cost_table: str | None = None  # JSON of each level's ms (or a session.json), for the virtual clock
     options: dict = field(default_factory=dict)  # other methods' knobs (client/cli.py METHOD_KNOBS)
     token: str | None = field(default=None, repr=False)  # the server's (or relay's) access token; never recorded
     tls: ClientTLS | None = None                 # connect with TLS, verifying the server this way
@@ -73,6 +77,10 @@ class ClientConfig:
             raise ConfigError(f"LoD pixel target must be positive, got {self.lod_pixels}")
         if self.lod_level not in (None, "original", "proxy", "box"):
             raise ConfigError(f"LoD level must be original, proxy or box, got {self.lod_level!r}")
+        if self.deadline not in DEADLINE_MODES:
+            raise ConfigError(f"deadline must be one of {', '.join(DEADLINE_MODES)}, got {self.deadline!r}")
+        if self.cost_table is not None and not os.path.isfile(self.cost_table):
+            raise ConfigError(f"cost table {self.cost_table!r}: no such file")
         if self.progress not in ("bar", "lines", "none"):
             raise ConfigError(f"progress must be bar, lines or none, got {self.progress!r}")
         OutputConfig(self.width, self.height, self.fov_deg, self.rate_hz)

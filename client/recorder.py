@@ -8,11 +8,16 @@ Files in the output directory, for method M::
     M.records.csv    one row per output tick (columns: RECORD_FIELDS)
 
 The videos hold one frame per tick displayed afresh, stamped with its tick; a missed tick
-(``missed`` = 1 in its record) kept the previous image and adds none.
+(``missed`` = 1 in its record) kept the previous image and adds none. ``level`` is the quality
+level the tick was drawn at (client/deadline.py; 0 the method's best), ``level_reason`` why
+(:data:`pibr.client.deadline.REASONS`), with the tick's budget (its interval without a
+controller) and the level's predicted cost (0: no prediction).
 
-Encoding runs on a worker thread per method; at most ``max_pending`` frames wait, so a slow
+Writing runs on a worker thread per method; at most ``max_pending`` frames wait, so a slow
 disk slows the client (and, on the real clock, shows up as missed deadlines) rather than
-filling memory.
+filling memory. ``defer`` (the wall clock's way) writes the images as they are, uncompressed,
+and encodes the videos when the recorder closes, after the run: measuring what the client shows
+then costs its clock a copy per tick, not two video encodes.
 """
 from __future__ import annotations
 
@@ -24,6 +29,8 @@ from collections import deque
 
 import numpy as np
 
+from .deadline import OFF
+
 POSE_FIELDS = ("px", "py", "pz", "qw", "qx", "qy", "qz")
 #: frame_*: the server frame shown (NaN before the first): its scene time and its primary
 #: view's pose, from which the benchmarks re-render what was transmitted (geometric holes).
@@ -31,17 +38,26 @@ RECORD_FIELDS = (
     "tick", "t", "scene_t", *POSE_FIELDS,
     "frame_id", "frame_render_t", "frame_pose_t", "frame_arrival_t", "age_ms",
     "client_ms", "hole_fraction", "missed", "frame_scene_t", *(f"frame_{k}" for k in POSE_FIELDS),
+    "level", "level_reason", "budget_ms", "predicted_ms",
 )
+#: The quality level's columns of a recording made before they existed: the top level, no controller.
+_LEVEL_DEFAULTS = {"level": 0, "level_reason": OFF, "budget_ms": 0.0, "predicted_ms": 0.0}
+#: Columns read as integers (the rest are numbers).
+_INTEGER_FIELDS = ("tick", "frame_id", "missed", "level", "level_reason")
 
 
 class MethodRecorder:
     def __init__(self, out_dir: str, method: str, width: int, height: int, rate_hz: float,
-                 lossless: bool = True, max_pending: int = 4, video: bool = True):
-        """video=False writes the records only: the least work per tick, for timing runs."""
+                 lossless: bool = True, max_pending: int = 4, video: bool = True, defer: bool = False):
+        """video=False writes the records only: the least work per tick, for timing runs;
+        defer: encode the videos after the run (see the module docstring)."""
         import av
 
         self._av = av
         os.makedirs(out_dir, exist_ok=True)
+        self._raw = None     # defer: (file of (h, w, 3) uint8 images, [pts]) until close()
+        if defer and video:
+            self._raw = (open(os.path.join(out_dir, f".{method}.frames.raw"), "w+b"), [])
         self.method, self.width, self.height = method, width, height
         rate = fractions.Fraction(rate_hz).limit_denominator(1000)
         self._containers = []
@@ -67,12 +83,32 @@ class MethodRecorder:
 
     def _write(self, rgb: np.ndarray | None, pts: int, record: dict) -> None:
         if rgb is not None:
-            frame = self._av.VideoFrame.from_ndarray(rgb, format="rgb24")
-            for container, stream in zip(self._containers, self._streams):
-                frame.pts = pts
-                for packet in stream.encode(frame):
-                    container.mux(packet)
+            if self._raw is not None:
+                self._raw[0].write(rgb.data)
+                self._raw[1].append(pts)
+            else:
+                self._encode(rgb, pts)
         self._csv.writerow(record)
+
+    def _encode(self, rgb: np.ndarray, pts: int) -> None:
+        frame = self._av.VideoFrame.from_ndarray(rgb, format="rgb24")
+        for container, stream in zip(self._containers, self._streams):
+            frame.pts = pts
+            for packet in stream.encode(frame):
+                container.mux(packet)
+
+    def _encode_deferred(self) -> None:
+        """The images written during the run, encoded now, in order; the raw file is removed."""
+        f, stamps = self._raw
+        size = self.height * self.width * 3
+        f.flush()
+        f.seek(0)
+        for pts in stamps:
+            data = f.read(size)
+            self._encode(np.frombuffer(data, np.uint8).reshape(self.height, self.width, 3), pts)
+        f.close()
+        os.unlink(f.name)
+        self._raw = None
 
     def submit(self, rgb: np.ndarray, record: dict) -> None:
         """Queue one displayed image (H, W, 3) uint8 and its record; blocks while too many wait.
@@ -99,6 +135,8 @@ class MethodRecorder:
             self._pending.popleft().result()
 
         def finish():
+            if self._raw is not None:
+                self._encode_deferred()
             for container, stream in zip(self._containers, self._streams):
                 for packet in stream.encode():
                     container.mux(packet)
@@ -116,12 +154,13 @@ def read_records(path: str) -> list[dict]:
     rows = []
     with open(path, newline="") as f:
         reader = csv.DictReader(f)
-        missing = [k for k in RECORD_FIELDS if k not in (reader.fieldnames or [])]
+        missing = [k for k in RECORD_FIELDS if k not in (reader.fieldnames or []) and k not in _LEVEL_DEFAULTS]
         if missing:
             raise ConfigError(f"{path}: not a pibr records file (missing columns {', '.join(missing)})")
         for line, row in enumerate(reader, start=2):
             try:
-                rows.append({k: (int(v) if k in ("tick", "frame_id", "missed") else float(v)) for k, v in row.items()})
+                rows.append({**_LEVEL_DEFAULTS,
+                             **{k: (int(v) if k in _INTEGER_FIELDS else float(v)) for k, v in row.items()}})
             except (TypeError, ValueError):
                 raise ConfigError(f"{path}:{line}: a value does not parse as a number") from None
     return rows

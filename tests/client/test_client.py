@@ -218,3 +218,96 @@ async def test_real_clock_warms_up_before_its_clock_and_reports_what_it_decoded(
     for r in rows:
         assert r["frame_arrival_t"] <= r["t"] + 1e-9
         assert 128 <= r["age_ms"] < 128 + 1000 * (r["t"] - arrivals[0]) + 5000
+
+
+# ------------------------------------------------------------------ the deadline controller (issue 25)
+
+def _table(tmp_path, proxy_ms=None, rotation_ms=(5.0, 3.0, 2.0)):
+    from pibr.client.deadline import levels_for
+
+    table = {"rotation": dict(zip([lv.name for lv in levels_for("rotation")], rotation_ms))}
+    if proxy_ms is not None:
+        table["proxy"] = dict(zip([lv.name for lv in levels_for("proxy")], proxy_ms))
+    path = tmp_path / "costs.json"
+    path.write_text(json.dumps(table))
+    return str(path)
+
+
+async def test_virtual_clock_levels_come_from_the_cost_table_alone(relay_endpoint, tmp_path):
+    """The same table gives the same levels (and images) in every run; a table where the top
+    level fits keeps it; one where it does not moves to the best level that fits."""
+    host, port = relay_endpoint
+    slow = _table(tmp_path, rotation_ms=(40.0, 20.0, 10.0))      # 33.3 ms ticks: 1/2 fits, full does not
+    runs = []
+    for name in ("a", "b"):
+        await run_client(_cfg(host, port, tmp_path / name, methods=("rotation",), cost_table=slow))
+        runs.append(read_records(tmp_path / name / "rotation.records.csv"))
+    assert [r["level"] for r in runs[0]] == [1] * 30
+    assert runs[0][0]["level_reason"] == 1 and {r["level_reason"] for r in runs[0][1:]} == {2}   # down, then held
+    assert all(r["predicted_ms"] == 20.0 and r["budget_ms"] == pytest.approx(1000 / 30 - 1) for r in runs[0])
+    strip = lambda rows: [{k: v for k, v in r.items() if k != "client_ms"} for r in rows]
+    assert strip(runs[0]) == strip(runs[1])
+    assert all(np.array_equal(x, y) for x, y in zip(_frames(tmp_path / "a" / "rotation.lossless.mkv"),
+                                                    _frames(tmp_path / "b" / "rotation.lossless.mkv")))
+    fast = _table(tmp_path, rotation_ms=(4.0, 3.0, 2.0))
+    await run_client(_cfg(host, port, tmp_path / "c", methods=("rotation",), cost_table=fast))
+    rows = read_records(tmp_path / "c" / "rotation.records.csv")
+    assert {(r["level"], r["level_reason"]) for r in rows} == {(0, 0)}
+    info = json.load(open(tmp_path / "c" / "session.json"))
+    assert info["deadline"]["adapt"] is False and info["deadline"]["methods"]["rotation"]["share_at_level"]["full"] == 1
+
+
+async def test_virtual_clock_without_a_table_keeps_todays_behaviour(relay_endpoint, tmp_path):
+    host, port = relay_endpoint
+    await run_client(_cfg(host, port, tmp_path, methods=("rotation",)))
+    rows = read_records(tmp_path / "rotation.records.csv")
+    assert {(r["level"], r["level_reason"]) for r in rows} == {(0, 5)}
+    assert json.load(open(tmp_path / "session.json"))["deadline"] is None
+    with pytest.raises(ConfigError, match="needs --cost-table"):
+        await run_client(_cfg(host, port, tmp_path / "x", methods=("rotation",), deadline="on"))
+
+
+async def test_real_clock_calibrates_every_level_and_records_its_choices(relay_endpoint, tmp_path):
+    from pibr.client.deadline import levels_for
+
+    host, port = relay_endpoint
+    result = await run_client(_cfg(host, port, tmp_path, clock="real", duration_s=1.0, rate_hz=20.0,
+                                   methods=("rotation",)))
+    info = json.load(open(tmp_path / "session.json"))
+    d = info["deadline"]
+    assert d["adapt"] is True and len(d["calibration_ms"]["rotation"]) == len(levels_for("rotation"))
+    assert all(ms > 0 for ms in d["calibration_ms"]["rotation"])
+    assert sum(d["methods"]["rotation"]["ticks_at_level"].values()) == result.ticks - result.missed_deadlines
+    rows = read_records(tmp_path / "rotation.records.csv")
+    shown = [r for r in rows if not r["missed"]]
+    assert all(0 <= r["level"] < len(levels_for("rotation")) and 0 <= r["level_reason"] <= 4 for r in shown)
+    assert all(math.isfinite(r["budget_ms"]) and r["budget_ms"] < 50.0 for r in shown)
+    assert info["record_ms"]["ticks"] == len(shown)
+    assert len(_frames(tmp_path / "rotation.lossless.mkv")) == len(shown)   # encoded after the run
+    assert not list(tmp_path.glob(".*.frames.raw"))                         # and the raw images removed
+    await run_client(_cfg(host, port, tmp_path / "off", clock="real", duration_s=0.5, rate_hz=20.0,
+                          methods=("rotation",), deadline="off"))
+    rows = read_records(tmp_path / "off" / "rotation.records.csv")
+    assert {r["level"] for r in rows} == {0} and {r["level_reason"] for r in rows if not r["missed"]} == {5}
+
+
+async def test_a_slow_decoder_never_holds_a_tick(relay_endpoint, tmp_path, monkeypatch):
+    """Decoding runs beside the ticks (latest frame wins): with every frame taking 250 ms to
+    decode, the display keeps its ticks and shows the frames as they come out."""
+    import time as _time
+
+    import pibr.client.app as app
+
+    class SlowDecoder(app.H264Decoder):
+        def decode(self, *args, **kwargs):
+            _time.sleep(0.25)            # sleeps without the GIL, as PyAV's decoding does
+            return super().decode(*args, **kwargs)
+
+    monkeypatch.setattr(app, "H264Decoder", SlowDecoder)
+    host, port = relay_endpoint
+    result = await run_client(_cfg(host, port, tmp_path, clock="real", duration_s=2.0, rate_hz=20.0,
+                                   methods=("rotation",), deadline="off"))
+    rows = read_records(tmp_path / "rotation.records.csv")
+    shown = [r for r in rows if not r["missed"]]
+    assert result.ticks == 40 and len(shown) >= 30          # a tick that waited on 250 ms decodes would miss 5 of 6
+    assert len({r["frame_id"] for r in rows if r["frame_id"] >= 0}) >= 3   # and the frames still come through

@@ -1,0 +1,274 @@
+"""Keeping the output rate: each tick, the best quality level whose predicted cost fits its budget.
+
+A tick has one output interval to draw every method the client runs, less a margin for the
+rest of the tick's work (uploading a new frame, reading the images back, handing them to the
+recorders), measured as it goes. Each method has quality *levels*, best first (:func:`levels_for`):
+the method at full resolution, without inpainting, at lower render scales (client/render_scale.py),
+with coarser proxies, and last, the cheapest there is: ``rotation`` of the newest frame at a
+low scale, so that something is always shown rather than nothing.
+
+The :class:`DeadlineController` keeps a running estimate of each level's cost (mean plus twice
+the mean deviation, exponentially weighted: a level that is usually cheap but sometimes slow is
+predicted slow), fitted on the wall clock from what the ticks take, or given as a table (on the
+virtual clock, where the choices must not depend on the machine). Each tick it starts from the
+levels in use and, while the predicted total exceeds the budget, moves the method with the
+largest predicted cost one level down; it moves a method up again only after ``up_after``
+consecutive ticks in which the better level would have fitted with room to spare
+(``up_headroom``), so the level does not flicker between two that straddle the budget.
+
+Every choice is recorded with its reason (:data:`REASONS`), so a run says what each tick showed
+and why; a fast machine (a GPU) keeps the top level because every level fits.
+"""
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+
+from pibr.protocol.errors import ConfigError
+
+#: Why a tick was drawn at its level (the ``level_reason`` column of the records).
+REASONS = {
+    0: "top level, it fits",
+    1: "down: the level above was predicted over the budget",
+    2: "held: the level above has not fitted with room for long enough",
+    3: "up: the level above fitted with room for long enough",
+    4: "cheapest level: nothing fits the budget",
+    5: "kept: no controller (--deadline off)",
+}
+TOP, DOWN, HELD, UP, CHEAPEST, OFF = range(6)
+#: --deadline: auto (on for the wall clock, and for the virtual clock given a cost table), on, off.
+DEADLINE_MODES = ("auto", "on", "off")
+
+
+@dataclass(frozen=True)
+class Level:
+    """One quality level: ``method`` drawn at ``scale`` of the output's resolution with ``options``."""
+
+    name: str
+    method: str
+    scale: float = 1.0
+    options: dict = field(default_factory=dict)
+
+    def to_json(self) -> dict:
+        return {"name": self.name, "method": self.method, "scale": self.scale, "options": dict(self.options)}
+
+
+#: The last resort of every method: the newest frame turned to the current orientation, at a
+#: third of the output's resolution (a full-screen pass over a ninth of the pixels).
+FALLBACK = Level("rotation at 1/3", "rotation", 1 / 3)
+
+
+def levels_for(method: str) -> tuple[Level, ...]:
+    """The quality levels of ``method``, best first, ending with the fallback.
+
+    ``proxy`` first leaves out inpainting (its second geometry pass), then renders fewer pixels,
+    then draws coarser proxies; every other method renders fewer pixels. Chosen by measurement
+    (``pibr bench levels``, room at 960x540 on llvmpipe): the proxy levels reach 0.32x the top
+    level's time, where fixed costs (its passes, the proxies' vertices, the upsampling) leave
+    little to gain; the fallback 0.14x. Not levels, because they were not cheaper or left holes:
+    ``--no-carve`` (0.39x at 1/3, 14 % holes), the box level for every object (0.33x at 1/3,
+    DSSIM 0.100 against 0.070), scales under 1/4 (1/5: 0.28x, DSSIM 0.090)."""
+    if method == "proxy":
+        no_inpaint = {"inpaint": False}
+        coarse = {"inpaint": False, "lod_target_px": 24.0}
+        return (Level("full", "proxy"), Level("no inpainting", "proxy", 1.0, no_inpaint),
+                Level("3/4, no inpainting", "proxy", 0.75, no_inpaint),
+                Level("1/2, no inpainting", "proxy", 0.5, no_inpaint),
+                Level("1/2, coarse LoD", "proxy", 0.5, coarse),
+                Level("1/3, coarse LoD", "proxy", 1 / 3, coarse), Level("1/4, coarse LoD", "proxy", 0.25, coarse),
+                FALLBACK)
+    if method in ("none", "rotation"):   # full-screen passes: only fewer pixels make them cheaper
+        return (Level("full", method), Level("1/2", method, 0.5), Level("1/3", method, 1 / 3))
+    return (Level("full", method), Level("3/4", method, 0.75), Level("1/2", method, 0.5), FALLBACK)
+
+
+class _Estimate:
+    """Exponentially weighted mean and mean absolute deviation of one level's cost (ms)."""
+
+    def __init__(self, alpha: float):
+        self.alpha, self.mean, self.dev, self.count = alpha, None, 0.0, 0
+
+    def add(self, ms: float) -> None:
+        self.count += 1
+        if self.mean is None:
+            self.mean = ms
+            return
+        self.dev += self.alpha * (abs(ms - self.mean) - self.dev)
+        self.mean += self.alpha * (ms - self.mean)
+
+    def predicted(self) -> float | None:
+        return None if self.mean is None else self.mean + 2.0 * self.dev
+
+
+class DeadlineController:
+    """The levels of every method of one client, chosen together each tick (module docstring).
+
+    levels : method -> its levels, best first; interval_ms : the output interval;
+    costs : a cost table, method -> level name -> ms (None: measured as the client runs);
+    adapt : update the estimates from measured costs (False: the table alone, reproducible);
+    margin_ms : the least margin kept for the rest of the tick's work (the measured one may be more).
+    """
+
+    def __init__(self, levels: dict, interval_ms: float, costs: dict | None = None, adapt: bool = True,
+                 margin_ms: float = 1.0, up_after: int = 15, up_headroom: float = 0.85, alpha: float = 0.15):
+        if not levels:
+            raise ConfigError("the deadline controller needs at least one method")
+        self.levels = {m: tuple(ls) for m, ls in levels.items()}
+        self.interval_ms, self.adapt, self.min_margin_ms = interval_ms, adapt, margin_ms
+        self.up_after, self.up_headroom = up_after, up_headroom
+        self._cost = {m: [_Estimate(alpha) for _ in ls] for m, ls in self.levels.items()}
+        self._overhead = _Estimate(alpha)
+        if costs is not None:
+            self.load_costs(costs)
+        self.current = {m: 0 for m in self.levels}
+        self._room = {m: 0 for m in self.levels}      # consecutive ticks the level above fitted with room
+        self.history = {m: [0] * len(ls) for m, ls in self.levels.items()}   # ticks at each level
+        self.reasons = {m: [0] * len(REASONS) for m in self.levels}
+
+    # ------------------------------------------------------------------ costs
+
+    def load_costs(self, costs: dict) -> None:
+        """Take a cost table, method -> level name -> ms (as :meth:`cost_table` writes it)."""
+        for m, table in costs.items():
+            if m not in self.levels:
+                continue
+            if not isinstance(table, dict):
+                raise ConfigError(f"cost table: the costs of {m!r} must be an object of level name -> ms")
+            names = [lv.name for lv in self.levels[m]]
+            for name, ms in table.items():
+                if name not in names:
+                    raise ConfigError(f"cost table: {m!r} has no level {name!r}; its levels: {', '.join(names)}")
+                if isinstance(ms, bool) or not isinstance(ms, (int, float)) or not (0 <= ms < 1e6):
+                    raise ConfigError(f"cost table: {m!r} level {name!r}: expected ms in [0, 1e6), got {ms!r}")
+                self._cost[m][names.index(name)].add(float(ms))
+
+    def observe(self, method: str, level: int, ms: float) -> None:
+        """A level of ``method`` took ``ms`` (wall ms of its render) this tick."""
+        if self.adapt and math.isfinite(ms):
+            self._cost[method][level].add(ms)
+
+    def observe_overhead(self, ms: float) -> None:
+        """The rest of a tick's work took ``ms`` (everything but the methods' renders)."""
+        if self.adapt and math.isfinite(ms):
+            self._overhead.add(max(0.0, ms))
+
+    def predicted(self, method: str, level: int) -> float | None:
+        """Predicted ms of a level: its estimate, else the nearest better level's scaled by the
+        pixel ratio (None when the method has no estimate at all)."""
+        p = self._cost[method][level].predicted()
+        if p is not None:
+            return p
+        levels = self.levels[method]
+        for k in range(level - 1, -1, -1):   # a better level measured: fewer pixels cost less
+            q = self._cost[method][k].predicted()
+            if q is not None and levels[k].method == levels[level].method:
+                return q * (levels[level].scale / levels[k].scale) ** 2
+        for k in range(level + 1, len(levels)):
+            q = self._cost[method][k].predicted()
+            if q is not None and levels[k].method == levels[level].method:
+                return q * (levels[level].scale / levels[k].scale) ** 2
+        return None
+
+    @property
+    def budget_ms(self) -> float:
+        """The interval less the margin for the rest of the tick's work."""
+        overhead = self._overhead.predicted() or 0.0
+        return self.interval_ms - max(self.min_margin_ms, overhead)
+
+    def cost_table(self) -> dict:
+        """The current estimates, method -> level name -> predicted ms (``--cost-table`` reads it back)."""
+        return {m: {lv.name: round(p, 3) for k, lv in enumerate(ls) if (p := self._cost[m][k].predicted()) is not None}
+                for m, ls in self.levels.items()}
+
+    # ------------------------------------------------------------------ choosing
+
+    def _total(self, levels: dict) -> float | None:
+        costs = [self.predicted(m, k) for m, k in levels.items()]
+        return None if any(c is None for c in costs) else sum(costs)
+
+    def choose(self) -> dict:
+        """-> method -> (level index, reason). Call once per tick, before drawing."""
+        budget = self.budget_ms
+        levels = dict(self.current)
+        reason = {m: TOP if k == 0 else HELD for m, k in levels.items()}
+        total = self._total(levels)
+        if total is None:     # nothing known yet (no calibration): draw the top levels and learn
+            self._commit(levels, {m: TOP for m in levels})
+            return {m: (0, TOP) for m in levels}
+        # down: while over, the method with the largest predicted cost goes one level down
+        while total > budget:
+            movable = [m for m, k in levels.items() if k < len(self.levels[m]) - 1]
+            if not movable:
+                break
+            m = max(movable, key=lambda x: (self.predicted(x, levels[x]), x))
+            levels[m] += 1
+            reason[m] = DOWN
+            self._room[m] = 0
+            total = self._total(levels)
+        if total > budget:
+            for m, k in levels.items():
+                if k == len(self.levels[m]) - 1:
+                    reason[m] = CHEAPEST
+        else:
+            # up: one method at a time, the one whose step up costs least, once it has fitted long enough
+            candidates = []
+            for m, k in levels.items():
+                if k == 0 or reason[m] == DOWN:
+                    continue
+                above = dict(levels, **{m: k - 1})
+                t = self._total(above)
+                if t is not None and t <= budget * self.up_headroom:
+                    self._room[m] += 1
+                    candidates.append((t - total, m))
+                else:
+                    self._room[m] = 0
+            ready = sorted((d, m) for d, m in candidates if self._room[m] >= self.up_after)
+            if ready:
+                m = ready[0][1]
+                levels[m] -= 1
+                reason[m] = UP
+                self._room[m] = 0
+        self._commit(levels, reason)
+        return {m: (levels[m], reason[m]) for m in levels}
+
+    def _commit(self, levels: dict, reason: dict) -> None:
+        self.current = dict(levels)
+        for m, k in levels.items():
+            self.history[m][k] += 1
+            self.reasons[m][reason[m]] += 1
+
+    def summary(self) -> dict:
+        """What the controller did: per method its levels, the ticks at each and why, the cost table."""
+        out = {"interval_ms": self.interval_ms, "budget_ms": round(self.budget_ms, 3), "adapt": self.adapt,
+               "up_after": self.up_after, "up_headroom": self.up_headroom, "methods": {}}
+        for m, ls in self.levels.items():
+            ticks = sum(self.history[m])
+            out["methods"][m] = {
+                "levels": [lv.to_json() for lv in ls],
+                "ticks_at_level": {lv.name: n for lv, n in zip(ls, self.history[m])},
+                "share_at_level": {lv.name: (n / ticks if ticks else 0.0) for lv, n in zip(ls, self.history[m])},
+                "reasons": {REASONS[r]: n for r, n in enumerate(self.reasons[m]) if n},
+            }
+        out["costs_ms"] = self.cost_table()
+        overhead = self._overhead.predicted()
+        out["overhead_ms"] = None if overhead is None else round(overhead, 3)
+        return out
+
+
+def read_cost_table(path: str) -> dict:
+    """A cost table from a JSON file: the table itself (method -> level name -> ms), a client's
+    ``session.json`` (its ``deadline.costs_ms``: what it measured) or ``pibr bench levels``'
+    ``levels.json`` (its ``costs_ms``)."""
+    try:
+        with open(path, encoding="utf-8") as f:
+            data = json.load(f)
+    except (OSError, ValueError) as exc:
+        raise ConfigError(f"cost table {path}: {exc}") from None
+    if isinstance(data, dict) and isinstance(data.get("deadline"), dict):
+        data = data["deadline"].get("costs_ms")
+    elif isinstance(data, dict) and isinstance(data.get("costs_ms"), dict):
+        data = data["costs_ms"]
+    if not isinstance(data, dict):
+        raise ConfigError(f"cost table {path}: expected an object of method -> level name -> ms")
+    return data
