@@ -10,6 +10,7 @@ from pibr.protocol.depth_codecs import DEPTH_CODECS
 from pibr.protocol.motion_flow import FLOW_CODERS
 
 from . import commands   # the runners: they import what they run when they run
+from .processes import PLACEMENTS
 
 #: The benchmarks' primary view (bench/simulation.py BENCH_VIEW_SIZE, repeated here so that
 #: ``pibr --help`` needs no GL or codec import; a test keeps them equal).
@@ -404,6 +405,13 @@ def register(sub) -> None:
                               "1088x1088 at 960x540)")
     rt.add_argument("--extra-view", choices=("auto", "on", "off"), default=None,
                     help="the server's extra view (default: the server's, auto)")
+    rt.add_argument("--placement", choices=(*PLACEMENTS, "both"), default="split",
+                    help="split (default): the server and the relay on one core, the client on the other, as "
+                         "on two machines; shared: anywhere; both")
+    rt.add_argument("--controllers", choices=("on", "off", "both"), default="both",
+                    help="the client's deadline controller on, off, or both in one run (default both)")
+    rt.add_argument("--no-score", action="store_true",
+                    help="do not record and score what was shown (faster: speed figures only)")
     _out(rt)
     rt.set_defaults(func=commands.cmd_bench_realtime)
 

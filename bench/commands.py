@@ -11,6 +11,7 @@ def realtime_server_args(view_size, extra_view) -> tuple:
 
 def cmd_bench_realtime(args) -> int:
     from .demo import check_inputs
+    from .processes import PLACEMENTS
     from .realtime import print_realtime, run_realtime_bench
 
     check_inputs(args.scene, args.trace, args.start, args.duration)
@@ -18,7 +19,10 @@ def cmd_bench_realtime(args) -> int:
                            clients=args.clients, duration_s=args.duration, scaling_duration_s=args.scaling_duration,
                            scene=args.scene, trace=args.trace, start_s=args.start, rate_hz=args.rate,
                            size=args.size, latency_ms=args.latency_ms, server_fps=args.server_fps,
-                           server_args=realtime_server_args(args.view_size, args.extra_view))
+                           server_args=realtime_server_args(args.view_size, args.extra_view),
+                           placements=PLACEMENTS if args.placement == "both" else (args.placement,),
+                           controllers={"on": (True,), "off": (False,), "both": (True, False)}[args.controllers],
+                           score=not args.no_score)
     print_realtime(r)
     print(f"written: {args.out}/realtime.json")
     return 0

@@ -29,7 +29,9 @@ class ProcessFailed(PibrError):
 class PibrProcess:
     """One ``python -m pibr ARGS`` child with its output pumped to ``log_path``."""
 
-    def __init__(self, name: str, args: list[str], log_path: str, on_progress=None, env=None):
+    def __init__(self, name: str, args: list[str], log_path: str, on_progress=None, env=None, cpus=None):
+        """cpus: the CPU numbers the child may run on (None: any), as if it had a machine of
+        that many cores: its software rasteriser then starts as many threads."""
         self.name, self.args, self.log_path = name, args, log_path
         os.makedirs(os.path.dirname(log_path) or ".", exist_ok=True)
         self._log = open(log_path, "w")
@@ -38,8 +40,13 @@ class PibrProcess:
         self._tail: deque[str] = deque(maxlen=30)
         self._on_progress = on_progress
         full_env = dict(os.environ, PYTHONUNBUFFERED="1", **(env or {}))
+        if cpus is not None:
+            cpus = sorted(cpus)
+            full_env["LP_NUM_THREADS"] = str(len(cpus))      # llvmpipe's rasteriser threads
+        self.cpus = cpus
         self.proc = subprocess.Popen([sys.executable, "-m", "pibr", *args], stdout=subprocess.PIPE,
-                                     stderr=subprocess.STDOUT, text=True, bufsize=1, env=full_env)
+                                     stderr=subprocess.STDOUT, text=True, bufsize=1, env=full_env,
+                                     preexec_fn=None if cpus is None else lambda: os.sched_setaffinity(0, cpus))
         self._pump = threading.Thread(target=self._read, name=f"{name}-output", daemon=True)
         self._pump.start()
 
@@ -120,9 +127,27 @@ def run_pipeline(out_dir: str, server_args: list[str], relay_args: list[str] | N
     return run_sessions(out_dir, server_args, relay_args, [client_args], on_progress=on_progress, timeout=timeout)
 
 
+#: Where ``pibr bench realtime --placement`` runs each process: ``split`` gives the server and
+#: the relay one core and the clients the other, standing in for a server and a headset on
+#: separate machines; ``shared`` lets every process run anywhere.
+PLACEMENTS = ("split", "shared")
+
+
+def placement_cpus(placement: str) -> dict:
+    """-> {"server": cpus, "relay": cpus, "client": cpus} (None: anywhere) for a placement."""
+    if placement == "shared":
+        return {"server": None, "relay": None, "client": None}
+    if placement != "split":
+        raise ValueError(f"placement must be one of {', '.join(PLACEMENTS)}, got {placement!r}")
+    available = sorted(os.sched_getaffinity(0))
+    if len(available) < 2:
+        raise PibrError(f"--placement split needs two cores; this process may use only {available}")
+    return {"server": {available[0]}, "relay": {available[0]}, "client": {available[1]}}
+
+
 def run_sessions(out_dir: str, server_args: list[str], relay_args: list[str] | None, clients: list[list[str]],
                  on_progress=None, timeout: float = 1800.0, on_started=None, before_stop=None,
-                 verbose_server: bool = False) -> dict:
+                 verbose_server: bool = False, placement: str = "shared") -> dict:
     """Start a server (and a relay in front of it), run every client (each a list of extra
     arguments) at once to completion, stop the rest. -> timings in seconds.
 
@@ -130,20 +155,22 @@ def run_sessions(out_dir: str, server_args: list[str], relay_args: list[str] | N
     ``out_dir/logs``. ``on_progress(done, total)`` hears the first client's ticks;
     ``on_started(processes)`` is called once every process runs, ``before_stop(processes)`` once
     the clients have ended and before the server and relay are stopped (processes: name ->
-    PibrProcess). ``verbose_server`` logs the server's sessions (INFO) to its log."""
+    PibrProcess). ``verbose_server`` logs the server's sessions (INFO) to its log; ``placement``:
+    which cores each process may use (:data:`PLACEMENTS`)."""
+    cpus = placement_cpus(placement)
     logs = os.path.join(out_dir, "logs")
     t0 = time.perf_counter()
     procs = []
     try:
         server = PibrProcess("server", ["-v"] * verbose_server + ["serve", "--port", "0", *server_args],
-                             os.path.join(logs, "server.log"))
+                             os.path.join(logs, "server.log"), cpus=cpus["server"])
         procs.append(server)
         host, port = server.wait_listening()
         t_server = time.perf_counter()
         target = f"{host}:{port}"
         if relay_args is not None:
             relay = PibrProcess("relay", ["relay", "--listen", "127.0.0.1:0", "--upstream", target, *relay_args],
-                                os.path.join(logs, "relay.log"))
+                                os.path.join(logs, "relay.log"), cpus=cpus["relay"])
             procs.append(relay)
             rh, rp = relay.wait_listening(30)
             target = f"{rh}:{rp}"
@@ -153,7 +180,7 @@ def run_sessions(out_dir: str, server_args: list[str], relay_args: list[str] | N
             out = out_dir if len(clients) == 1 else os.path.join(out_dir, name)
             runners.append(PibrProcess(name, ["client", "--connect", target, "--out", out, "--progress", "lines",
                                               *client_args], os.path.join(logs, f"{name}.log"),
-                                       on_progress=on_progress if k == 0 else None))
+                                       on_progress=on_progress if k == 0 else None, cpus=cpus["client"]))
         procs += runners
         if on_started is not None:
             on_started({p.name: p for p in procs})

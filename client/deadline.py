@@ -84,20 +84,21 @@ def levels_for(method: str) -> tuple[Level, ...]:
 
 
 class _Estimate:
-    """Exponentially weighted mean and mean absolute deviation of one level's cost (ms)."""
+    """Exponentially weighted mean and mean absolute deviation of a series."""
 
     def __init__(self, alpha: float):
         self.alpha, self.mean, self.dev, self.count = alpha, None, 0.0, 0
 
-    def add(self, ms: float) -> None:
+    def add(self, x: float) -> None:
         self.count += 1
         if self.mean is None:
-            self.mean = ms
+            self.mean = x
             return
-        self.dev += self.alpha * (abs(ms - self.mean) - self.dev)
-        self.mean += self.alpha * (ms - self.mean)
+        self.dev += self.alpha * (abs(x - self.mean) - self.dev)
+        self.mean += self.alpha * (x - self.mean)
 
-    def predicted(self) -> float | None:
+    def high(self) -> float | None:
+        """The mean plus twice the mean deviation: what the series usually stays under."""
         return None if self.mean is None else self.mean + 2.0 * self.dev
 
 
@@ -108,6 +109,14 @@ class DeadlineController:
     costs : a cost table, method -> level name -> ms (None: measured as the client runs);
     adapt : update the estimates from measured costs (False: the table alone, reproducible);
     margin_ms : the least margin kept for the rest of the tick's work (the measured one may be more).
+
+    Costs: each level has a *base* cost (the table's, or the first it measured: the calibration
+    before the clock starts), and each method one *speed factor*, the measured cost of whatever
+    level it drew over that level's base (exponentially weighted mean plus twice the mean
+    deviation). A level is predicted at its base times the factor, so a level not drawn for a
+    while follows what the drawn one measures: when the machine gets busier or freer (another
+    process, a frame upload) every level's prediction moves with it, and a level once measured
+    slow is tried again when the others say it would fit.
     """
 
     def __init__(self, levels: dict, interval_ms: float, costs: dict | None = None, adapt: bool = True,
@@ -117,7 +126,8 @@ class DeadlineController:
         self.levels = {m: tuple(ls) for m, ls in levels.items()}
         self.interval_ms, self.adapt, self.min_margin_ms = interval_ms, adapt, margin_ms
         self.up_after, self.up_headroom = up_after, up_headroom
-        self._cost = {m: [_Estimate(alpha) for _ in ls] for m, ls in self.levels.items()}
+        self._base = {m: [None] * len(ls) for m, ls in self.levels.items()}
+        self._factor = {m: _Estimate(alpha) for m in self.levels}
         self._overhead = _Estimate(alpha)
         if costs is not None:
             self.load_costs(costs)
@@ -129,7 +139,8 @@ class DeadlineController:
     # ------------------------------------------------------------------ costs
 
     def load_costs(self, costs: dict) -> None:
-        """Take a cost table, method -> level name -> ms (as :meth:`cost_table` writes it)."""
+        """Take a cost table, method -> level name -> ms (as :meth:`cost_table` writes it), as the
+        levels' base costs."""
         for m, table in costs.items():
             if m not in self.levels:
                 continue
@@ -139,46 +150,61 @@ class DeadlineController:
             for name, ms in table.items():
                 if name not in names:
                     raise ConfigError(f"cost table: {m!r} has no level {name!r}; its levels: {', '.join(names)}")
-                if isinstance(ms, bool) or not isinstance(ms, (int, float)) or not (0 <= ms < 1e6):
-                    raise ConfigError(f"cost table: {m!r} level {name!r}: expected ms in [0, 1e6), got {ms!r}")
-                self._cost[m][names.index(name)].add(float(ms))
+                if isinstance(ms, bool) or not isinstance(ms, (int, float)) or not (0 < ms < 1e6):
+                    raise ConfigError(f"cost table: {m!r} level {name!r}: expected ms in (0, 1e6), got {ms!r}")
+                self._base[m][names.index(name)] = float(ms)
+
+    def calibrate(self, method: str, level: int, ms: float) -> None:
+        """A level's base cost, measured before the clock starts (the median of a few draws)."""
+        if math.isfinite(ms) and ms > 0:
+            self._base[method][level] = ms
 
     def observe(self, method: str, level: int, ms: float) -> None:
         """A level of ``method`` took ``ms`` (wall ms of its render) this tick."""
-        if self.adapt and math.isfinite(ms):
-            self._cost[method][level].add(ms)
+        if not (self.adapt and math.isfinite(ms) and ms > 0):
+            return
+        base = self._base[method][level]
+        if base is None:   # a level's first measure sets its base, at the speed the method runs at now
+            factor = self._factor[method].mean
+            self._base[method][level] = base = ms / (factor if factor else 1.0)
+        self._factor[method].add(ms / base)
 
     def observe_overhead(self, ms: float) -> None:
         """The rest of a tick's work took ``ms`` (everything but the methods' renders)."""
         if self.adapt and math.isfinite(ms):
             self._overhead.add(max(0.0, ms))
 
-    def predicted(self, method: str, level: int) -> float | None:
-        """Predicted ms of a level: its estimate, else the nearest better level's scaled by the
-        pixel ratio (None when the method has no estimate at all)."""
-        p = self._cost[method][level].predicted()
-        if p is not None:
-            return p
+    def _base_of(self, method: str, level: int) -> float | None:
+        """A level's base cost, or one guessed from the nearest level of the same method with a
+        base, by the ratio of their pixels (fragments go with the square of the scale)."""
+        base = self._base[method][level]
+        if base is not None:
+            return base
         levels = self.levels[method]
-        for k in range(level - 1, -1, -1):   # a better level measured: fewer pixels cost less
-            q = self._cost[method][k].predicted()
-            if q is not None and levels[k].method == levels[level].method:
-                return q * (levels[level].scale / levels[k].scale) ** 2
-        for k in range(level + 1, len(levels)):
-            q = self._cost[method][k].predicted()
-            if q is not None and levels[k].method == levels[level].method:
-                return q * (levels[level].scale / levels[k].scale) ** 2
+        order = sorted(range(len(levels)), key=lambda k: abs(k - level))
+        for k in order:
+            b = self._base[method][k]
+            if b is not None and levels[k].method == levels[level].method:
+                return b * (levels[level].scale / levels[k].scale) ** 2
         return None
+
+    def predicted(self, method: str, level: int) -> float | None:
+        """Predicted ms of a level: its base cost times the method's speed factor (None when the
+        method has no cost at all yet)."""
+        base = self._base_of(method, level)
+        if base is None:
+            return None
+        return base * (self._factor[method].high() or 1.0)
 
     @property
     def budget_ms(self) -> float:
         """The interval less the margin for the rest of the tick's work."""
-        overhead = self._overhead.predicted() or 0.0
+        overhead = self._overhead.high() or 0.0
         return self.interval_ms - max(self.min_margin_ms, overhead)
 
     def cost_table(self) -> dict:
-        """The current estimates, method -> level name -> predicted ms (``--cost-table`` reads it back)."""
-        return {m: {lv.name: round(p, 3) for k, lv in enumerate(ls) if (p := self._cost[m][k].predicted()) is not None}
+        """The current predictions, method -> level name -> ms (``--cost-table`` reads it back)."""
+        return {m: {lv.name: round(p, 3) for k, lv in enumerate(ls) if (p := self.predicted(m, k)) is not None}
                 for m, ls in self.levels.items()}
 
     # ------------------------------------------------------------------ choosing
@@ -251,7 +277,8 @@ class DeadlineController:
                 "reasons": {REASONS[r]: n for r, n in enumerate(self.reasons[m]) if n},
             }
         out["costs_ms"] = self.cost_table()
-        overhead = self._overhead.predicted()
+        overhead = self._overhead.high()
+        out["speed_factor"] = {m: None if f.mean is None else round(f.high(), 4) for m, f in self._factor.items()}
         out["overhead_ms"] = None if overhead is None else round(overhead, 3)
         return out
 

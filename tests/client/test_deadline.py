@@ -126,3 +126,16 @@ def test_a_file_that_is_no_cost_table_is_refused(tmp_path):
         read_cost_table(str(tmp_path / "x.json"))
     with pytest.raises(ConfigError, match="cost table"):
         read_cost_table(str(tmp_path / "missing.json"))
+
+
+def test_a_level_measured_slow_before_the_clock_is_tried_again_when_the_drawn_one_says_it_fits():
+    levels = {"m": (Level("a", "m"), Level("b", "m", 0.75), Level("c", "m", 0.5))}
+    c = DeadlineController(levels, 33.3, margin_ms=0.0, up_after=5)
+    for k, ms in enumerate((100.0, 50.0, 20.0)):     # calibrated while the machine was busy
+        c.calibrate("m", k, ms)
+    assert c.choose()["m"] == (2, DOWN)
+    for _ in range(40):
+        c.observe("m", 2, 10.0)                     # now the drawn level runs twice as fast
+        level = c.choose()["m"][0]
+    assert c.predicted("m", 1) == pytest.approx(25.0, rel=0.05)   # 50 x 0.5: the factor follows
+    assert level == 1
