@@ -113,10 +113,11 @@ class DeadlineController:
     Costs: each level has a *base* cost (the table's, or the first it measured: the calibration
     before the clock starts), and each method one *speed factor*, the measured cost of whatever
     level it drew over that level's base (exponentially weighted mean plus twice the mean
-    deviation). A level is predicted at its base times the factor, so a level not drawn for a
-    while follows what the drawn one measures: when the machine gets busier or freer (another
-    process, a frame upload) every level's prediction moves with it, and a level once measured
-    slow is tried again when the others say it would fit.
+    deviation), kept apart for the levels that draw another method (the ``rotation`` fallback
+    says nothing of how fast ``proxy`` runs). A level is predicted at its base times the factor,
+    so a level not drawn for a while follows what the drawn ones measure: when the machine gets
+    busier or freer (another process, a frame upload) every level's prediction moves with it,
+    and a level once measured slow is tried again when the others say it would fit.
     """
 
     def __init__(self, levels: dict, interval_ms: float, costs: dict | None = None, adapt: bool = True,
@@ -127,7 +128,8 @@ class DeadlineController:
         self.interval_ms, self.adapt, self.min_margin_ms = interval_ms, adapt, margin_ms
         self.up_after, self.up_headroom = up_after, up_headroom
         self._base = {m: [None] * len(ls) for m, ls in self.levels.items()}
-        self._factor = {m: _Estimate(alpha) for m in self.levels}
+        # method -> the method its levels draw (``proxy``, or the ``rotation`` fallback) -> speed factor
+        self._factor = {m: {lv.method: _Estimate(alpha) for lv in ls} for m, ls in self.levels.items()}
         self._overhead = _Estimate(alpha)
         if costs is not None:
             self.load_costs(costs)
@@ -163,11 +165,11 @@ class DeadlineController:
         """A level of ``method`` took ``ms`` (wall ms of its render) this tick."""
         if not (self.adapt and math.isfinite(ms) and ms > 0):
             return
+        factor = self._factor[method][self.levels[method][level].method]
         base = self._base[method][level]
         if base is None:   # a level's first measure sets its base, at the speed the method runs at now
-            factor = self._factor[method].mean
-            self._base[method][level] = base = ms / (factor if factor else 1.0)
-        self._factor[method].add(ms / base)
+            self._base[method][level] = base = ms / (factor.mean or 1.0)
+        factor.add(ms / base)
 
     def observe_overhead(self, ms: float) -> None:
         """The rest of a tick's work took ``ms`` (everything but the methods' renders)."""
@@ -194,7 +196,7 @@ class DeadlineController:
         base = self._base_of(method, level)
         if base is None:
             return None
-        return base * (self._factor[method].high() or 1.0)
+        return base * (self._factor[method][self.levels[method][level].method].high() or 1.0)
 
     @property
     def budget_ms(self) -> float:
@@ -278,7 +280,8 @@ class DeadlineController:
             }
         out["costs_ms"] = self.cost_table()
         overhead = self._overhead.high()
-        out["speed_factor"] = {m: None if f.mean is None else round(f.high(), 4) for m, f in self._factor.items()}
+        out["speed_factor"] = {m: {drawn: None if f.mean is None else round(f.high(), 4) for drawn, f in fs.items()}
+                               for m, fs in self._factor.items()}
         out["overhead_ms"] = None if overhead is None else round(overhead, 3)
         return out
 

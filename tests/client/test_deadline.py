@@ -139,3 +139,13 @@ def test_a_level_measured_slow_before_the_clock_is_tried_again_when_the_drawn_on
         level = c.choose()["m"][0]
     assert c.predicted("m", 1) == pytest.approx(25.0, rel=0.05)   # 50 x 0.5: the factor follows
     assert level == 1
+
+
+def test_the_fallback_says_nothing_of_how_fast_the_method_itself_runs():
+    c = DeadlineController({"proxy": PROXY}, 1000 / 30)
+    for k, ms in enumerate([90, 80, 60, 40, 35, 30, 25, 8]):
+        c.calibrate("proxy", k, ms)
+    for _ in range(30):
+        c.observe("proxy", len(PROXY) - 1, 16.0)      # the rotation fallback runs at half its speed
+    assert c.predicted("proxy", len(PROXY) - 1) > 15.0
+    assert c.predicted("proxy", len(PROXY) - 2) == pytest.approx(25.0)   # proxy's own levels keep their base
