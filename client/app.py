@@ -34,6 +34,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from pibr.common.gl import GLThread
+from pibr.common.quality import OFF, DeadlineController, read_cost_table
 from pibr.protocol.errors import ConfigError, UnexpectedMessage
 from pibr.protocol.messages import (FRAMES_DECODED, Clock, Frame, Hello, OutputConfig, PayloadKind, PoseMsg,
                                     Stats)
@@ -41,7 +42,7 @@ from pibr.protocol.pose import Pose
 
 from .config import ClientConfig
 from .connection import ClientConnection
-from .deadline import OFF, DeadlineController, levels_for, read_cost_table
+from .deadline import levels_for
 from .depth_decoders import make_depth_decoder
 from .frame_textures import FrameTextures
 from .methods import needs_proxies, quadtree_threshold

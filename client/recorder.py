@@ -29,7 +29,7 @@ from collections import deque
 
 import numpy as np
 
-from .deadline import OFF
+from pibr.common.quality import OFF
 
 POSE_FIELDS = ("px", "py", "pz", "qw", "qx", "qy", "qz")
 #: frame_*: the server frame shown (NaN before the first): its scene time and its primary

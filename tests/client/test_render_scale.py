@@ -5,7 +5,8 @@ import pytest
 
 from pibr.bench.metrics import psnr
 from pibr.bench.simulation import Simulation, bench_server_config, load_proxies
-from pibr.client.deadline import Level, levels_for
+from pibr.client.deadline import levels_for
+from pibr.common.quality import Level
 from pibr.client.render_scale import make_level, scaled_output
 from pibr.common.link import SessionSchedule
 from pibr.common.replay import display_samples

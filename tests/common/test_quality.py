@@ -1,11 +1,12 @@
-"""The deadline controller: levels chosen against a cost table, hysteresis, the fallback, the
-cost table's round trip (no GL: client/deadline.py is arithmetic)."""
+"""The deadline controller (pibr.common.quality) with the client's levels (client/deadline.py):
+levels chosen against a cost table, hysteresis, the fallback, the cost model, the cost table's
+round trip (no GL: it is arithmetic)."""
 import json
 
 import pytest
 
-from pibr.client.deadline import (CHEAPEST, DOWN, FALLBACK, HELD, TOP, UP, DeadlineController, Level, levels_for,
-                                  read_cost_table)
+from pibr.client.deadline import FALLBACK, levels_for
+from pibr.common.quality import CHEAPEST, DOWN, HELD, TOP, UP, DeadlineController, Level, read_cost_table
 from pibr.protocol.errors import ConfigError
 
 PROXY = levels_for("proxy")
