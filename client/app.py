@@ -35,9 +35,9 @@ import numpy as np
 
 from pibr.common.gl import GLThread
 from pibr.common.quality import OFF, DeadlineController, read_cost_table
-from pibr.protocol.errors import ConfigError, UnexpectedMessage
+from pibr.protocol.errors import ConfigError, MalformedMessage, UnexpectedMessage
 from pibr.protocol.messages import (FRAMES_DECODED, Clock, Frame, Hello, OutputConfig, PayloadKind, PoseMsg,
-                                    Stats)
+                                    Stats, decode_frame_level)
 from pibr.protocol.pose import Pose
 
 from .config import ClientConfig
@@ -359,7 +359,6 @@ class Client:
 
     def _object_poses(self, frame: Frame):
         """The frame's moving-object transforms (None when it carries none), checked against the session."""
-        from pibr.protocol.errors import MalformedMessage
         from pibr.protocol.object_poses import decode_object_poses
 
         payload = frame.payload(PayloadKind.OBJECT_POSES)
@@ -408,8 +407,6 @@ class Client:
         method uses flow or the frame carries no motion flow."""
         if self._motion_decoder is None:
             return None
-        from pibr.protocol.errors import MalformedMessage
-
         from .frame_textures import primary_flow_frame
 
         payload = frame.payload(PayloadKind.MOTION_FLOW)
@@ -462,10 +459,23 @@ class Client:
             "age_ms": float("nan") if f is None else (t_us - pose_t_us) / 1e3,
             "client_ms": client_ms, "hole_fraction": hole, "missed": missed,
             "level": 0, "level_reason": OFF, "budget_ms": 1e3 / self.cfg.rate_hz, "predicted_ms": 0.0,
+            "server_level": self._server_level(f),
             "frame_scene_t": float("nan") if f is None else f.scene_t_us / 1e6,
             **dict(zip((f"frame_{k}" for k in POSE_FIELDS),
                        [float("nan")] * 7 if f is None else f.primary_pose.as_array())),
         }
+
+    def _server_level(self, frame) -> int:
+        """The server's rate-control level ``frame`` was made at (an index in the session's
+        ``server_levels``), -1 for none (no frame yet, or no rate control)."""
+        payload = None if frame is None else frame.payload(PayloadKind.FRAME_LEVEL)
+        if payload is None:
+            return -1
+        level = decode_frame_level(payload)
+        if level >= len(self.session.options.get("server_levels", ())):
+            raise MalformedMessage(f"frame {frame.frame_id} names server level {level}, but the session has "
+                                   f"{len(self.session.options.get('server_levels', ()))}")
+        return level
 
     async def _run_virtual(self, trace, interval_us, n_ticks, preroll, progress) -> None:
         side = self.conn.side   # side.horizon_us: every later server message has a virtual time >= this

@@ -11,7 +11,9 @@ The videos hold one frame per tick displayed afresh, stamped with its tick; a mi
 (``missed`` = 1 in its record) kept the previous image and adds none. ``level`` is the quality
 level the tick was drawn at (client/deadline.py; 0 the method's best), ``level_reason`` why
 (:data:`pibr.client.deadline.REASONS`), with the tick's budget (its interval without a
-controller) and the level's predicted cost (0: no prediction).
+controller) and the level's predicted cost (0: no prediction); ``server_level`` the level the
+shown frame was made at by the server's rate control (an index in ``server_levels`` of the
+session's options; -1: none).
 
 Writing runs on a worker thread per method; at most ``max_pending`` frames wait, so a slow
 disk slows the client (and, on the real clock, shows up as missed deadlines) rather than
@@ -38,12 +40,12 @@ RECORD_FIELDS = (
     "tick", "t", "scene_t", *POSE_FIELDS,
     "frame_id", "frame_render_t", "frame_pose_t", "frame_arrival_t", "age_ms",
     "client_ms", "hole_fraction", "missed", "frame_scene_t", *(f"frame_{k}" for k in POSE_FIELDS),
-    "level", "level_reason", "budget_ms", "predicted_ms",
+    "level", "level_reason", "budget_ms", "predicted_ms", "server_level",
 )
 #: The quality level's columns of a recording made before they existed: the top level, no controller.
-_LEVEL_DEFAULTS = {"level": 0, "level_reason": OFF, "budget_ms": 0.0, "predicted_ms": 0.0}
+_LEVEL_DEFAULTS = {"level": 0, "level_reason": OFF, "budget_ms": 0.0, "predicted_ms": 0.0, "server_level": -1}
 #: Columns read as integers (the rest are numbers).
-_INTEGER_FIELDS = ("tick", "frame_id", "missed", "level", "level_reason")
+_INTEGER_FIELDS = ("tick", "frame_id", "missed", "level", "level_reason", "server_level")
 
 
 class MethodRecorder:

@@ -271,9 +271,25 @@ class PayloadKind:
     QUADTREE = 5          # depth quadtrees of every view (protocol/quadtree.py), when the Hello asked
     OBJECT_POSES = 6      # moving objects' transforms at the frame's scene time (protocol/object_poses.py)
     MOTION_FLOW = 7       # motion flow of moving objects in the primary view (protocol/motion_flow.py)
-    ALL = (H264_ATLAS, EDGE_DEPTH, EDGE_DEPTH_EXTRA, EDGE_MOTION, QUADTREE, OBJECT_POSES, MOTION_FLOW)
+    FRAME_LEVEL = 8       # the server's rate-control level the frame was made at (one byte: its index in
+                          # SessionConfig.options["server_levels"]); frames without rate control carry none
+    ALL = (H264_ATLAS, EDGE_DEPTH, EDGE_DEPTH_EXTRA, EDGE_MOTION, QUADTREE, OBJECT_POSES, MOTION_FLOW, FRAME_LEVEL)
     NAMES = {1: "h264-atlas", 2: "edge-depth", 3: "edge-depth-extra", 4: "edge-motion", 5: "quadtree",
-             6: "object-poses", 7: "motion-flow"}
+             6: "object-poses", 7: "motion-flow", 8: "frame-level"}
+
+
+def encode_frame_level(level: int) -> bytes:
+    """The FRAME_LEVEL payload of a level index in 0..255."""
+    if not 0 <= level <= 255:
+        raise ValueError(f"a frame level is an index in 0..255, got {level}")
+    return bytes([level])
+
+
+def decode_frame_level(payload) -> int:
+    """A FRAME_LEVEL payload -> its level index; MalformedMessage unless it is one byte."""
+    if len(payload) != 1:
+        raise MalformedMessage(f"Frame: a frame-level payload is one byte, got {len(payload)}")
+    return payload[0]
 
 
 _FRAME_HEAD = struct.Struct("<IqqIqI7d7ddd4fB")

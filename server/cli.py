@@ -9,7 +9,7 @@ from pibr.common.address import parse_host_port
 from pibr.protocol.depth_codecs import AUTO, DEPTH_CODECS
 from pibr.protocol.motion_flow import DEFAULT_FLOW_CODER, FLOW_CODERS
 
-from .config import DEFAULT_PORT
+from .config import DEFAULT_PORT, RATE_CONTROL_MODES
 from .relay import DEFAULT_BUFFER_BYTES, DEFAULT_MAX_CONNECTIONS
 
 
@@ -108,6 +108,11 @@ def register(sub) -> None:
                    help="motion flow of scenes that move: the moving mask and 8x8 block means (blocks), or "
                         "Pajak et al.'s edge samples diffused on the client (edges) ('pibr bench dynamic' "
                         f"measures both; default {DEFAULT_FLOW_CODER})")
+    p.add_argument("--rate-control", choices=RATE_CONTROL_MODES, default="on",
+                   help="on the real clock, hold --fps by making each frame at the best level whose predicted cost "
+                        "fits its interval (the extra view on every 2nd or 4th frame, longer straight edges, the "
+                        "primary view rendered at 3/4 or 1/2 and upsampled); each frame's level goes to the client "
+                        "and the log (default on; the virtual clock has no deadline and makes every frame whole)")
     p.add_argument("--max-sessions", type=int, default=8,
                    help="sessions served at once, counted from a valid Hello (default 8)")
     p.add_argument("--admit-wait-s", type=float, default=5.0, metavar="S",

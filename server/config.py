@@ -23,6 +23,8 @@ MIN_EDGE_DEG, MAX_EDGE_DEG = 1.0, 30.0
 extra_offset_pose = dual_view_offset  # the server's name for it
 
 
+#: --rate-control: the real clock's frames held to --fps by their levels (server/rate_control.py), or not.
+RATE_CONTROL_MODES = ("on", "off")
 #: Real clock: frames a session sends ahead of what its client reports decoded (server/session.py).
 DEFAULT_MAX_IN_FLIGHT = 3
 
@@ -74,6 +76,7 @@ class ServerConfig:
     proxy_settings: ProxySettings = field(default_factory=ProxySettings)
     edge: EdgeSettings = field(default_factory=EdgeSettings)
     flow_coder: str = DEFAULT_FLOW_CODER    # MOTION_FLOW of scenes that move (protocol/motion_flow.py)
+    rate_control: str = "on"            # the real clock's frame levels held to --fps (server/rate_control.py)
 
     def __post_init__(self):
         if not (0 < self.port < 65536) and self.port != 0:
@@ -106,6 +109,8 @@ class ServerConfig:
             raise ConfigError(f"bandwidth cap must be in 16..10000000 kbit/s, got {self.bandwidth_kbps}")
         if self.flow_coder not in FLOW_CODERS:
             raise ConfigError(f"flow coder must be one of {', '.join(FLOW_CODERS)}, got {self.flow_coder!r}")
+        if self.rate_control not in RATE_CONTROL_MODES:
+            raise ConfigError(f"rate control must be on or off, got {self.rate_control!r}")
         if self.max_sessions < 1:
             raise ConfigError("max sessions must be at least 1")
         if self.max_pending < 1:

@@ -23,11 +23,11 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass
 
-from pibr.protocol.messages import Frame, PayloadKind
+from pibr.protocol.messages import Frame, PayloadKind, encode_frame_level
 from pibr.protocol.pose import Pose
 
 from .depth_encoders import make_depth_encoder
-from .producer import FrameProducer, ProducedFrame
+from .producer import FULL, FrameLevel, FrameProducer, ProducedFrame
 from .renderer import Renderer
 from .session_plan import plan_session
 
@@ -44,13 +44,16 @@ class EncodedFrame:
     quadtree: bytes | None = None
     object_poses: bytes | None = None
     motion: bytes | None = None
+    level: int | None = None      # the rate control's level the frame was made at (None: no rate control)
 
     @property
     def payloads(self) -> tuple:
-        """The Frame's payloads, always in this order: atlas, depth, quadtree, object poses, motion flow."""
+        """The Frame's payloads, always in this order: atlas, depth, quadtree, object poses, motion
+        flow, the frame's level."""
         out = [(PayloadKind.H264_ATLAS, self.video), *self.depth]
         for kind, data in ((PayloadKind.QUADTREE, self.quadtree), (PayloadKind.OBJECT_POSES, self.object_poses),
-                           (PayloadKind.MOTION_FLOW, self.motion)):
+                           (PayloadKind.MOTION_FLOW, self.motion),
+                           (PayloadKind.FRAME_LEVEL, None if self.level is None else encode_frame_level(self.level))):
             if data is not None:
                 out.append((kind, data))
         return tuple(out)
@@ -101,9 +104,10 @@ class SessionPipeline:
         self.producer = FrameProducer(ctx, renderer, self.spec)
         return self
 
-    def produce(self, pose: Pose, t: float) -> ProducedFrame:
-        """Render, read back and pack the frame of ``pose`` at scene time ``t`` (GL thread)."""
-        return self.producer.produce(pose, t)
+    def produce(self, pose: Pose, t: float, level: FrameLevel = FULL) -> ProducedFrame:
+        """Render, read back and pack the frame of ``pose`` at scene time ``t`` (GL thread), made
+        at ``level`` (server/rate_control.py; default: all of it)."""
+        return self.producer.produce(pose, t, level)
 
     def release(self) -> None:
         """Release the GL resources (GL thread) and close the encoders."""
@@ -158,11 +162,12 @@ class SessionPipeline:
 
         return motion_flow_payload(produced, self.config.flow_coder)
 
-    def encode(self, produced: ProducedFrame, force_keyframe: bool = False) -> EncodedFrame:
-        """Every stream of ``produced``, in order, on this thread."""
+    def encode(self, produced: ProducedFrame, force_keyframe: bool = False, level: int | None = None) -> EncodedFrame:
+        """Every stream of ``produced``, in order, on this thread (``level``: the rate control's
+        level it was made at, sent with it)."""
         video, key = self.encode_video(produced, force_keyframe)
         return EncodedFrame(video, key, self.encode_depth(produced), self.encode_quadtree(produced),
-                            produced.object_poses, self.encode_motion(produced))
+                            produced.object_poses, self.encode_motion(produced), level)
 
     def frame(self, frame_id: int, render_t_us: int, pose_t_us: int, pose_seq: int, produced: ProducedFrame,
               encoded: EncodedFrame, timings_ms: tuple = (0.0, 0.0, 0.0, 0.0)) -> Frame:

@@ -67,6 +67,57 @@ class ProducedFrame:
     object_poses: bytes | None = None      # the OBJECT_POSES payload at scene_t (moving objects)
 
 
+#: Upsamples a primary view rendered at a lower resolution into the full-size target: colour
+#: bilinearly, distance and motion from the nearest low pixel (a distance between two surfaces, or a
+#: moving flag between an object and what is behind it, would be neither), motion in full pixels.
+_UPSAMPLE_FS = """
+#version 410
+uniform sampler2D u_color;
+uniform sampler2D u_distance;
+uniform sampler2D u_motion;
+uniform vec2 u_size;
+uniform float u_scale;
+uniform bool u_with_motion;
+layout(location = 0) out vec4 o_color;
+layout(location = 1) out float o_distance;
+layout(location = 2) out vec4 o_motion;
+void main() {
+    vec2 uv = gl_FragCoord.xy / u_size;
+    ivec2 low = textureSize(u_distance, 0);
+    ivec2 p = clamp(ivec2(uv * vec2(low)), ivec2(0), low - 1);
+    o_color = texture(u_color, uv);
+    o_distance = texelFetch(u_distance, p, 0).r;
+    o_motion = vec4(0.0);
+    if (u_with_motion) {
+        vec4 m = texelFetch(u_motion, p, 0);
+        o_motion = vec4(m.xy / u_scale, m.zw);
+    }
+}
+"""
+_UPSAMPLE_VS = """
+#version 410
+in vec2 in_pos;
+void main() { gl_Position = vec4(in_pos, 0.0, 1.0); }
+"""
+
+
+@dataclass(frozen=True)
+class FrameLevel:
+    """How much of a frame to make (server/rate_control.py chooses it per frame).
+
+    extra : render the extra view this frame (False: the atlas keeps the last one, with its pose);
+    edge_deg : the primary view's longest straight edge as a view angle (None: the renderer's);
+    scale : render the primary view at this fraction of its size, upsampled into the atlas.
+    """
+
+    extra: bool = True
+    edge_deg: float | None = None
+    scale: float = 1.0
+
+
+FULL = FrameLevel()
+
+
 class FrameProducer:
     """Render targets and atlas packer of one session. Create, use and release on the GL thread."""
 
@@ -87,23 +138,43 @@ class FrameProducer:
             self.extra_edge_deg = edge_angle_for_width(renderer.max_edge_angle_deg, spec.primary_size[0],
                                                        spec.extra_size[0])
             renderer.prepare_edge_angle(self.extra_edge_deg)
+        self._low = {}              # scale -> the primary view's smaller render target
+        self._upsample = None       # (program, vbo, vao) of the upsampling pass, made when first needed
+        self._extra_pose = None     # the extra view's pose in the atlas (frames that keep it)
 
-    def produce(self, pose: Pose, t: float) -> ProducedFrame:
+    def produce(self, pose: Pose, t: float, level: FrameLevel = FULL) -> ProducedFrame:
+        """The frame of ``pose`` at scene time ``t``, made at ``level`` (default: all of it)."""
         ctx = self.ctx
         t0 = time.perf_counter()
-        self.renderer.render_wide(self.primary, pose, t, self.spec.projection, motion_dt=self.spec.motion_dt)
-        extra_pose = None
-        if self.extra is not None:
-            extra_pose = pose.compose(self.spec.extra_offset)
+        primary_edge = level.edge_deg
+        if level.scale == 1.0:
+            self.renderer.render_wide(self.primary, pose, t, self.spec.projection, motion_dt=self.spec.motion_dt,
+                                      max_edge_deg=primary_edge)
+        else:
+            low = self._low_target(level.scale)
+            self.renderer.render_wide(low, pose, t, self.spec.projection, motion_dt=self.spec.motion_dt,
+                                      max_edge_deg=primary_edge)
+            self._upsample_into_primary(low, level.scale)
+        fresh_extra = self.extra is not None and (level.extra or self._extra_pose is None)
+        if fresh_extra:
+            self._extra_pose = pose.compose(self.spec.extra_offset)
             peel = (self.primary, pose, self.spec.peel_tolerance) if self.spec.peel else None
-            self.renderer.render_wide(self.extra, extra_pose, t, self.spec.projection, peel=peel,
-                                      mark_peeled=self.spec.mark_peeled, max_edge_deg=self.extra_edge_deg)
+            extra_edge = self.extra_edge_deg
+            if level.edge_deg is not None and self.spec.extra_edges_by_size:
+                extra_edge = edge_angle_for_width(level.edge_deg, self.spec.primary_size[0], self.spec.extra_size[0])
+            elif level.edge_deg is not None:
+                extra_edge = level.edge_deg
+            self.renderer.render_wide(self.extra, self._extra_pose, t, self.spec.projection, peel=peel,
+                                      mark_peeled=self.spec.mark_peeled, max_edge_deg=extra_edge)
+        extra_pose = self._extra_pose if self.extra is not None else None
         ctx.finish()
         t1 = time.perf_counter()
         if self.spec.gpu_pack:
+            if level != FULL:
+                raise ValueError("frame levels need the CPU packer (gpu_pack is the reference only)")
             yuv, distances, low, pack_ms, readback_ms = self._pack_on_gpu(t1)
         else:
-            yuv, distances, low, pack_ms, readback_ms = self._pack_on_cpu(t1)
+            yuv, distances, low, pack_ms, readback_ms = self._pack_on_cpu(t1, read_extra=fresh_extra)
         motion, moving = None, None
         if self.spec.motion_dt is not None:
             t2 = time.perf_counter()
@@ -113,15 +184,47 @@ class FrameProducer:
         return ProducedFrame(yuv, pose, extra_pose, t, (t1 - t0) * 1e3, readback_ms, pack_ms, distances,
                              motion, moving, low, poses)
 
-    def _pack_on_cpu(self, t1: float) -> tuple:
+    def _low_target(self, scale: float) -> RenderTarget:
+        if scale not in self._low:
+            w, h = (max(16, int(round(side * scale))) for side in self.spec.primary_size)
+            target = RenderTarget(self.ctx, w, h, motion=self.spec.motion_dt is not None)
+            target.color.filter = (self.ctx.LINEAR, self.ctx.LINEAR)
+            self._low[scale] = target
+        return self._low[scale]
+
+    def _upsample_into_primary(self, low: RenderTarget, scale: float) -> None:
+        ctx = self.ctx
+        if self._upsample is None:
+            prog = ctx.program(vertex_shader=_UPSAMPLE_VS, fragment_shader=_UPSAMPLE_FS)
+            vbo = ctx.buffer(np.array([-1, -1, 1, -1, -1, 1, 1, 1], dtype="f4").tobytes())
+            self._upsample = (prog, vbo, ctx.vertex_array(prog, [(vbo, "2f", "in_pos")]))
+        prog, _, vao = self._upsample
+        with_motion = low.motion is not None
+        fbo = self.primary.all_fbo if with_motion else self.primary.fbo
+        fbo.use()
+        ctx.disable(ctx.DEPTH_TEST)
+        low.color.use(location=0)
+        low.distance.use(location=1)
+        if with_motion:
+            low.motion.use(location=2)
+        for name, value in (("u_color", 0), ("u_distance", 1), ("u_motion", 2), ("u_scale", float(scale)),
+                            ("u_with_motion", with_motion),
+                            ("u_size", (float(self.primary.width), float(self.primary.height)))):
+            if name in prog:
+                prog[name].value = value
+        vao.render(ctx.TRIANGLE_STRIP)
+
+    def _pack_on_cpu(self, t1: float, read_extra: bool = True) -> tuple:
         """One readback of each view's colour and distance, then the CPU packer; the distances
-        and low-resolution colour the caller wants come from the same reads."""
+        and low-resolution colour the caller wants come from the same reads. ``read_extra``
+        False: the extra view was not rendered again, its last reads are packed again."""
         layout, colors, dists = self.spec.layout, {}, {}
         keep = self.spec.keep_distance
         for name, (target, rgba, dist) in self._reads.items():
-            colors[name + ".color"] = target.read_rgba_into(rgba)
+            fresh = name != "extra" or read_extra
+            colors[name + ".color"] = target.read_rgba_into(rgba) if fresh else rgba
             if keep or layout.rect(name + ".depth") is not None:
-                dists[name + ".depth"] = target.read_distance_into(dist)
+                dists[name + ".depth"] = target.read_distance_into(dist) if fresh else dist
         t2 = time.perf_counter()
         yuv = self.packer.pack(colors, dists).copy()
         t3 = time.perf_counter()
@@ -155,5 +258,10 @@ class FrameProducer:
         self.primary.release()
         if self.extra is not None:
             self.extra.release()
+        for target in self._low.values():
+            target.release()
+        if self._upsample is not None:
+            for r in reversed(self._upsample):
+                r.release()
         if self.spec.gpu_pack:
             self.packer.release()

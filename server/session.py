@@ -27,6 +27,8 @@ from pibr.protocol.messages import FRAMES_DECODED, Bye, Clock, Error, Hello, Pos
 from pibr.protocol.sides import ServerSide
 
 from .pipeline import EncodedFrame
+from .producer import FULL
+from .rate_control import RateControl, server_levels
 
 log = logging.getLogger(__name__)
 
@@ -41,6 +43,7 @@ class Session:
         self.conn = self.side.conn
         self.peer = writer.get_extra_info("peername")
         self.pipeline = None            # the session's SessionPipeline (server/pipeline.py), after the Hello
+        self.rate: RateControl | None = None   # its frames' levels on the wall clock (server/rate_control.py)
         self.config = None
         self.frames_sent = 0
         self.frames_skipped = 0
@@ -142,6 +145,10 @@ class Session:
         log.info("session %d: closed after %d frames (%d skipped for a slow connection, %d held while the client "
                  "decoded, %d tick overruns)", self.id, self.frames_sent, self.frames_skipped, self.frames_held,
                  self.tick_overruns)
+        if self.rate is not None:
+            made = self.rate.summary()["frames_at_level"]
+            log.info("session %d: frames by rate-control level: %s", self.id,
+                     ", ".join(f"{name} {n}" for name, n in made.items() if n) or "none")
 
     async def _receive_hello(self) -> Hello:
         """The client's Hello, whole within ``hello_timeout_s`` of connecting, however it trickles in
@@ -167,6 +174,8 @@ class Session:
         self.idle_timeout_s = cfg.idle_timeout_virtual_s if hello.clock == "virtual" else cfg.idle_timeout_s
         self.pipeline, bundle = await self.server.setup_session(self.id, hello)
         self.config = self.pipeline.session
+        if "server_levels" in self.config.options:   # the plan turned the rate control on (session_plan.py)
+            self.rate = RateControl(server_levels(self.config.extra is not None), cfg.fps)
         setup_us = int((time.monotonic() - t_hello) * 1e6)
         self.conn.send(Welcome(server=self.server.name, session=self.id, config=self.config.to_json(),
                                setup_us=setup_us))
@@ -180,11 +189,14 @@ class Session:
 
     # ------------------------------------------------------------------ frames
 
-    async def _send_frame(self, pose_msg: PoseMsg, t_us: int, vtime_us: int, force_keyframe: bool = False) -> None:
+    async def _send_frame(self, pose_msg: PoseMsg, t_us: int, vtime_us: int, force_keyframe: bool = False,
+                          level: tuple | None = None) -> None:
         """The pipeline's stages (server/pipeline.py) where they belong: rendering on the shared GL
-        thread, the encoders in the pool, the H.264 encode and the quadtrees side by side."""
+        thread, the encoders in the pool, the H.264 encode and the quadtrees side by side.
+        ``level``: (index, FrameLevel) of the rate control (server/rate_control.py), or None."""
         pipeline = self.pipeline
-        produced = await self.server.render(self.id, lambda ctx: pipeline.produce(pose_msg.pose, t_us * 1e-6))
+        made = FULL if level is None else level[1]
+        produced = await self.server.render(self.id, lambda ctx: pipeline.produce(pose_msg.pose, t_us * 1e-6, made))
         t0 = time.perf_counter()
         jobs = [self.server.encode(self.id, pipeline.encode_video, produced, force_keyframe)]
         if pipeline.quadtree_threshold > 0:
@@ -195,7 +207,8 @@ class Session:
             depth = await self.server.encode(self.id, pipeline.encode_depth, produced)
         if produced.motion is not None:   # a scene that moves: its flow, whatever the depth codec
             motion = await self.server.encode(self.id, pipeline.encode_motion, produced)
-        encoded = EncodedFrame(video, key, depth, quadtree[0] if quadtree else None, produced.object_poses, motion)
+        encoded = EncodedFrame(video, key, depth, quadtree[0] if quadtree else None, produced.object_poses, motion,
+                               None if level is None else level[0])
         encode_ms = (time.perf_counter() - t0) * 1e3   # H.264 and, with the edge codec, depth (and quadtrees)
         frame = pipeline.frame(self.frames_sent, t_us, pose_msg.t_us, pose_msg.seq, produced, encoded,
                                (produced.render_ms, produced.readback_ms, produced.pack_ms, encode_ms))
@@ -299,8 +312,18 @@ class Session:
                     elif self._client_behind():
                         self.frames_held += 1
                     else:
-                        t_us = int(round((loop.time() - start) * 1e6))
-                        await self._send_frame(newest[0], t_us, t_us, need_keyframe)
+                        if self.rate is not None and not self.rate.calibration_ms:
+                            await self._calibrate(newest[0].pose)
+                            start = loop.time() - k * interval   # the clock goes on from here
+                        level = None
+                        if self.rate is not None:
+                            index, _, made = self.rate.choose()
+                            level = (index, made)
+                        t0 = loop.time()
+                        t_us = int(round((t0 - start) * 1e6))
+                        await self._send_frame(newest[0], t_us, t_us, need_keyframe, level)
+                        if self.rate is not None:
+                            self.rate.observe(level[0], (loop.time() - t0) * 1e3, level[1].extra)
                         need_keyframe = False
                         self.writer.write(self.conn.data_to_send())  # no drain: never wait on one client
                 next_k = max(k + 1, math.floor((loop.time() - start) / interval) + 1)
@@ -318,6 +341,14 @@ class Session:
             env = await self._recv()    # a pose or a clock (the side refuses anything else)
             if isinstance(env.message, PoseMsg):
                 newest[0] = env.message
+
+    async def _calibrate(self, pose) -> None:
+        """The rate control's first cost estimates: every level made on the GL thread, in this
+        session's fair turn, before its first frame (server/rate_control.py)."""
+        pipeline, rate = self.pipeline, self.rate
+        costs = await self.server.render(self.id, lambda ctx: rate.calibrate(pipeline, pose, 0.0))
+        log.info("session %d: rate control calibrated: %s", self.id,
+                 ", ".join(f"{name} {ms:.0f} ms" for name, ms in zip(rate.names, costs)))
 
     def stats(self) -> dict:
         return {"frames_sent": self.frames_sent, "frames_skipped": self.frames_skipped,

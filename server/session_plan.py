@@ -9,6 +9,7 @@ from pibr.protocol.session import SessionConfig, ViewConfig
 
 from .config import PAPER_EXTRA_OFFSET, ServerConfig, extra_offset_pose
 from .producer import ProducerSpec
+from .rate_control import server_levels
 from .quadtree import ROOT_TILE as QUADTREE_ROOT_TILE
 from .scene_plan import Decision, ScenePlan, decide_proxies, make_plan
 
@@ -69,6 +70,9 @@ def plan_session(cfg: ServerConfig, scene, hello: Hello, proxies: dict | None = 
     # transforms and their motion flow with every frame, whatever the depth codec.
     motion = bool(plan.motion.value)
     options = {"projection": cfg.projection, "plan": plan.to_json()}
+    if cfg.rate_control == "on" and hello.clock == "real":
+        # the frames' levels (server/rate_control.py), which each frame names by index
+        options["server_levels"] = [lv.name for lv in server_levels(use_extra)]
     if use_extra:   # whether the extra view's sky (distance 0) is sky, not also peeled pixels
         options["peel_marker"] = bool(cfg.peel_marker)
     quadtree = hello.quadtree_threshold > 0   # a quadtree payload in every frame, built from the float distances

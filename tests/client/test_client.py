@@ -283,6 +283,9 @@ async def test_real_clock_calibrates_every_level_and_records_its_choices(relay_e
     assert all(0 <= r["level"] < len(levels_for("rotation")) and 0 <= r["level_reason"] <= 4 for r in shown)
     assert all(math.isfinite(r["budget_ms"]) and r["budget_ms"] < 50.0 for r in shown)
     assert info["record_ms"]["ticks"] == len(shown)
+    # the server's rate control made every frame at one of the levels it announced, and said which
+    levels = info["session"]["options"]["server_levels"]
+    assert levels[0] == "full" and all(0 <= r["server_level"] < len(levels) for r in shown if r["frame_id"] >= 0)
     assert len(_frames(tmp_path / "rotation.lossless.mkv")) == len(shown)   # encoded after the run
     assert not list(tmp_path.glob(".*.frames.raw"))                         # and the raw images removed
     await run_client(_cfg(host, port, tmp_path / "off", clock="real", duration_s=0.5, rate_hz=20.0,
