@@ -78,15 +78,31 @@ def real_clock_summary(out_dir: str, metrics: dict, duration_s: float) -> dict:
     """What the wall clock allowed: server frames received per second of the client's clock, and
     per method the ticks shown afresh per second and the share of missed deadlines (a missed
     tick repeats the previous image)."""
+    from pibr.client.recorder import read_records
+
     from .evaluate import read_session
 
-    arrivals = read_session(out_dir)["result"].get("frame_arrivals_s", [])
+    session = read_session(out_dir)
+    arrivals = session["result"].get("frame_arrivals_s", [])
     received = sum(1 for a in arrivals if 0.0 <= a <= duration_s)
+    deadline = session.get("deadline") or {}
     methods = {}
     for name, m in metrics["methods"].items():
         ticks, missed = m["frames"], m.get("missed_deadlines") or 0
         methods[name] = {"output_hz": (ticks - missed) / duration_s, "missed_fraction": missed / ticks if ticks else None}
-    return {"server_fps": received / duration_s, "frames_received": received, "methods": methods}
+        chosen = (deadline.get("methods") or {}).get(name)
+        if chosen:   # the client's quality levels (client/deadline.py) and why
+            methods[name]["levels"] = {k: v for k, v in chosen["share_at_level"].items() if v > 0}
+            methods[name]["reasons"] = chosen["reasons"]
+    out = {"server_fps": received / duration_s, "frames_received": received, "methods": methods,
+           "budget_ms": deadline.get("budget_ms"), "tick_overhead_ms": deadline.get("overhead_ms")}
+    names = session["session"].get("options", {}).get("server_levels")
+    if names:   # the server's levels (server/rate_control.py), each frame shown counted once
+        rows = read_records(os.path.join(out_dir, f"{next(iter(metrics['methods']))}.records.csv"))
+        made = {r["frame_id"]: r["server_level"] for r in rows if r["frame_id"] >= 0 and r["server_level"] >= 0}
+        out["server_levels"] = {names[k]: sum(1 for v in made.values() if v == k) / len(made)
+                                for k in sorted(set(made.values()))} if made else {}
+    return out
 
 
 def print_report(metrics: dict, out_dir: str) -> None:
@@ -105,6 +121,17 @@ def print_report(metrics: dict, out_dir: str) -> None:
               f"({100 * m['missed_fraction']:.0f} % of ticks missed" + (
                   f": the {len(real['methods'])} methods render on every tick, so their costs add up; time one "
                   "at a time with --method proxy)." if several else ")."))
+        if real.get("server_levels"):
+            shares = ", ".join(f"{k} {100 * v:.0f} %" for k, v in real["server_levels"].items())
+            print(f"The server's rate control made the frames shown at: {shares} (the best level predicted "
+                  f"to fit its frame interval; --rate-control off makes every frame whole).")
+        for name, mm in real["methods"].items():
+            if mm.get("levels"):
+                shares = ", ".join(f"{k} {100 * v:.0f} %" for k, v in mm["levels"].items())
+                why = max(mm["reasons"].items(), key=lambda kv: kv[1])[0]
+                print(f"The client drew {name} at: {shares}; mostly {why} (budget {real['budget_ms']:.1f} ms a "
+                      f"tick after {real['tick_overhead_ms'] or 0:.1f} ms of other work; --deadline off to always "
+                      f"draw the best level).")
     print(f"\nFLIP on every {metrics['flip_every']} frame(s). Finished in {t.get('total', 0):.0f} s "
           f"(streaming {t.get('streaming', 0):.0f} s, evaluation {t.get('evaluation', 0):.0f} s).")
     print(f"Outputs in {out_dir}/: side_by_side.mp4, metrics.json, metrics_frames.csv, quality.png, "
