@@ -10,7 +10,8 @@ carries them. Layouts (W x H primary view, extra view at W/2 x H/2)::
                                       |         |         | E.dep|
                                       +---------+---------+------+
 
-    with the edge codec carrying depth, only the colour rectangles remain.
+    with the edge codec carrying depth, only the colour rectangles remain. At colour scale 0.5
+    each colour rectangle is half its view's width and height (depth stays whole).
 
 Depth rectangles hold the disparity code in luma (chroma 128); the packer writes luma
 directly, so no RGB conversion touches depth. Rectangle corners and sizes are multiples of
@@ -105,24 +106,66 @@ def check_view_size(width: int, height: int, what: str = "view") -> None:
                          f"{MAX_VIEW_PIXELS} pixels ({int(MAX_VIEW_PIXELS ** 0.5)}x{int(MAX_VIEW_PIXELS ** 0.5)})")
 
 
-def build_layout(primary: tuple, extra: tuple | None, depth_in_atlas: bool) -> AtlasLayout:
-    """Atlas for a primary view of size (w, h), an optional extra view of size (w2, h2)."""
+#: Scales a session may send its views' colour at (``SessionConfig.colour_scale``): 0.5 sends
+#: half the width and height and the client rebuilds the rest (client/colour_rebuild.py; Pajak
+#: et al. 2011, Sec. 3.3).
+COLOUR_SCALES = (1.0, 0.5)
+#: What a frame at colour scale 0.5 sends, cycling with the frame id: with jitter (jx, jy), pixel
+#: (i, j) of the view's half-size colour rectangle holds the luma of the view's pixel
+#: (2 i + jx, 2 j + jy), and chroma sample (i, j) of the rectangle the chroma of the view's 2x2
+#: block (2 i + jx, 2 j + jy) (the average of its four pixels, as 4:2:0 at scale 1 sends every
+#: block). Every pixel's luma and every block's chroma of a still view is sent once in four
+#: frames, the diagonal first so that two frames already sample both rows and both columns.
+COLOUR_JITTER = ((0, 0), (1, 1), (1, 0), (0, 1))
+
+
+def colour_jitter(frame_id: int) -> tuple:
+    """(x, y) in 0..1: the jitter of frame ``frame_id`` at colour scale 0.5 (COLOUR_JITTER)."""
+    return COLOUR_JITTER[frame_id % len(COLOUR_JITTER)]
+
+
+def colour_size(view: tuple, colour_scale: float) -> tuple:
+    """(w, h) of a view's colour rectangle at ``colour_scale`` (one of COLOUR_SCALES)."""
+    if colour_scale not in COLOUR_SCALES:
+        raise ValueError(f"colour scale must be one of {', '.join(f'{s:g}' for s in COLOUR_SCALES)}, "
+                         f"got {colour_scale!r:.40}")
+    step = int(round(1.0 / colour_scale))
+    w, h = view
+    if w % (2 * step) or h % (2 * step):
+        raise ValueError(f"a {w}x{h} view cannot send its colour at scale {colour_scale:g}: its sides must be "
+                         f"multiples of {2 * step} (4:2:0 chroma)")
+    return w // step, h // step
+
+
+def _aligned(n: int) -> int:
+    return -(-n // ALIGN) * ALIGN
+
+
+def build_layout(primary: tuple, extra: tuple | None, depth_in_atlas: bool,
+                 colour_scale: float = 1.0) -> AtlasLayout:
+    """Atlas for a primary view of size (w, h), an optional extra view of size (w2, h2), colour
+    at ``colour_scale`` of each view's size (depth always at full size). Every rectangle starts
+    on a multiple of ALIGN."""
     pw, ph = primary
-    rects = {"primary.color": (0, 0, pw, ph)}
-    x = pw
+    pcw, pch = colour_size(primary, colour_scale)
+    rects = {"primary.color": (0, 0, pcw, pch)}
+    x, height = _aligned(pcw), pch
     if depth_in_atlas:
         rects["primary.depth"] = (x, 0, pw, ph)
-        x += pw
-    width, height = x, ph
+        x, height = x + _aligned(pw), max(height, ph)
+    width = x
     if extra is not None:
         ew, eh = extra
-        rects["extra.color"] = (x, 0, ew, eh)
+        ecw, ech = colour_size(extra, colour_scale)
+        rects["extra.color"] = (x, 0, ecw, ech)
+        width = x + _aligned(ecw)
         if depth_in_atlas:
-            if 2 * eh <= ph:
-                rects["extra.depth"] = (x, eh, ew, eh)
-            else:
-                rects["extra.depth"] = (x + ew, 0, ew, eh)
-                width += ew
-        width += ew
-        height = max(height, eh if "extra.depth" not in rects or rects["extra.depth"][1] == 0 else 2 * eh)
-    return AtlasLayout(width, height, rects)
+            if _aligned(ech) + eh <= height:     # under the extra colour
+                rects["extra.depth"] = (x, _aligned(ech), ew, eh)
+                width = x + max(_aligned(ecw), _aligned(ew))
+            else:                                # beside it
+                rects["extra.depth"] = (width, 0, ew, eh)
+                width += _aligned(ew)
+                height = max(height, eh)
+        height = max(height, ech)
+    return AtlasLayout(_aligned(width), _aligned(height), rects)

@@ -20,7 +20,8 @@ import math
 from dataclasses import dataclass, field
 
 from . import bounded_json
-from .atlas import ALIGN, MAX_VIEW_PIXELS, MAX_VIEW_SIDE, AtlasLayout, build_layout, check_view_size
+from .atlas import (ALIGN, COLOUR_SCALES, MAX_VIEW_PIXELS, MAX_VIEW_SIDE, AtlasLayout, build_layout, check_view_size,
+                    colour_size)
 from .depth_codecs import DEPTH_CODECS
 from .errors import JSONError, MalformedMessage
 from .pose import Pose
@@ -83,6 +84,10 @@ class SessionConfig:
                        (``PayloadKind.OBJECT_POSES``) and their motion flow in the primary view
                        (``MOTION_FLOW``, either depth codec); False: frames carry no motion of any kind
     proxies          : the proxy bundle's announcement (proxy.BundleInfo as JSON) or None when none are sent
+    colour_scale     : the views' colour is sent at this scale of their size (atlas.COLOUR_SCALES): at 0.5
+                       frame ``k`` sends the luma of one pixel of each 2x2 block and the chroma of one 2x2
+                       block of each 4x4, those ``atlas.colour_jitter(k)`` names (atlas.COLOUR_JITTER),
+                       and the client rebuilds the rest (client/colour_rebuild.py); depth stays whole
     """
 
     scene: dict
@@ -101,6 +106,7 @@ class SessionConfig:
     motion: bool = False
     proxies: dict | None = None
     options: dict = field(default_factory=dict)
+    colour_scale: float = 1.0
 
     @property
     def frame_interval_us(self) -> int:
@@ -136,7 +142,7 @@ class SessionConfig:
             "atlas": self.atlas.to_json(), "video_bitrate_kbps": self.video_bitrate_kbps,
             "keyint": self.keyint, "depth_codec": self.depth_codec, "depth_bits": self.depth_bits,
             "depth_min_code": self.depth_min_code, "motion": self.motion, "proxies": self.proxies,
-            "options": self.options,
+            "options": self.options, "colour_scale": self.colour_scale,
         }
 
     @classmethod
@@ -188,8 +194,13 @@ class SessionConfig:
             raise MalformedMessage(f"{p}.primary: {exc}") from None
         if (extra is None) != (offset is None):
             raise MalformedMessage(f"{p}: an extra view needs an extra_offset and an extra_offset an extra view")
+        colour_scale = o.get("colour_scale", 1.0)
+        if isinstance(colour_scale, bool) or colour_scale not in COLOUR_SCALES:
+            raise MalformedMessage(f"{p}: colour_scale must be one of {', '.join(f'{s:g}' for s in COLOUR_SCALES)}, "
+                                   f"got {colour_scale!r:.40}")
+        colour_scale = float(colour_scale)
         atlas = AtlasLayout.from_json(o.get("atlas"))
-        _check_atlas_views(atlas, primary, extra, codec)
+        _check_atlas_views(atlas, primary, extra, codec, colour_scale)
         bits = _num(o, "depth_bits", 1, 16, int) if "depth_bits" in o else 8
         min_code = _num(o, "depth_min_code", 1, 65534, int) if "depth_min_code" in o else 16
         _check_depth_transport(near, far, bits, min_code, codec)
@@ -205,7 +216,7 @@ class SessionConfig:
             depth_codec=codec,
             depth_bits=bits,
             depth_min_code=min_code,
-            motion=bool(o.get("motion", False)), proxies=proxies, options=options,
+            motion=bool(o.get("motion", False)), proxies=proxies, options=options, colour_scale=colour_scale,
         )
 
 
@@ -223,9 +234,11 @@ def _check_depth_transport(near: float, far: float, bits: int, min_code: int, co
         raise MalformedMessage(f"Welcome.config: {spec.noun} carries {lo}..{hi} bits, depth_bits is {bits}")
 
 
-def _check_atlas_views(atlas: AtlasLayout, primary: ViewConfig, extra: ViewConfig | None, codec: str) -> None:
+def _check_atlas_views(atlas: AtlasLayout, primary: ViewConfig, extra: ViewConfig | None, codec: str,
+                       colour_scale: float = 1.0) -> None:
     """The atlas holds exactly the rectangles the views and the depth transport need, each
-    of its view's size (as :func:`~pibr.protocol.atlas.build_layout` places them)."""
+    of its view's size, colour at ``colour_scale`` of it (as :func:`~pibr.protocol.atlas.build_layout`
+    places them)."""
     views = {"primary": primary, "extra": extra}
     for name in ("primary.color", "primary.depth", "extra.color", "extra.depth"):
         view = views[name.split(".")[0]]
@@ -235,9 +248,18 @@ def _check_atlas_views(atlas: AtlasLayout, primary: ViewConfig, extra: ViewConfi
             raise MalformedMessage(f"Welcome.config.atlas: rectangle {name} is missing")
         if not wanted and r is not None:
             raise MalformedMessage(f"Welcome.config.atlas: rectangle {name} has no view or depth to hold")
-        if r is not None and (r[2], r[3]) != (view.width, view.height):
-            raise MalformedMessage(f"Welcome.config.atlas: rectangle {name} is {r[2]}x{r[3]}, its view "
-                                   f"{view.width}x{view.height}")
+        if r is None:
+            continue
+        size = (view.width, view.height)
+        if name.endswith("color"):
+            try:
+                size = colour_size(size, colour_scale)
+            except ValueError as exc:
+                raise MalformedMessage(f"Welcome.config: {exc}") from None
+        if (r[2], r[3]) != size:
+            what = f"its view's colour at scale {colour_scale:g}" if name.endswith("color") else "its view's depth"
+            raise MalformedMessage(f"Welcome.config.atlas: rectangle {name} is {r[2]}x{r[3]}, not {size[0]}x{size[1]} "
+                                   f"({what})")
 
 
 def check_atlas_layout(session: SessionConfig) -> None:
@@ -247,7 +269,8 @@ def check_atlas_layout(session: SessionConfig) -> None:
     extra = None if session.extra is None else (session.extra.width, session.extra.height)
     try:
         expected = build_layout((session.primary.width, session.primary.height), extra,
-                                depth_in_atlas=DEPTH_CODECS[session.depth_codec].in_atlas)
+                                depth_in_atlas=DEPTH_CODECS[session.depth_codec].in_atlas,
+                                colour_scale=session.colour_scale)
     except ValueError as exc:
         raise MalformedMessage(f"Welcome.config: the views have no atlas layout ({exc})") from None
     if session.atlas != expected:

@@ -6,6 +6,7 @@ import sys
 
 from pibr.common import arguments
 from pibr.common.address import parse_host_port
+from pibr.protocol.atlas import COLOUR_SCALES
 from pibr.protocol.depth_codecs import AUTO, DEPTH_CODECS
 from pibr.protocol.motion_flow import DEFAULT_FLOW_CODER, FLOW_CODERS
 
@@ -113,6 +114,11 @@ def register(sub) -> None:
                         "fits its interval (the extra view on every 2nd or 4th frame, longer straight edges, the "
                         "primary view rendered at 3/4 or 1/2 and upsampled); each frame's level goes to the client "
                         "and the log (default on; the virtual clock has no deadline and makes every frame whole)")
+    p.add_argument("--colour-scale", type=float, choices=COLOUR_SCALES, default=1.0,
+                   help="send the views' colour at this scale of their size: 0.5 sends the colour of a quarter of "
+                        "the pixels, a different one of each 2x2 block every frame, and the client rebuilds the rest "
+                        "from its previous views reprojected with depth (Pajak et al. 2011; depth stays whole; "
+                        "'pibr bench upsampling' measures it; default 1)")
     p.add_argument("--max-sessions", type=int, default=8,
                    help="sessions served at once, counted from a valid Hello (default 8)")
     p.add_argument("--admit-wait-s", type=float, default=5.0, metavar="S",

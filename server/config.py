@@ -4,7 +4,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from pibr.protocol.access import check_listen_access
-from pibr.protocol.atlas import check_view_size
+from pibr.protocol.atlas import COLOUR_SCALES, check_view_size
 from pibr.protocol.depth_codecs import AUTO, DEPTH_CODECS
 from pibr.protocol.errors import ConfigError
 from pibr.protocol.framing import DEFAULT_MAX_MESSAGE_SIZE
@@ -77,6 +77,7 @@ class ServerConfig:
     edge: EdgeSettings = field(default_factory=EdgeSettings)
     flow_coder: str = DEFAULT_FLOW_CODER    # MOTION_FLOW of scenes that move (protocol/motion_flow.py)
     rate_control: str = "on"            # the real clock's frame levels held to --fps (server/rate_control.py)
+    colour_scale: float = 1.0           # the views' colour sent at this scale, jittered (protocol/atlas.py)
 
     def __post_init__(self):
         if not (0 < self.port < 65536) and self.port != 0:
@@ -111,6 +112,9 @@ class ServerConfig:
             raise ConfigError(f"flow coder must be one of {', '.join(FLOW_CODERS)}, got {self.flow_coder!r}")
         if self.rate_control not in RATE_CONTROL_MODES:
             raise ConfigError(f"rate control must be on or off, got {self.rate_control!r}")
+        if self.colour_scale not in COLOUR_SCALES:
+            raise ConfigError(f"colour scale must be one of {', '.join(f'{c:g}' for c in COLOUR_SCALES)}, "
+                              f"got {self.colour_scale!r}")
         if self.max_sessions < 1:
             raise ConfigError("max sessions must be at least 1")
         if self.max_pending < 1:

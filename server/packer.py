@@ -166,27 +166,33 @@ _V0, _V1, _V2 = (_F(_F(k) * _F(255.0 / 4.0)) for k in (0.5, -0.418688, -0.081312
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _pack_color(rgba, y_plane, u_plane, v_plane, x0, y0):
-    """rgba (h, w) uint32, RGBA bytes little-endian, h and w even -> Y at (y0, x0) and U, V
-    at (y0 / 2, x0 / 2) of the planes: the luma and chroma passes' float32 arithmetic."""
-    h, w = rgba.shape
+def _pack_color(rgba, y_plane, u_plane, v_plane, x0, y0, step, jx, jy):
+    """rgba (H, W) uint32, RGBA bytes little-endian, H and W multiples of 2 ``step`` -> a
+    (H / step, W / step) image: Y at (y0, x0) of the pixels (step j + jy, step i + jx), U and V at
+    (y0 / 2, x0 / 2) of the 2x2 blocks of rows 2 (step j + jy) and columns 2 (step i + jx): the
+    luma and chroma passes' float32 arithmetic. ``step`` 1 (jx = jy = 0): the whole view; 2: the
+    colour scale 0.5's pixels and blocks of jitter (jx, jy) (protocol/atlas.py colour_jitter), so
+    that four frames send every pixel's luma and every block's chroma of a still view once."""
+    height, width = rgba.shape
+    h, w = height // step, width // step
     for j in range(h):
-        src = rgba[j]
+        src = rgba[step * j + jy]
         dst = y_plane[y0 + j]
         for i in range(w):
-            p = src[i]
+            p = src[step * i + jx]
             r = _F(p & 255) * _INV255
             g = _F((p >> 8) & 255) * _INV255
             b = _F((p >> 16) & 255) * _INV255
             dst[x0 + i] = np.uint8(np.floor(((r * _L0 + _F(0.5)) + g * _L1) + b * _L2))
     for j in range(h // 2):
-        top = rgba[2 * j]
-        bottom = rgba[2 * j + 1]
+        top = rgba[2 * (step * j + jy)]
+        bottom = rgba[2 * (step * j + jy) + 1]
         u_row = u_plane[y0 // 2 + j]
         v_row = v_plane[y0 // 2 + j]
         for i in range(w // 2):
+            x = 2 * (step * i + jx)
             # the order the chroma pass adds its texels: (0, 0), (1, 0), (0, 1), (1, 1)
-            a, b, c, d = top[2 * i], top[2 * i + 1], bottom[2 * i], bottom[2 * i + 1]
+            a, b, c, d = top[x], top[x + 1], bottom[x], bottom[x + 1]
             sr = ((_F(a & 255) * _INV255 + _F(b & 255) * _INV255) + _F(c & 255) * _INV255) + _F(d & 255) * _INV255
             sg = (((_F((a >> 8) & 255) * _INV255 + _F((b >> 8) & 255) * _INV255) + _F((c >> 8) & 255) * _INV255)
                   + _F((d >> 8) & 255) * _INV255)
@@ -245,9 +251,12 @@ class CpuAtlasPacker:
         self._u = chroma[:q].reshape(h // 2, w // 2)
         self._v = chroma[q:].reshape(h // 2, w // 2)
 
-    def pack(self, colors: dict, distances: dict) -> np.ndarray:
+    def pack(self, colors: dict, distances: dict, jitter: tuple | None = None) -> np.ndarray:
         """colors: rect name -> (h, w, 4) uint8 RGBA; distances: rect name -> (h, w) float32 radial
-        distance (0 sky, negative peeled). -> (1.5 H, W) uint8 yuv420p buffer (reused between calls)."""
+        distance (0 sky, negative peeled). -> (1.5 H, W) uint8 yuv420p buffer (reused between calls).
+        ``jitter`` (x, y): the colours are whole views twice the size of their rectangles, which
+        take the pixels and chroma blocks of that jitter (colour scale 0.5, :func:`_pack_color`)."""
+        step, (jx, jy) = (1, (0, 0)) if jitter is None else (2, jitter)
         for name in RECT_NAMES:
             r = self.layout.rect(name)
             if r is None:
@@ -264,8 +273,9 @@ class CpuAtlasPacker:
                 _pack_depth(src, self._y, x, y, _F(q.near), _F(q.far), _F(q.min_code), _F(q.max_code))
             elif name in colors:
                 src = colors[name]
-                _check_source(name, src, (h, w, 4), np.uint8)
-                _pack_color(src.view(np.uint32).reshape(h, w), self._y, self._u, self._v, x, y)
+                _check_source(name, src, (step * h, step * w, 4), np.uint8)
+                _pack_color(src.view(np.uint32).reshape(step * h, step * w), self._y, self._u, self._v, x, y,
+                            step, jx, jy)
         return self._buf
 
 

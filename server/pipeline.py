@@ -104,10 +104,12 @@ class SessionPipeline:
         self.producer = FrameProducer(ctx, renderer, self.spec)
         return self
 
-    def produce(self, pose: Pose, t: float, level: FrameLevel = FULL) -> ProducedFrame:
+    def produce(self, pose: Pose, t: float, level: FrameLevel = FULL, frame_id: int | None = None,
+                keep_colour: bool = False) -> ProducedFrame:
         """Render, read back and pack the frame of ``pose`` at scene time ``t`` (GL thread), made
-        at ``level`` (server/rate_control.py; default: all of it)."""
-        return self.producer.produce(pose, t, level)
+        at ``level`` (server/rate_control.py; default: all of it) for the Frame ``frame_id`` (default:
+        the producer's count from 0); ``keep_colour``: hand the views' whole colour too."""
+        return self.producer.produce(pose, t, level, frame_id, keep_colour)
 
     def release(self) -> None:
         """Release the GL resources (GL thread) and close the encoders."""
@@ -172,6 +174,9 @@ class SessionPipeline:
     def frame(self, frame_id: int, render_t_us: int, pose_t_us: int, pose_seq: int, produced: ProducedFrame,
               encoded: EncodedFrame, timings_ms: tuple = (0.0, 0.0, 0.0, 0.0)) -> Frame:
         """The Frame message of ``produced`` (rendered at ``render_t_us``, which is also its scene time)."""
+        if self.session.colour_scale != 1.0 and produced.frame_id != frame_id:
+            raise ValueError(f"frame {frame_id} was produced for frame id {produced.frame_id}: its colour's jitter "
+                             f"would not be the one the client expects")
         return Frame(frame_id=frame_id, render_t_us=render_t_us, pose_t_us=pose_t_us, pose_seq=pose_seq,
                      scene_t_us=render_t_us, primary_pose=produced.primary_pose, extra_pose=produced.extra_pose,
                      near=self.session.near, far=self.session.far, timings_ms=timings_ms,

@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from pibr.protocol.atlas import AtlasLayout
+from pibr.protocol.atlas import AtlasLayout, colour_jitter
 from pibr.protocol.depth import DepthQuantizer
 from pibr.protocol.pose import Pose
 
@@ -47,6 +47,10 @@ class ProducerSpec:
     #: pack the atlas in GL passes and read back the planes (same bytes as the CPU packer, slower
     #: on llvmpipe; kept as the reference the CPU packer is tested against)
     gpu_pack: bool = False
+    #: the views' colour at this scale of their size: 0.5 packs the luma of one pixel of each 2x2
+    #: block and the chroma of one 2x2 block of each 4x4, those protocol/atlas.py's ``colour_jitter``
+    #: names for the frame's id (server/packer.py; depth and motion stay whole)
+    colour_scale: float = 1.0
 
 
 @dataclass
@@ -65,6 +69,8 @@ class ProducedFrame:
     moving: np.ndarray | None = None       # (h, w) bool: pixels of moving objects
     low_colour: np.ndarray | None = None   # (h / k, w / k, 3) uint8 primary colour
     object_poses: bytes | None = None      # the OBJECT_POSES payload at scene_t (moving objects)
+    frame_id: int = 0                      # the id of the Frame it is made for (its colour's jitter)
+    colours: dict = field(default_factory=dict)  # view name -> (h, w, 3) uint8 whole colour (keep_colour)
 
 
 #: Upsamples a primary view rendered at a lower resolution into the full-size target: colour
@@ -141,10 +147,18 @@ class FrameProducer:
         self._low = {}              # scale -> the primary view's smaller render target
         self._upsample = None       # (program, vbo, vao) of the upsampling pass, made when first needed
         self._extra_pose = None     # the extra view's pose in the atlas (frames that keep it)
+        self._produced = 0          # frames made so far: the next frame's id unless the caller names it
+        if spec.colour_scale != 1.0 and spec.gpu_pack:
+            raise ValueError("a colour scale needs the CPU packer (gpu_pack is the reference only)")
 
-    def produce(self, pose: Pose, t: float, level: FrameLevel = FULL) -> ProducedFrame:
-        """The frame of ``pose`` at scene time ``t``, made at ``level`` (default: all of it)."""
+    def produce(self, pose: Pose, t: float, level: FrameLevel = FULL, frame_id: int | None = None,
+                keep_colour: bool = False) -> ProducedFrame:
+        """The frame of ``pose`` at scene time ``t``, made at ``level`` (default: all of it), for the
+        Frame ``frame_id`` (default: counted from 0 by this producer; a colour scale's jitter follows it).
+        ``keep_colour``: also hand each view's whole colour (benchmarks measure against it)."""
         ctx = self.ctx
+        frame_id = self._produced if frame_id is None else frame_id
+        self._produced = frame_id + 1
         t0 = time.perf_counter()
         primary_edge = level.edge_deg
         if level.scale == 1.0:
@@ -173,8 +187,12 @@ class FrameProducer:
             if level != FULL:
                 raise ValueError("frame levels need the CPU packer (gpu_pack is the reference only)")
             yuv, distances, low, pack_ms, readback_ms = self._pack_on_gpu(t1)
+            colours = {}
+            if keep_colour:
+                colours = {name: t.read_rgba_into(rgba)[:, :, :3].copy() for name, (t, rgba, _) in self._reads.items()}
         else:
-            yuv, distances, low, pack_ms, readback_ms = self._pack_on_cpu(t1, read_extra=fresh_extra)
+            yuv, distances, low, pack_ms, readback_ms, colours = self._pack_on_cpu(t1, fresh_extra, frame_id,
+                                                                                   keep_colour)
         motion, moving = None, None
         if self.spec.motion_dt is not None:
             t2 = time.perf_counter()
@@ -182,7 +200,7 @@ class FrameProducer:
             readback_ms += (time.perf_counter() - t2) * 1e3
         poses = object_poses_payload(self.renderer.scene, t) if self.spec.object_poses else None
         return ProducedFrame(yuv, pose, extra_pose, t, (t1 - t0) * 1e3, readback_ms, pack_ms, distances,
-                             motion, moving, low, poses)
+                             motion, moving, low, poses, frame_id, colours)
 
     def _low_target(self, scale: float) -> RenderTarget:
         if scale not in self._low:
@@ -214,10 +232,11 @@ class FrameProducer:
                 prog[name].value = value
         vao.render(ctx.TRIANGLE_STRIP)
 
-    def _pack_on_cpu(self, t1: float, read_extra: bool = True) -> tuple:
+    def _pack_on_cpu(self, t1: float, read_extra: bool, frame_id: int, keep_colour: bool) -> tuple:
         """One readback of each view's colour and distance, then the CPU packer; the distances
         and low-resolution colour the caller wants come from the same reads. ``read_extra``
-        False: the extra view was not rendered again, its last reads are packed again."""
+        False: the extra view was not rendered again, its last reads are packed again (at a
+        colour scale, its pixels of this frame's jitter: the client rebuilds it like any view)."""
         layout, colors, dists = self.spec.layout, {}, {}
         keep = self.spec.keep_distance
         for name, (target, rgba, dist) in self._reads.items():
@@ -226,14 +245,16 @@ class FrameProducer:
             if keep or layout.rect(name + ".depth") is not None:
                 dists[name + ".depth"] = target.read_distance_into(dist) if fresh else dist
         t2 = time.perf_counter()
-        yuv = self.packer.pack(colors, dists).copy()
+        jitter = colour_jitter(frame_id) if self.spec.colour_scale != 1.0 else None
+        yuv = self.packer.pack(colors, dists, jitter).copy()
         t3 = time.perf_counter()
         distances = {name: dists[name + ".depth"].copy() for name in self._reads} if keep else {}
         low = None
         if self.spec.low_colour:
             k = self.spec.low_colour
             low = colors["primary.color"][k // 2::k, k // 2::k, :3].copy()
-        return yuv, distances, low, (t3 - t2) * 1e3, (t2 - t1 + time.perf_counter() - t3) * 1e3
+        colours = {name: colors[name + ".color"][:, :, :3].copy() for name in self._reads} if keep_colour else {}
+        return yuv, distances, low, (t3 - t2) * 1e3, (t2 - t1 + time.perf_counter() - t3) * 1e3, colours
 
     def _pack_on_gpu(self, t1: float) -> tuple:
         """The GL packing passes, then reading back their planes (and what the caller wants)."""

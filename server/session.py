@@ -195,8 +195,9 @@ class Session:
         thread, the encoders in the pool, the H.264 encode and the quadtrees side by side.
         ``level``: (index, FrameLevel) of the rate control (server/rate_control.py), or None."""
         pipeline = self.pipeline
-        made = FULL if level is None else level[1]
-        produced = await self.server.render(self.id, lambda ctx: pipeline.produce(pose_msg.pose, t_us * 1e-6, made))
+        made, frame_id = FULL if level is None else level[1], self.frames_sent
+        produced = await self.server.render(self.id, lambda ctx: pipeline.produce(pose_msg.pose, t_us * 1e-6, made,
+                                                                                        frame_id))
         t0 = time.perf_counter()
         jobs = [self.server.encode(self.id, pipeline.encode_video, produced, force_keyframe)]
         if pipeline.quadtree_threshold > 0:
@@ -210,7 +211,7 @@ class Session:
         encoded = EncodedFrame(video, key, depth, quadtree[0] if quadtree else None, produced.object_poses, motion,
                                None if level is None else level[0])
         encode_ms = (time.perf_counter() - t0) * 1e3   # H.264 and, with the edge codec, depth (and quadtrees)
-        frame = pipeline.frame(self.frames_sent, t_us, pose_msg.t_us, pose_msg.seq, produced, encoded,
+        frame = pipeline.frame(frame_id, t_us, pose_msg.t_us, pose_msg.seq, produced, encoded,
                                (produced.render_ms, produced.readback_ms, produced.pack_ms, encode_ms))
         self.conn.send(frame, vtime_us=vtime_us)
         self.frames_sent += 1

@@ -64,7 +64,7 @@ def plan_session(cfg: ServerConfig, scene, hello: Hello, proxies: dict | None = 
     pw, ph = plan.view_size.value
     extra_size = extra_view_size((pw, ph), cfg.extra_scale) if use_extra else None
     offset = extra_offset_for(cfg, scene) if use_extra else None
-    layout = build_layout((pw, ph), extra_size, depth_in_atlas=codec.in_atlas)
+    layout = build_layout((pw, ph), extra_size, depth_in_atlas=codec.in_atlas, colour_scale=cfg.colour_scale)
     quantizer = codec.quantizer(scene.near, scene.far)
     # A scene with nothing moving sends no motion at all. One that moves sends its objects'
     # transforms and their motion flow with every frame, whatever the depth codec.
@@ -84,11 +84,11 @@ def plan_session(cfg: ServerConfig, scene, hello: Hello, proxies: dict | None = 
         primary=ViewConfig(pw, ph), extra=ViewConfig(*extra_size) if extra_size else None,
         extra_offset=offset, atlas=layout, video_bitrate_kbps=video_kbps, keyint=cfg.keyint,
         depth_codec=codec.name, depth_bits=quantizer.bits, depth_min_code=quantizer.min_code,
-        motion=motion, proxies=proxies, options=options)
+        motion=motion, proxies=proxies, options=options, colour_scale=cfg.colour_scale)
     # depth in the atlas is packed from the views' distances; depth of its own is coded from them (float)
     spec = ProducerSpec((pw, ph), layout, quantizer if codec.in_atlas else None, cfg.projection, extra_size, offset,
                         keep_distance=not codec.in_atlas or quadtree, motion_dt=1.0 / cfg.fps if motion else None,
                         object_poses=motion,
                         low_colour=8 if not codec.in_atlas and cfg.edge.perceptual else 0,
-                        mark_peeled=bool(cfg.peel_marker))
+                        mark_peeled=bool(cfg.peel_marker), colour_scale=cfg.colour_scale)
     return config, spec

@@ -11,7 +11,7 @@ from pibr.protocol.errors import MalformedMessage
 from pibr.protocol.framing import encode_frame
 from pibr.protocol.messages import Hello, Stats, Welcome, _get, parse_message
 from pibr.protocol.pose import dual_view_offset
-from pibr.protocol.session import SessionConfig, ViewConfig
+from pibr.protocol.session import SessionConfig, ViewConfig, check_atlas_layout
 
 HELLO_OUTPUT = b'{"protocol": 1, "output": {"width": 960, "height": 540, "rate_hz": 60, "fov_deg": %s}}'
 
@@ -65,21 +65,60 @@ def test_stats_values_of_every_documented_size_still_parse():
 
 # ------------------------------------------------------------------ defect 3: non-finite numbers
 
-def _config(codec="h264", view=(64, 64), extra=True) -> dict:
+def _config(codec="h264", view=(64, 64), extra=True, colour_scale=1.0) -> dict:
     half = (view[0] // 2, view[1] // 2) if extra else None
     cfg = SessionConfig(
         scene={"name": "room", "near": 0.1, "far": 100.0, "viewer_origin": [0, 1.6, 0, 1, 0, 0, 0]},
         clock="virtual", server_fps=10.0, server_delay_us=20_000, primary=ViewConfig(*view),
         extra=ViewConfig(*half) if extra else None, extra_offset=dual_view_offset(1.5, 1.8, 15) if extra else None,
-        atlas=build_layout(view, half, depth_in_atlas=codec == "h264"), video_bitrate_kbps=2000.0, keyint=30,
-        depth_codec=codec, depth_bits=8 if codec == "h264" else 12, depth_min_code=16 if codec == "h264" else 2)
+        atlas=build_layout(view, half, depth_in_atlas=codec == "h264", colour_scale=colour_scale),
+        video_bitrate_kbps=2000.0, keyint=30, depth_codec=codec, depth_bits=8 if codec == "h264" else 12,
+        depth_min_code=16 if codec == "h264" else 2, colour_scale=colour_scale)
     return json.loads(json.dumps(cfg.to_json(), allow_nan=False))
 
 
-@pytest.mark.parametrize("codec, extra", [("h264", True), ("edge", True), ("h264", False), ("edge", False)])
-def test_valid_configs_round_trip(codec, extra):
-    o = _config(codec, extra=extra)
-    assert SessionConfig.from_json(o).to_json() == o
+@pytest.mark.parametrize("codec, extra, colour_scale", [("h264", True, 1.0), ("edge", True, 1.0), ("h264", False, 1.0),
+                                                        ("edge", False, 1.0), ("h264", True, 0.5), ("edge", True, 0.5)])
+def test_valid_configs_round_trip(codec, extra, colour_scale):
+    o = _config(codec, extra=extra, colour_scale=colour_scale)
+    config = SessionConfig.from_json(o)
+    assert config.to_json() == o and config.colour_scale == colour_scale
+    check_atlas_layout(config)
+
+
+def test_a_colour_scaled_atlas_holds_half_size_colour_and_whole_depth():
+    o = _config(colour_scale=0.5)
+    assert o["atlas"]["rects"] == {"primary.color": [0, 0, 32, 32], "primary.depth": [32, 0, 64, 64],
+                                   "extra.color": [96, 0, 16, 16], "extra.depth": [96, 16, 32, 32]}
+    assert (o["atlas"]["width"], o["atlas"]["height"]) == (128, 64)      # 16-aligned around the 16x16 extra colour
+    edge = _config("edge", colour_scale=0.5)
+    assert (edge["atlas"]["width"], edge["atlas"]["height"]) == (48, 32)
+    without = dict(o)
+    del without["colour_scale"]    # a Welcome from before colour scales: whole colour, so this atlas is wrong
+    with pytest.raises(MalformedMessage, match="primary.color is 32x32, not 64x64"):
+        SessionConfig.from_json(without)
+
+
+@pytest.mark.parametrize("value", [0.25, 2, "0.5", True, None, [0.5]])
+def test_a_colour_scale_that_is_not_one_of_the_scales_is_refused(value):
+    o = _config(colour_scale=0.5)
+    o["colour_scale"] = value
+    with pytest.raises(MalformedMessage, match="colour_scale must be one of 1, 0.5"):
+        SessionConfig.from_json(o)
+
+
+def test_whole_colour_rectangles_in_a_colour_scaled_atlas_are_refused():
+    o = _config(colour_scale=0.5)
+    whole = _config(colour_scale=1.0)
+    o["atlas"] = whole["atlas"]
+    with pytest.raises(MalformedMessage, match=r"primary.color is 64x64, not 32x32 \(its view's colour at scale 0.5\)"):
+        SessionConfig.from_json(o)
+    laid_out = SessionConfig.from_json(_config(colour_scale=0.5))
+    moved = dict(_config(colour_scale=0.5))
+    moved["atlas"] = {**moved["atlas"], "width": 256}     # rectangles of the right sizes, a bigger atlas
+    with pytest.raises(MalformedMessage, match="is not the layout of its views"):
+        check_atlas_layout(SessionConfig.from_json(moved))
+    check_atlas_layout(laid_out)
 
 
 @pytest.mark.parametrize("path, value, match", [
@@ -159,7 +198,7 @@ def test_the_largest_session_the_server_accepts_is_accepted():
 
 @pytest.mark.parametrize("change, match", [
     (lambda o: o["atlas"]["rects"].pop("primary.depth"), "rectangle primary.depth is missing"),
-    (lambda o: o["atlas"]["rects"]["extra.color"].__setitem__(2, 16), "extra.color is 16x32, its view 32x32"),
+    (lambda o: o["atlas"]["rects"]["extra.color"].__setitem__(2, 16), "extra.color is 16x32, not 32x32"),
     (lambda o: o.update(extra=None), "an extra view needs an extra_offset"),
     (lambda o: o.update(depth_bits=4), "min_code must be in"),
     (lambda o: o.update(depth_codec="edge"), "primary.depth has no view or depth to hold"),

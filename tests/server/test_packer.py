@@ -181,3 +181,32 @@ def test_bad_sources_and_layouts_are_refused():
         CpuAtlasPacker(layout, None).pack({}, {"primary.depth": np.zeros((64, 64), np.float32)})
     with pytest.raises(ValueError, match="even corners"):
         CpuAtlasPacker(AtlasLayout(64, 64, {"primary.color": (1, 0, 32, 32)}), None)
+
+
+def test_a_colour_scaled_pack_sends_the_jitters_pixels_and_blocks():
+    """At colour scale 0.5 the rectangle holds the luma of the pixels (2 i + jx, 2 j + jy) and the
+    chroma of the view's 2x2 blocks (2 i + jx, 2 j + jy): the bytes the whole view's pack has there."""
+    from pibr.protocol.atlas import COLOUR_JITTER
+
+    rng = np.random.default_rng(3)
+    view = rng.integers(0, 256, (64, 96, 4), dtype=np.uint8)
+    whole = CpuAtlasPacker(build_layout((96, 64), None, False), None).pack({"primary.color": view}, {}).copy()
+    wy, wu, wv = _planes(whole, 96, 64)
+    layout = build_layout((96, 64), None, False, colour_scale=0.5)
+    assert layout.rect("primary.color") == (0, 0, 48, 32)
+    seen = np.zeros((64, 96), int)
+    for jx, jy in COLOUR_JITTER:
+        packed = CpuAtlasPacker(layout, None).pack({"primary.color": view}, {}, (jx, jy)).copy()
+        y, u, v = _planes(packed, layout.width, layout.height)
+        assert np.array_equal(y[:32, :48], wy[jy::2, jx::2])
+        assert np.array_equal(u[:16, :24], wu[jy::2, jx::2]) and np.array_equal(v[:16, :24], wv[jy::2, jx::2])
+        seen[jy::2, jx::2] += 1
+    assert np.all(seen == 1)     # four frames: every pixel once
+    with pytest.raises(ValueError, match=r"needs a C-contiguous \(64, 96, 4\)"):
+        CpuAtlasPacker(layout, None).pack({"primary.color": view[::2, ::2].copy()}, {}, (0, 0))
+
+
+def _planes(yuv, width, height):
+    chroma = yuv[height:].reshape(-1)
+    q = (width // 2) * (height // 2)
+    return yuv[:height], chroma[:q].reshape(height // 2, width // 2), chroma[q:].reshape(height // 2, width // 2)

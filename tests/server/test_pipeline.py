@@ -1,4 +1,5 @@
 """The session pipeline: one place builds a session's frames, for the server and every benchmark."""
+import numpy as np
 import pytest
 
 from pibr.protocol.messages import Frame, Hello, OutputConfig, PayloadKind
@@ -69,3 +70,31 @@ def test_the_virtual_clock_makes_the_same_bytes_and_a_restart_starts_with_a_keyf
         pipeline.release()
     assert first.keyframe and not second.keyframe and again.keyframe
     assert again.payloads == first.payloads   # a fresh stream: the edge codec's temporal context starts over too
+
+
+def test_a_colour_scale_sends_a_quarter_of_the_colour_at_the_frames_jitter(gl_ctx):
+    from pibr.protocol.atlas import colour_jitter
+    from pibr.protocol.errors import ConfigError
+
+    room = load_scene("room")
+    config = ServerConfig(view_size=(128, 128), extra_view="on", depth_codec="edge", colour_scale=0.5)
+    pipeline = SessionPipeline(config, room, HELLO).open(gl_ctx)
+    try:
+        assert pipeline.session.colour_scale == 0.5
+        assert pipeline.session.atlas.rect("primary.color") == (0, 0, 64, 64)
+        assert pipeline.session.atlas.rect("extra.color") == (64, 0, 32, 32)
+        produced = pipeline.produce(room.viewer_origin, 0.0, frame_id=5, keep_colour=True)
+        assert produced.frame_id == 5 and produced.colours["primary"].shape == (128, 128, 3)
+        jx, jy = colour_jitter(5)
+        y = produced.yuv[:64, :64].astype(int)
+        rgb = produced.colours["primary"][jy::2, jx::2].astype(float)
+        expected = np.floor(0.299 * rgb[..., 0] + 0.587 * rgb[..., 1] + 0.114 * rgb[..., 2] + 0.5)
+        assert np.abs(y - expected).max() <= 1         # the luma of the jitter's pixels (float32 rounding)
+        encoded = pipeline.encode(produced)
+        assert pipeline.frame(5, 0, 0, 0, produced, encoded).frame_id == 5
+        with pytest.raises(ValueError, match="produced for frame id 5"):
+            pipeline.frame(6, 0, 0, 0, produced, encoded)
+    finally:
+        pipeline.release()
+    with pytest.raises(ConfigError, match="colour scale must be one of 1, 0.5"):
+        ServerConfig(colour_scale=0.25)
