@@ -206,7 +206,7 @@ class Client:
         with the wall ms of reading the images back in ``self._record_ms`` (``read``: for the recorders)."""
         textures, methods, target = self._gl_state
         if decoded is not None and textures.frame_id != decoded.frame.frame_id:
-            textures.upload(decoded.image, decoded.frame.frame_id, decoded.distances, decoded.flow)
+            textures.upload(decoded.image, decoded.frame, decoded.distances, decoded.flow)
         out, read_ms = [], 0.0
         for name, instances in methods.items():
             m = instances[chosen[name][0] if chosen else 0]
@@ -282,6 +282,9 @@ class Client:
             self._depth_decoder = make_depth_decoder(self.session)
             if self.session.motion:
                 self.poses = self._pose_history()
+                if cfg.options.get("motion") == "flow" and self.session.colour_scale != 1.0:
+                    raise ConfigError(f"--motion flow extrapolates the frame's whole colour; this server sends "
+                                      f"colour at scale {self.session.colour_scale:g} (serve with --colour-scale 1)")
                 if cfg.options.get("motion") == "flow":
                     from .motion_flow import MotionFlowDecoder
 

@@ -8,7 +8,9 @@ and converted to RGB in the shader. Depth comes from the transport the session u
 
 Shaders call ``primary_distance(uv)`` / ``extra_distance(uv)`` (radial distance, 0 = sky or
 nothing known) and ``atlas_rgb(rect, uv)``, whichever the transport; :func:`frame_glsl`
-writes the matching implementation.
+writes the matching implementation. At a colour scale (``SessionConfig.colour_scale`` 0.5) the
+video carries a quarter of each view's colour pixels; every upload rebuilds the views' whole
+colour (client/colour_rebuild.py) and ``atlas_rgb`` reads that.
 
 A frame uploaded with a :class:`~pibr.client.flow_warp.FlowFrame` can show its primary view
 extrapolated along its motion flow to a display time: ``use(flow_time)`` writes the rectangle
@@ -24,6 +26,7 @@ from pibr.protocol.depth_codecs import DEPTH_CODECS
 from pibr.protocol.projection import GLSL as PROJECTION_GLSL
 from pibr.protocol.session import SessionConfig
 
+from .colour_rebuild import UNIT_REBUILT, ColourRebuild, RebuildSettings, rebuilt_layout
 from .video import YUVImage
 
 #: Codes of depth-transport error a comparison of distances forgives (quantization and coding
@@ -51,15 +54,18 @@ uniform float u_slack_codes;     // codes of depth-transport error to forgive (D
 
 // The distance step of one depth code at distance r (disparity coding: it grows as r^2).
 float depth_code_step(float r) { return r * r / (u_depth_near * (u_depth_max_code - u_depth_min_code)); }
-// Colour of a view at uv in [0,1]^2 (row 0 on top); rect = (x, y, w, h) of the view in the atlas.
-vec3 atlas_rgb(vec4 rect, vec2 uv) {
+// Full-range BT.601 (as the server's packer): Y, U, V texels in [0, 1] -> RGB.
+vec3 yuv_rgb(vec3 yuv) {
+    float y = yuv.x, u = yuv.y - 128.0 / 255.0, v = yuv.z - 128.0 / 255.0;
+    return clamp(vec3(y + 1.402 * v, y - 0.344136 * u - 0.714136 * v, y + 1.772 * u), 0.0, 1.0);
+}
+// Colour the frame's video holds for a view at uv in [0,1]^2 (row 0 on top); rect = (x, y, w, h)
+// of the view's colour in the atlas.
+vec3 wire_rgb(vec4 rect, vec2 uv) {
     vec2 p = rect.xy + clamp(uv * rect.zw, vec2(0.5), rect.zw - 0.5);
-    float y = texture(u_atlas_y, p / u_atlas_size).r;
     vec2 pc = clamp(0.5 * p, 0.5 * rect.xy + 0.5, 0.5 * (rect.xy + rect.zw) - 0.5);
     vec2 uvc = pc / (0.5 * u_atlas_size);
-    float u = texture(u_atlas_u, uvc).r - 128.0 / 255.0;
-    float v = texture(u_atlas_v, uvc).r - 128.0 / 255.0;
-    return clamp(vec3(y + 1.402 * v, y - 0.344136 * u - 0.714136 * v, y + 1.772 * u), 0.0, 1.0);
+    return yuv_rgb(vec3(texture(u_atlas_y, p / u_atlas_size).r, texture(u_atlas_u, uvc).r, texture(u_atlas_v, uvc).r));
 }
 """
 
@@ -73,6 +79,13 @@ float atlas_distance(vec4 rect, vec2 uv) {
 }
 float primary_distance(vec2 uv) { return atlas_distance(u_rect_primary_depth, uv); }
 float extra_distance(vec2 uv) { return atlas_distance(u_rect_extra_depth, uv); }
+// ... at pixel p of the view (row 0 on top), inside it
+float atlas_distance_at(vec4 rect, ivec2 p) {
+    float code = floor(texelFetch(u_atlas_y, ivec2(rect.xy) + p, 0).r * 255.0 + 0.5);
+    return depth_dequantize(code, u_depth_near, u_depth_far, u_depth_min_code, u_depth_max_code);
+}
+float primary_distance_at(ivec2 p) { return atlas_distance_at(u_rect_primary_depth, p); }
+float extra_distance_at(ivec2 p) { return atlas_distance_at(u_rect_extra_depth, p); }
 """
 
 _EDGE_DEPTH = """
@@ -84,13 +97,38 @@ float map_distance(sampler2D map, vec2 uv) {
 }
 float primary_distance(vec2 uv) { return map_distance(u_dist_primary, uv); }
 float extra_distance(vec2 uv) { return map_distance(u_dist_extra, uv); }
+// ... at pixel p of the view (row 0 on top), inside it
+float primary_distance_at(ivec2 p) { return texelFetch(u_dist_primary, p, 0).r; }
+float extra_distance_at(ivec2 p) { return texelFetch(u_dist_extra, p, 0).r; }
 """
 
 
-def frame_glsl(config: SessionConfig) -> str:
-    """GLSL for sampling a frame of this session (projection maths included)."""
+_WIRE_COLOUR = """
+// Colour of a view at uv in [0,1]^2 (row 0 on top); rect = rect_uniform(config, "<view>.color").
+vec3 atlas_rgb(vec4 rect, vec2 uv) { return wire_rgb(rect, uv); }
+"""
+
+_REBUILT_COLOUR = """
+uniform sampler2D u_rebuilt;     // the views' whole colour (Y, U, V) rebuilt from a colour-scaled frame
+uniform vec2 u_rebuilt_size;
+// Colour of a view at uv in [0,1]^2 (row 0 on top); rect = rect_uniform(config, "<view>.color").
+vec3 atlas_rgb(vec4 rect, vec2 uv) {
+    vec2 p = rect.xy + clamp(uv * rect.zw, vec2(0.5), rect.zw - 0.5);
+    return yuv_rgb(texture(u_rebuilt, p / u_rebuilt_size).xyz);
+}
+"""
+
+
+def wire_glsl(config: SessionConfig) -> str:
+    """GLSL of the frame as it arrives: projection maths, ``wire_rgb`` and the views' distances."""
     depth = _H264_DEPTH if DEPTH_CODECS[config.depth_codec].in_atlas else _EDGE_DEPTH
     return PROJECTION_GLSL + DEPTH_GLSL + _COMMON + depth
+
+
+def frame_glsl(config: SessionConfig) -> str:
+    """GLSL for sampling a frame of this session (projection maths included): ``atlas_rgb`` reads
+    the video, or the colour rebuilt from it at a colour scale (client/colour_rebuild.py)."""
+    return wire_glsl(config) + (_WIRE_COLOUR if config.colour_scale == 1.0 else _REBUILT_COLOUR)
 
 
 def bind_frame_uniforms(prog, config: SessionConfig) -> None:
@@ -105,13 +143,21 @@ def bind_frame_uniforms(prog, config: SessionConfig) -> None:
         "u_depth_min_code": float(config.depth_min_code),
         "u_depth_max_code": float((1 << config.depth_bits) - 1),
         "u_slack_codes": DEPTH_SLACK_CODES[config.depth_codec],
+        "u_rebuilt": UNIT_REBUILT,
     }
+    if config.colour_scale != 1.0:
+        values["u_rebuilt_size"] = tuple(float(v) for v in rebuilt_layout(config)["size"])
     for name, value in values.items():
         if name in prog:
             prog[name].value = value
 
 
 def rect_uniform(config: SessionConfig, name: str) -> tuple:
+    """The rectangle (x, y, w, h) a shader passes for ``name`` (protocol/atlas.py RECT_NAMES): where
+    the atlas holds it, a view's colour where :func:`frame_glsl`'s ``atlas_rgb`` reads it (the
+    rebuilt texture at a colour scale); zeros when the session has no such rectangle."""
+    if name.endswith(".color") and config.colour_scale != 1.0 and config.atlas.rect(name) is not None:
+        return tuple(float(x) for x in rebuilt_layout(config)[name.split(".")[0]])
     r = config.atlas.rect(name)
     return (0.0, 0.0, 0.0, 0.0) if r is None else tuple(float(x) for x in r)
 
@@ -159,7 +205,7 @@ def _inside(inner, outer) -> bool:
 class FrameTextures:
     """The newest frame's textures; :meth:`upload` replaces their contents. GL thread only."""
 
-    def __init__(self, ctx, config: SessionConfig):
+    def __init__(self, ctx, config: SessionConfig, rebuild_settings: RebuildSettings | None = None):
         self.ctx = ctx
         w, h = config.atlas.width, config.atlas.height
         self.y = ctx.texture((w, h), 1)
@@ -179,14 +225,23 @@ class FrameTextures:
                 self.distances[name] = t
         self.frame_id = None
         self.config = config
+        #: a colour-scaled session's views rebuilt whole each frame (client/colour_rebuild.py)
+        self.rebuild = None
+        if config.colour_scale != 1.0:
+            self.rebuild = ColourRebuild(ctx, config, wire_glsl(config), bind_frame_uniforms,
+                                         DEPTH_SLACK_CODES[config.depth_codec], rebuild_settings or RebuildSettings())
         self.flow = None
         self.extrapolated = None
         self._image: YUVImage | None = None
         self._cpu_distances: dict = {}
 
-    def upload(self, image: YUVImage, frame_id: int, distances: dict | None = None, flow=None) -> None:
-        """image: the atlas planes; distances: view name -> (h, w) float32 (edge codec); flow: the
-        frame's :class:`~pibr.client.flow_warp.FlowFrame` (see :meth:`use`), or None."""
+    def upload(self, image: YUVImage, frame, distances: dict | None = None, flow=None) -> None:
+        """image: the atlas planes of ``frame`` (its Frame message); distances: view name -> (h, w)
+        float32 (edge codec); flow: the frame's :class:`~pibr.client.flow_warp.FlowFrame` (see
+        :meth:`use`), or None. At a colour scale the views' colour is rebuilt here."""
+        if flow is not None and self.rebuild is not None:
+            raise ValueError("extrapolating a frame along its motion flow needs its whole colour: the session "
+                             "sends colour at scale %g" % self.config.colour_scale)
         self._image = image
         self._cpu_distances = dict(distances or {})
         self.y.write(np.ascontiguousarray(image.y), alignment=1)
@@ -194,9 +249,13 @@ class FrameTextures:
         self.v.write(np.ascontiguousarray(image.v), alignment=1)
         for name, d in (distances or {}).items():
             self.distances[name].write(np.ascontiguousarray(d, np.float32).tobytes())
-        self.frame_id = frame_id
+        self.frame_id = frame.frame_id
         self.flow = flow
         self.extrapolated = None   # what of the primary view the textures hold extrapolated (see use())
+        if self.rebuild is not None:
+            self.use()
+            self.rebuild.run(frame)
+            self.rebuild.use()
 
     def view_distances(self, name: str) -> np.ndarray | None:
         """The newest frame's radial distance of view ``name`` ("primary" or "extra") on the CPU,
@@ -270,7 +329,11 @@ class FrameTextures:
         for name, unit in (("primary", UNIT_DIST_PRIMARY), ("extra", UNIT_DIST_EXTRA)):
             if name in self.distances:
                 self.distances[name].use(unit)
+        if self.rebuild is not None:
+            self.rebuild.use()
 
     def release(self) -> None:
         for t in (self.y, self.u, self.v, *self.distances.values()):
             t.release()
+        if self.rebuild is not None:
+            self.rebuild.release()
