@@ -367,6 +367,36 @@ def register(sub) -> None:
     _out(lv)
     lv.set_defaults(func=commands.cmd_bench_levels)
 
+    up = bs.add_parser("upsampling", help="colour sent at a quarter of the pixels and rebuilt on the client: "
+                                          "server ms, bits, PSNR/DSSIM against the whole colour",
+                       description="Pajak et al.'s spatio-temporal upsampling (--colour-scale 0.5) measured alone: "
+                                   "the same frames through three streams (colour whole; at a quarter of the pixels "
+                                   "at the same bitrate; and at a quarter of the bitrate), still and moving heads "
+                                   "from the windows: server ms per stage, bits per second, the client's rebuild ms, "
+                                   "and the views' PSNR and DSSIM against their whole colour before coding, beside "
+                                   "plain bilinear upscaling. Writes upsampling.json.")
+    _scene(up)
+    _windows_option(up)
+    up.add_argument("--still-frames", type=arguments.positive_int, default=8,
+                    help="frames of each window's first pose held still (default 8)")
+    up.add_argument("--moving", type=arguments.positive, default=3.0,
+                    help="seconds of each window at the server's frame rate (default 3)")
+    up.add_argument("--fps", type=arguments.positive, default=10.0, help="server frame rate (default 10)")
+    up.add_argument("--depth-codec", type=_codecs, default=tuple(DEPTH_CODECS), metavar="CODEC,...",
+                    help=f"depth codecs to measure with, comma-separated (default {','.join(DEPTH_CODECS)})")
+    up.add_argument("--stride", type=arguments.positive_int, default=2,
+                    help="score every Nth frame of the moving sequences (default 2)")
+    for name, help_ in (("spatial-sigma", "screen-distance falloff among the new samples, pixels"),
+                        ("sample-sigma", "falloff of the new samples' weight with the distance to the nearest, pixels"),
+                        ("decay", "the history's confidence kept from frame to frame"),
+                        ("max-confidence", "the most weight the history may gather"),
+                        ("depth-tolerance", "relative distance within which two points are one surface")):
+        up.add_argument(f"--{name}", type=arguments.positive, default=None,
+                        help=f"the rebuild's {help_} (default: client/colour_rebuild.py's)")
+    _view_size(up)
+    _out(up)
+    up.set_defaults(func=commands.cmd_bench_upsampling)
+
     lo = bs.add_parser("lod", help="encaging level-of-detail proxies: triangles, enclosure, time per object",
                        description="Generate (or read from the cache) every object's encaging proxy and report the "
                                    "triangle counts, the fraction of original vertices enclosed and the time taken.")

@@ -247,6 +247,28 @@ def cmd_bench_offset(args) -> int:
     return 0
 
 
+def cmd_bench_upsampling(args) -> int:
+    from dataclasses import replace
+
+    from pibr.client.colour_rebuild import DEFAULT_SETTINGS
+
+    from .upsampling_bench import print_upsampling_table, run_upsampling_bench
+
+    given = {k: getattr(args, k) for k in ("spatial_sigma", "sample_sigma", "decay", "max_confidence",
+                                            "depth_tolerance") if getattr(args, k) is not None}
+    settings = replace(DEFAULT_SETTINGS, **given)
+    for k, codec in enumerate(args.depth_codec):
+        name = "upsampling.json" if len(args.depth_codec) == 1 else f"upsampling-{codec}.json"
+        r = run_upsampling_bench(scene_spec=args.scene, windows=args.windows, still_frames=args.still_frames,
+                                 moving_s=args.moving, fps=args.fps, view_size=args.view_size, depth_codec=codec,
+                                 settings=settings, stride=args.stride, out_dir=args.out, result_name=name)
+        if k:
+            print()
+        print_upsampling_table(r)
+        print(f"written: {args.out}/{name}")
+    return 0
+
+
 def cmd_bench_levels(args) -> int:
     from .levels_bench import print_levels_table, run_levels_bench
 

@@ -207,7 +207,7 @@ def bench_client(scene_spec="room", trace="pred6dof-1", frames=40, view_size=BEN
         t0 = time.perf_counter()
         image = decoder.decode(frame.payload(PayloadKind.H264_ATLAS))
         t1 = time.perf_counter()
-        textures.upload(image, frame.frame_id)
+        textures.upload(image, frame)
         ctx.finish()
         t2 = time.perf_counter()
         if k >= 2:

@@ -164,7 +164,7 @@ class Simulation:
         ``pose`` -> (Frame, its views' true distances {view: (h, w)} when kept). Frames must be
         received (:meth:`receive`) in the order they were served."""
         c0 = time.process_time()
-        p = self.pipeline.produce(pose, t_render)
+        p = self.pipeline.produce(pose, t_render, frame_id=len(self.bytes))
         encoded = self.pipeline.encode(p)
         self.server_cpu_ms.append((time.process_time() - c0) * 1e3)
         self.bytes.append(len(encoded.video))
@@ -210,7 +210,7 @@ class Simulation:
             flow_frame = primary_flow_frame(self.session, image, distances, *self.flow, t_render)
             self.flow_decode_ms.append((t1 - t0) * 1e3)
             self.flow_prepare_ms.append((time.perf_counter() - t1) * 1e3)
-        self.textures.upload(image, frame.frame_id, distances, flow_frame)
+        self.textures.upload(image, frame, distances, flow_frame)
 
     def restart_stream(self) -> None:
         """A new session's stream: fresh encoders and decoders (the next frame is a keyframe);
@@ -282,7 +282,7 @@ class Simulation:
         us = int(round(t * 1e6))
         frame = Frame(decoder.frames, us, us, 0, us, p.primary_pose, p.extra_pose, self.scene.near, self.scene.far,
                       payloads=((PayloadKind.H264_ATLAS, data),), keyframe=key)
-        textures.upload(decoder.decode(data), frame.frame_id)
+        textures.upload(decoder.decode(data), frame)
         return frame, textures
 
     def make_method(self, name, **options):
