@@ -17,10 +17,10 @@ reports what a user of the system would feel:
   (``pibr evaluate``: DSSIM, PSNR; a missed tick scores the image it held), beside the same
   window on the virtual clock without controllers (the quality the wall clock is measured against).
 
-Each method and depth codec runs with the controllers on and off (``controllers``), on one
-``placement`` or both: ``split`` pins the server and the relay to one core and the client to
-the other (standing in for a server and a headset on separate machines; each rasteriser then
-runs one thread), ``shared`` lets them run anywhere. The clients record what they show with
+Each method and depth codec runs with the controllers (the client's deadline, the server's rate
+control) on and off (``controllers``), on one ``placement`` or both: ``split`` pins the server
+and the relay to one core and the client to the other (standing in for a server and a headset on
+separate machines; each rasteriser then runs one thread), ``shared`` lets them run anywhere. The clients record what they show with
 their encoding deferred to after the run (client/recorder.py), so measuring costs the clock a
 copy per tick (reported apart: ``record_ms``).
 
@@ -49,6 +49,7 @@ GOALS = {"server_fps_min": 9.5, "missed_fraction_max": 0.05, "age_ms_p50_max": 3
          "dssim_of_rotation_max": 0.6, "dssim_of_virtual_max": 1.5}
 
 _SESSION_CLOSED = re.compile(r"closed after (\d+) frames \((\d+) skipped .*?, (\d+) held .*?, (\d+) tick overruns\)")
+_SERVER_LEVELS = re.compile(r"frames by rate-control level: (.*)$")
 
 
 class CpuSampler:
@@ -136,6 +137,8 @@ def _client_summary(out: str, method: str, duration_s: float, rate_hz: float) ->
 
 
 def _server_sessions(log_path: str) -> list[dict]:
+    """Each closed session's counts from the server's log, with the frames its rate control made
+    at each level (``levels``: name -> frames; absent without rate control)."""
     out = []
     with open(log_path) as f:
         for line in f:
@@ -144,6 +147,10 @@ def _server_sessions(log_path: str) -> list[dict]:
                 sent, skipped, held, overruns = (int(x) for x in m.groups())
                 out.append({"frames_sent": sent, "skipped_slow_connection": skipped, "held_for_client": held,
                             "tick_overruns": overruns})
+                continue
+            m = _SERVER_LEVELS.search(line.rstrip())
+            if m and out and m.group(1) != "none":
+                out[-1]["levels"] = {name: int(n) for name, n in (part.rsplit(": ", 1) for part in m.group(1).split("; "))}
     return out
 
 
@@ -152,9 +159,11 @@ def run_one(out_dir: str, method: str, depth_codec: str, clients: int = 1, clock
             rate_hz: float = 30.0, size=(960, 540), latency_ms: float = 128.0, server_fps: float = 10.0,
             server_args=(), placement: str = "shared", controllers: bool = True, score: bool = False) -> dict:
     """One run: a server, a relay and ``clients`` clients replaying the same window at once.
-    ``controllers``: the client's deadline controller on (off: always the best level);
+    ``controllers``: the client's deadline controller and the server's rate control on (off: always
+    the best level, every frame whole);
     ``score``: record what a single client shows and score it against ground truth afterwards."""
     half = latency_ms / 2.0
+    server_args = (*server_args, "--rate-control", "on" if controllers else "off")
     client_args = ["--trace", trace, "--start", str(start_s), "--duration", str(duration_s), "--rate", str(rate_hz),
                    "--size", f"{size[0]}x{size[1]}", "--clock", clock, "--method", method,
                    "--depth-codec", depth_codec, "--deadline", "auto" if controllers else "off"]
@@ -309,7 +318,10 @@ def print_realtime(result: dict) -> None:
               f"{_fmt(cpu.get('relay'), '5.2f')} {_fmt(cpu.get('client'), '6.2f')}")
         if c.get("levels"):
             used = ", ".join(f"{name} {100 * share:.0f} %" for name, share in c["levels"].items() if share > 0)
-            print(f"{'':>15}levels: {used}")
+            print(f"{'':>15}client levels: {used}")
+        made = (r.get("server") or [{}])[0].get("levels")
+        if made:
+            print(f"{'':>15}server levels: " + "; ".join(f"{name} {n}" for name, n in made.items()))
     for r in result.get("virtual", []):
         shown = r.get("shown") or {}
         print(f"{'virtual':>9} {'off':>3} {r['method']:>9} {r['depth_codec']:>5} {'(the reference: no deadline)':>38} "

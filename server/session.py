@@ -148,7 +148,7 @@ class Session:
         if self.rate is not None:
             made = self.rate.summary()["frames_at_level"]
             log.info("session %d: frames by rate-control level: %s", self.id,
-                     ", ".join(f"{name} {n}" for name, n in made.items() if n) or "none")
+                     "; ".join(f"{name}: {n}" for name, n in made.items() if n) or "none")
 
     async def _receive_hello(self) -> Hello:
         """The client's Hello, whole within ``hello_timeout_s`` of connecting, however it trickles in
