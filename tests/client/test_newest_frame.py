@@ -30,7 +30,10 @@ def _session_config() -> dict:
 
 
 def _frames(config: dict, count: int) -> list:
-    """``count`` real H.264 frames of the session's atlas, a grey ramp that changes every frame."""
+    """``count`` real H.264 frames of the session's atlas, a grey ramp that changes every frame.
+
+    Stamped as rendered from a pose sent a minute into the session: the client starts its clock
+    only on a frame of a pose sent after its warm-up, and this script sends no other frames."""
     from pibr.server.video import H264Encoder
 
     w, h = config["atlas"]["width"], config["atlas"]["height"]
@@ -41,7 +44,7 @@ def _frames(config: dict, count: int) -> list:
         yuv = np.full((h * 3 // 2, w), 128, np.uint8)
         yuv[:h] = (np.arange(w)[None, :] + 20 * i) % 200 + 20
         data, key = encoder.encode(yuv)
-        frames.append(Frame(frame_id=i, render_t_us=i * 100_000, pose_t_us=0, pose_seq=0, scene_t_us=i * 100_000,
+        frames.append(Frame(frame_id=i, render_t_us=i * 100_000, pose_t_us=60_000_000, pose_seq=0, scene_t_us=i * 100_000,
                             primary_pose=pose, extra_pose=None, near=0.1, far=100.0,
                             payloads=((PayloadKind.H264_ATLAS, data),), keyframe=key))
     encoder.close()
