@@ -146,3 +146,28 @@ def test_bench_codec_speed_against_a_checkout_of_itself(tmp_path, capsys):
     assert json.loads((tmp_path / "codec_speed.json").read_text())["frames"] == 3
     print_codec_speed(r)
     assert "enc.encode" in capsys.readouterr().out
+
+
+def test_bench_upsampling(tmp_path, capsys):
+    """Three streams over a still and a moving sequence: the quarter's server colour costs less,
+    its rebuild converges on the still view and beats bilinear upscaling of the same frames."""
+    from pibr.bench.upsampling_bench import STREAMS, print_upsampling_table, run_upsampling_bench
+
+    r = run_upsampling_bench(windows=(Window("pred6dof-1", 12.0, 1.0),), still_frames=5, moving_s=0.8,
+                             view_size=TINY_VIEW, depth_codec="edge", out_dir=str(tmp_path), progress=False)
+    assert list(r["streams"]) == [name for name, _, _ in STREAMS]
+    whole, quarter = r["streams"]["whole"], r["streams"]["quarter"]
+    assert whole["atlas"] == [192, 128] and quarter["atlas"] == [96, 64]
+    assert whole["frames"] == quarter["frames"] == 5 + 8
+    assert quarter["times_ms_median"]["rebuild_ms"] > 0 and whole["times_ms_median"]["rebuild_ms"] < 1.0
+    curve = [x["psnr_mean"] for x in quarter["still_by_frame"]["primary"]]
+    assert curve[3] > curve[0] + 3                      # four frames: every pixel sent once
+    assert "bilinear" not in whole["moving"]["primary"]
+    moving = quarter["moving"]["primary"]
+    assert moving["rebuilt"]["psnr_mean"] > moving["bilinear"]["psnr_mean"]
+    assert len(r["verdicts"]) == 3 and all(isinstance(v["met"], bool) for v in r["verdicts"])
+    assert r["windows"]["disjoint_from_tuning"] is False          # 12 s of pred6dof-1 is a tuning window
+    saved = json.loads((tmp_path / "upsampling.json").read_text())
+    assert saved["streams"]["quarter"]["colour_scale"] == 0.5
+    print_upsampling_table(r)
+    assert "quarter-bits" in capsys.readouterr().out
