@@ -117,11 +117,14 @@ def register(subparsers) -> None:
 def run_convert(args) -> int:
     from pibr.common.traces.canonical import write_canonical_csv
 
-    trace = read_input(args)
+    # Cut first, then recentre: the first *kept* sample goes to the origin, not the recording's first.
+    trace = read_input(args, recentre=False)
     if args.rate is not None:
         trace = trace.resample(args.rate, args.start, args.duration)
     elif args.start or args.duration is not None:
         trace = trace.slice(args.start, args.duration)
+    if args.recentre:
+        trace = trace.recentred(yaw=args.recentre == "yaw")
     write_canonical_csv(trace, args.output)
     print(f"wrote {args.output}: {len(trace)} samples, {trace.duration:.3f} s")
     return 0
@@ -169,8 +172,9 @@ def run_list(args) -> int:
 # --------------------------------------------------------------------------------- helpers
 
 
-def read_input(args):
-    """The trace the import options describe (format, columns, axes, recentring)."""
+def read_input(args, recentre: bool = True):
+    """The trace the import options describe (format, columns, axes, and with ``recentre`` the
+    recentring ``--recentre`` asks for; a caller that cuts the trace recentres after cutting)."""
     from pibr.common.traces.loading import detect_format, load_trace
     from pibr.common.traces.importers import import_csv, import_pred6dof, parse_columns
 
@@ -184,7 +188,7 @@ def read_input(args):
                           degrees=not args.radians, handedness="left" if args.left_handed else "right",
                           delimiter=delimiter, skip_rows=args.skip_rows,
                           duplicates="drop" if args.drop_duplicates else "error", up=args.up, forward=args.forward,
-                          positions=args.positions, recentre=args.recentre)
+                          positions=args.positions, recentre=args.recentre if recentre else None)
     changed = [name for name, default in _CSV_OPTIONS.items() if getattr(args, name) != default]
     if args.columns or changed:
         options = ", ".join("--" + n.replace("_", "-") for n in (["columns"] if args.columns else []) + changed)
@@ -200,7 +204,7 @@ def read_input(args):
             what = f"{fmt} input" if os.path.isfile(args.input) else "a built-in or synthetic trace"
             raise TraceError(f"--time-unit applies to pred6dof and csv input, not to {what}")
         trace = load_trace(args.input, fmt)
-    return trace.recentred(yaw=args.recentre == "yaw") if args.recentre else trace
+    return trace.recentred(yaw=args.recentre == "yaw") if args.recentre and recentre else trace
 
 
 def format_summary(info: dict) -> str:

@@ -135,6 +135,23 @@ def test_cli_recentre_works_for_any_format(tmp_path, capsys):
     np.testing.assert_allclose(read_canonical_csv(out).positions[0], 0, atol=1e-12)
 
 
+@pytest.mark.parametrize("cut", [["--start", "1.5"], ["--start", "1.5", "--rate", "10"]])
+def test_cli_recentre_after_a_cut_centres_the_first_kept_sample(tmp_path, cut):
+    """Issue 26 (8): with --start, the first sample written is at the origin (it was the
+    recording's first sample, so the cut trace began 1.5 m away), and yaw turns its heading."""
+    turned = quat_from_axis_angle([0, 1, 0], math.radians(40))
+    rows = [f"{0.5 * k},{k},1.6,{-2 * k},{turned[0]},{turned[1]},{turned[2]},{turned[3]}" for k in range(8)]
+    path = write(tmp_path / "walk.csv", "t,px,py,pz,qw,qx,qy,qz\n" + "\n".join(rows) + "\n")
+    out = tmp_path / "out.csv"
+    assert run_cli(["trace", "convert", str(path), str(out), "--recentre", "yaw"] + cut) == 0
+    trace = read_canonical_csv(out)
+    np.testing.assert_allclose(trace.positions[0], 0, atol=1e-9)
+    np.testing.assert_allclose(forward(trace.orientations[0]), [0, 0, -1], atol=1e-9)
+    assert trace.duration == pytest.approx(2.0)
+    # the head still walks 1 m along x and 2 m along -z per half second, turned with the heading
+    assert np.linalg.norm(trace.positions[-1]) == pytest.approx(math.hypot(4, 8), rel=1e-6)
+
+
 # ------------------------------------------------------------------------------ 4. orientation only, Z up
 
 
