@@ -66,6 +66,8 @@ class Connection:
                 self.fail(exc)
                 return
             self._events.append(Envelope(msg, f.vtime_us, f.wire_size))
+        if self._reader.error is not None:   # garbage after the frames above
+            self.fail(self._reader.error)
 
     def receive_eof(self) -> None:
         if self.eof:

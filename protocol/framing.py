@@ -79,8 +79,18 @@ class FrameReader:
         self._failed: Exception | None = None
         self.bytes_received = 0
 
+    @property
+    def error(self) -> Exception | None:
+        """The protocol error the stream failed with (None while it is sound)."""
+        return self._failed
+
     def feed(self, data: bytes) -> list[RawFrame]:
-        """Add received bytes; return the frames they complete (possibly none)."""
+        """Add received bytes; return the frames they complete (possibly none).
+
+        Whole frames before a protocol error in the same bytes are returned (a peer's last valid
+        message is not lost to garbage after it); the error is then :attr:`error` at once and is
+        raised by the next call to :meth:`feed` or :meth:`eof`. With no frame before it, it is
+        raised here."""
         if self._failed is not None:
             raise self._failed
         self.bytes_received += len(data)
@@ -94,7 +104,8 @@ class FrameReader:
                 out.append(frame)
         except Exception as exc:  # remember, so a reader is never used past a protocol error
             self._failed = exc
-            raise
+            if not out:
+                raise
         finally:
             if self._pos:
                 del self._buf[: self._pos]
@@ -102,7 +113,10 @@ class FrameReader:
         return out
 
     def eof(self) -> None:
-        """The peer closed the stream: raises :class:`TruncatedMessage` if a frame was cut short."""
+        """The peer closed the stream: raises :class:`TruncatedMessage` if a frame was cut short,
+        or the error :meth:`feed` found after the frames it returned."""
+        if self._failed is not None:
+            raise self._failed
         pending = len(self._buf) - self._pos
         if self._failed is None and pending:
             if pending < HEADER_SIZE:

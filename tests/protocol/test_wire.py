@@ -7,8 +7,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from pibr.protocol.connection import Connection
-from pibr.protocol.errors import (BadMagic, MalformedMessage, MessageTooLarge, TruncatedMessage, UnknownMessageType,
-                                  UnsupportedVersion)
+from pibr.protocol.errors import (BadMagic, MalformedMessage, MessageTooLarge, ProtocolError, TruncatedMessage,
+                                  UnknownMessageType, UnsupportedVersion)
 from pibr.protocol.framing import HEADER, HEADER_SIZE, MAGIC, FrameReader, encode_frame
 from pibr.protocol.messages import Error, Frame, Hello, PoseMsg, parse_message
 
@@ -146,13 +146,47 @@ def test_garbage_payloads_never_crash(payload, mtype):
         assert str(conn.error)
 
 
+def test_a_valid_frame_before_garbage_in_one_read_is_delivered_then_the_stream_fails():
+    hello = golden_bytes("hello")
+    reader = FrameReader()
+    frames = reader.feed(hello + b"XBAD")
+    assert [f.type for f in frames] == [Hello.TYPE] and isinstance(reader.error, BadMagic)
+    with pytest.raises(BadMagic):
+        reader.feed(hello)                  # never read past the error
+    with pytest.raises(BadMagic):
+        reader.eof()                        # nor lost when the peer closes next
+    conn = Connection()
+    conn.receive_data(hello + b"XBAD")
+    assert [type(e.message) for e in conn.events_received()] == [Hello]
+    assert isinstance(conn.error, BadMagic) and conn.data_to_send()   # the peer is told why
+
+
 @settings(max_examples=200, deadline=None)
-@given(st.binary(min_size=1, max_size=300))
+@given(st.one_of(st.binary(min_size=1, max_size=300), st.binary(max_size=300).map(lambda b: MAGIC + b),
+                 st.binary(max_size=300).map(lambda b: golden_bytes("hello") + b)))
 def test_random_streams_fail_cleanly(data):
+    """Bytes that are not whole frames of valid messages fail the connection with a named
+    protocol error, an Error queued for the peer when it can still be told; whole valid frames
+    before the garbage are still delivered; nothing is read after the failure."""
     conn = Connection(max_message_size=256)
     conn.receive_data(data)
+    failed_while_open = conn.error is not None
     conn.receive_eof()
-    assert conn.error is None or str(conn.error)
+    events = conn.events_received()
+    hello = golden_bytes("hello")
+    if not data.startswith(MAGIC):
+        expected = BadMagic if len(data) >= HEADER_SIZE else (BadMagic, TruncatedMessage)
+        assert isinstance(conn.error, expected) and not events
+    if data.startswith(hello):
+        assert events and isinstance(events[0].message, Hello)
+    if conn.error is None:        # a clean end: the stream was whole frames of valid messages
+        assert events and sum(e.wire_size for e in events) == len(data)
+    else:
+        assert isinstance(conn.error, ProtocolError) and str(conn.error)
+        sent = conn.data_to_send()
+        assert bool(sent) == failed_while_open   # told the peer, unless the error came with the end
+        conn.receive_data(golden_bytes("hello"))
+        assert conn.events_received() == []
 
 
 def test_send_respects_size_limit():
