@@ -112,7 +112,9 @@ def test_extreme_offsets_render_and_measure(room_probe, offset):
     assert extra.max() <= room_probe.scene.far * 1.001
     points, sky, dirs = room_probe.display_points(pose, 0.0)
     m_all, m_geo = room_probe.missing(points, sky, dirs, [(pose, primary, False), (pose.compose(off), extra, True)])
-    assert 0 <= m_geo <= m_all + 1 and m_all < 0.05   # the display pose is the primary's: little is missing
+    n_geo = int((~sky).sum())
+    assert n_geo > 0 and 0 <= m_geo * n_geo <= m_all * sky.size + 1e-6   # geometry's holes are among all holes
+    assert m_all < 0.05 and m_geo < 0.05        # the display pose is the primary's: little is missing (measured 1.9-2.5 %)
     assert room_probe.ctx.error == "GL_NO_ERROR"
 
 
