@@ -53,6 +53,11 @@ CENTER_MODES = (None, "bounds", "base")
 
 # glTF is +Y up and in metres by specification: 'auto' never guesses for it.
 _Y_UP_FORMATS = (".gltf", ".glb")
+#: Formats +Y up by convention, not by specification: ``auto`` overrules them only on strong evidence.
+_Y_UP_BY_CONVENTION = {".obj": "OBJ"}
+#: The share of the surface area facing +Z without a counterpart that overrules a +Y convention
+#: (a room open on one side leaves one wall's share, 10-20 %; a pitch or terrain most of it).
+STRONG_Z_EVIDENCE = 1 / 3
 
 # Z-up to Y-up: a rotation of -90 degrees about +X, (x, y, z) -> (x, z, -y).
 _Z_TO_Y = np.array([[1.0, 0, 0, 0], [0, 0, 1.0, 0], [0, -1.0, 0, 0], [0, 0, 0, 1.0]])
@@ -183,7 +188,7 @@ def load_asset(path, *, up: str = "auto", units=None, fit_size: float | None = N
         if path.suffix.lower() in _Y_UP_FORMATS:
             up, up_reason = "y", "auto: glTF is +Y up by specification"
         else:
-            up, why = guess_up(parts)
+            up, why = guess_up(parts, convention=_Y_UP_BY_CONVENTION.get(path.suffix.lower()))
             up_reason = f"auto: {why}"
         log.info("%s: up axis %s (%s)", path, up, up_reason)
     if notes is not None:
@@ -603,8 +608,13 @@ def _union_bounds(parts) -> tuple[np.ndarray, np.ndarray]:
     return lo, hi
 
 
-def guess_up(parts) -> tuple[str, str]:
-    """('y' or 'z', why) for an asset of unknown convention, from its geometry in file axes.
+def guess_up(parts, convention: str | None = None) -> tuple[str, str]:
+    """('y' or 'z', why) for an asset, from its geometry in file axes.
+
+    ``convention``: the name of a format that is +Y up by convention (OBJ), or None. Such a
+    file is read +Z up only when at least :data:`STRONG_Z_EVIDENCE` of its surface area faces +Z
+    without a counterpart, or when it rests on z = 0 and not on y = 0: a room open on one side
+    (a classic test box) leaves its back wall facing the opening, which looks like a floor.
 
     A closed surface's area-weighted normals sum to zero; what does not cancel comes from open
     surfaces -- terrain, ground planes, floors, the tops of stands -- and those face up. So the
@@ -628,13 +638,20 @@ def guess_up(parts) -> tuple[str, str]:
             why = f"{100 * share[axis]:.0f} % of the surface area faces {sign}{name} without a counterpart"
             if sign == "-":
                 why += " (it faces down: the file may be upside down)"
-            return name, why
+            if convention is None or name == "y":
+                return name, why
+            if sign == "+" and share[axis] >= STRONG_Z_EVIDENCE:
+                return "z", why + f", enough to overrule {convention}'s +Y convention"
+            return "y", why + (f", not the {100 * STRONG_Z_EVIDENCE:.0f} % facing +z that would overrule "
+                               f"{convention}'s +Y convention")
     lo, hi = _union_bounds(parts)
     ext = hi - lo
     tol = 0.02 * max(float(np.linalg.norm(ext)), 1e-12)
     on_y, on_z = abs(lo[1]) <= tol, abs(lo[2]) <= tol
     if on_z and not on_y:
-        return "z", "it rests on z = 0"
+        return "z", "it rests on z = 0" + (f", which overrules {convention}'s +Y convention" if convention else "")
+    if convention is not None:
+        return "y", f"{convention} is +Y up by convention and nothing in the geometry overrules it"
     if on_y and not on_z:
         return "y", "it rests on y = 0"
     flatter = "z" if ext[2] < ext[1] else "y"

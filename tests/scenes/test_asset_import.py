@@ -155,3 +155,42 @@ def test_markings_on_a_pitch_are_decals_and_show(tmp_path):
     # white paint, not grass (without the decal offset: 20 % white, the rest z-fights away)
     assert (centre.min(axis=1) > 150).mean() > 0.99
 
+
+
+def _open_box_obj(open_side: str) -> str:
+    """A classic test room, +Y up: a 2 m box seen from inside (faces wound inwards), floor at
+    y = 0, centred on x and z, with the wall on ``open_side`` (+z or -z) left out."""
+    corners = [(x, y, z) for x in (-1, 1) for y in (0, 2) for z in (-1, 1)]
+    index = {c: i + 1 for i, c in enumerate(corners)}
+    walls = {  # each wall's corners, wound so its normal points into the box
+        "floor": [(-1, 0, -1), (-1, 0, 1), (1, 0, 1), (1, 0, -1)],
+        "ceiling": [(-1, 2, -1), (1, 2, -1), (1, 2, 1), (-1, 2, 1)],
+        "-x": [(-1, 0, -1), (-1, 2, -1), (-1, 2, 1), (-1, 0, 1)],
+        "+x": [(1, 0, -1), (1, 0, 1), (1, 2, 1), (1, 2, -1)],
+        "-z": [(-1, 0, -1), (1, 0, -1), (1, 2, -1), (-1, 2, -1)],
+        "+z": [(-1, 0, 1), (-1, 2, 1), (1, 2, 1), (1, 0, 1)],
+    }
+    lines = [f"v {x} {y} {z}" for x, y, z in corners]
+    lines += ["f " + " ".join(str(index[c]) for c in quad) for name, quad in walls.items() if name != open_side]
+    return "\n".join(lines) + "\n"
+
+
+@pytest.mark.parametrize("open_side", ["+z", "-z"])
+def test_a_y_up_obj_room_open_on_one_side_stays_upright(tmp_path, open_side):
+    """Issue 26 (8): the wall facing the opening is area facing +-z without a counterpart, like a
+    floor without a ceiling; OBJ is +Y up by convention, and 20 % of the surface is not enough to
+    overrule it. The note says so."""
+    path = tmp_path / "cornell.obj"
+    path.write_text(_open_box_obj(open_side))
+    notes = []
+    (room,) = load_asset(path, notes=notes)
+    lo, hi = room.world_bounds()
+    assert hi[1] - lo[1] == pytest.approx(2.0) and lo[1] == pytest.approx(0.0)   # floor still at y = 0
+    assert "+y up (auto:" in notes[0] and "20 % of the surface area faces" in notes[0], notes
+    assert "would overrule OBJ's +Y convention" in notes[0], notes
+    # The same geometry with no format convention (a list of parts) still reads as +Z up: the
+    # convention, not the geometry, keeps the OBJ upright.
+    from pibr.scenes.loaders import _Part, Material
+
+    assert guess_up([_Part("room", np.array(room.mesh.vertices), np.array(room.mesh.faces), None, None, None,
+                           Material())])[0] == "z"
