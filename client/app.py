@@ -474,10 +474,9 @@ class Client:
         payload = None if frame is None else frame.payload(PayloadKind.FRAME_LEVEL)
         if payload is None:
             return -1
-        level = decode_frame_level(payload)
-        if level >= len(self.session.options.get("server_levels", ())):
-            raise MalformedMessage(f"frame {frame.frame_id} names server level {level}, but the session has "
-                                   f"{len(self.session.options.get('server_levels', ()))}")
+        level, count = decode_frame_level(payload), len(self.session.options.get("server_levels", ()))
+        if level >= count:
+            raise MalformedMessage(f"frame {frame.frame_id} names server level {level}, but the session has {count}")
         return level
 
     async def _run_virtual(self, trace, interval_us, n_ticks, preroll, progress) -> None:

@@ -10,7 +10,7 @@ Files in the output directory, for method M::
 The videos hold one frame per tick displayed afresh, stamped with its tick; a missed tick
 (``missed`` = 1 in its record) kept the previous image and adds none. ``level`` is the quality
 level the tick was drawn at (client/deadline.py; 0 the method's best), ``level_reason`` why
-(:data:`pibr.client.deadline.REASONS`), with the tick's budget (its interval without a
+(:data:`pibr.common.quality.REASONS`), with the tick's budget (its interval without a
 controller) and the level's predicted cost (0: no prediction); ``server_level`` the level the
 shown frame was made at by the server's rate control (an index in ``server_levels`` of the
 session's options; -1: none).

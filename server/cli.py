@@ -111,8 +111,8 @@ def register(sub) -> None:
                         f"measures both; default {DEFAULT_FLOW_CODER})")
     p.add_argument("--rate-control", choices=RATE_CONTROL_MODES, default="on",
                    help="on the real clock, hold --fps by making each frame at the best level whose predicted cost "
-                        "fits its interval (the extra view on every 2nd or 4th frame, longer straight edges, the "
-                        "primary view rendered at 3/4 or 1/2 and upsampled); each frame's level goes to the client "
+                        "fits its interval (the extra view on every 2nd, 4th or 8th frame, longer straight edges, the "
+                        "primary view rendered at 1/2 or 1/3 and upsampled); each frame's level goes to the client "
                         "and the log (default on; the virtual clock has no deadline and makes every frame whole)")
     p.add_argument("--colour-scale", type=float, choices=COLOUR_SCALES, default=1.0,
                    help="send the views' colour at this scale of their size: 0.5 sends the colour of a quarter of "
