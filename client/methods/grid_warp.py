@@ -35,6 +35,11 @@ distance to the output camera) and :class:`~pibr.client.hole_fill.HoleFill` fill
 from a depth-aware low-pass pyramid into the output: alpha 1 where the grid covered the pixel,
 alpha 0 where the filling supplied it. With ``fill=False`` the grid is drawn straight into the
 output and holes stay transparent black.
+
+Moving objects (``motion="flow"``): the primary view is extrapolated along its motion flow
+(client/flow_warp.py) as for every other method that re-projects it, and its grid is rebuilt
+from the extrapolated distances whenever the extrapolation changes (per tick while something
+moves in view; the extra view's grid stays the frame's).
 """
 from __future__ import annotations
 
@@ -169,9 +174,10 @@ class GridWarp(Method):
     name = "gridwarp"
 
     def __init__(self, ctx, output, config, tile: int = DEFAULT_TILE, epsilon: float = DEFAULT_EPSILON,
-                 fill: bool = True):
+                 fill: bool = True, motion: str = "static"):
         self.tile, self.epsilon, self.fill = _check_knobs(tile, epsilon, fill)
         super().__init__(ctx, output, config)
+        self.set_motion(motion)
         glsl = {"frame": frame_glsl(config), "view": VIEW_POINT_GLSL}
         self.prog = ctx.program(vertex_shader=_VS % glsl, fragment_shader=_FS % glsl)
         bind_frame_uniforms(self.prog, config)
@@ -200,26 +206,36 @@ class GridWarp(Method):
             self.release()
             raise
         self._frame_id = None
+        self._extrapolated = None   # the flow extrapolation the primary grid was built from
         self.last_primitives = 0
         self.last_build_ms = 0.0   # CPU grid construction + upload for the newest frame
         self.builds = 0
 
     # -- per server frame ------------------------------------------------------------------
 
-    def build(self, textures) -> None:
-        """(Re)build and upload every view's grid from the newest frame's distance maps."""
+    def build(self, textures, primary_only: bool = False) -> None:
+        """(Re)build and upload every view's grid from the newest frame's distance maps (the
+        primary's as extrapolated along the motion flow when ``textures`` holds it so)."""
         t0 = time.perf_counter()
         for grid in self.grids:
-            dist = textures.view_distances("primary" if grid.view.index == 0 else "extra")
+            primary = grid.view.index == 0
+            if primary_only and not primary:
+                continue
+            dist = textures.view_distances("primary" if primary else "extra")
             if dist is None:
                 grid.cells = 0
                 continue
-            primary = grid.view.index == 0
+            ext = textures.extrapolated if primary else None
+            if ext is not None:
+                x0, y0, w, h = ext.rect
+                dist = dist.copy()
+                dist[y0:y0 + h, x0:x0 + w] = ext.distance
             g = build_surface_grid(dist, self.tile, self.epsilon, self.code_scale, self.slack_codes,
                                    sky_distance=self.sky_distance if primary else None, void_margin=VOID_MARGIN,
                                    void_at_discontinuities=not primary)
             grid.upload(g)
         self._frame_id = textures.frame_id
+        self._extrapolated = textures.extrapolated
         self.builds += 1
         self.last_build_ms = (time.perf_counter() - t0) * 1e3
 
@@ -227,14 +243,16 @@ class GridWarp(Method):
 
     def render(self, out_pose: Pose, frame, textures, scene_t: float = 0.0) -> None:
         ctx = self.ctx
+        textures.use(self.flow_time(scene_t))     # under ``flow``: the primary view extrapolated
         if textures.frame_id != self._frame_id:
             self.build(textures)
+        elif textures.extrapolated is not self._extrapolated:
+            self.build(textures, primary_only=True)
         output_fbo = ctx.fbo
         viewport = ctx.viewport
         if self.fill:
             self.target_fbo.use()
             self.target_fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
-        textures.use()
         ctx.enable(ctx.DEPTH_TEST)
         n = 0
         for grid in self.grids:

@@ -70,9 +70,17 @@ def test_motion_variants_only_where_things_move():
 
     everything = default_variants()
     assert motion_variants(everything, load_scene("sphere")) == []
-    assert [v.options for v in motion_variants(everything, load_scene("dynamic"))] == [{"motion": "static"},
-                                                                                         {"motion": "oracle"}]
+    moving = {v.label: v.options for v in motion_variants(everything, load_scene("dynamic"))}
+    # proxy's bounds, and every competitor that can warp the primary view along its motion flow,
+    # once, at its default knobs (homography's default plane is 4 m, coarse-meshwarp's step 4)
+    assert moving == {"proxy, static motion": {"motion": "static"}, "proxy, oracle motion": {"motion": "oracle"},
+                      "rotation, flow": {"motion": "flow"},
+                      "homography 4 m, flow": {"plane_distance": 4.0, "motion": "flow"},
+                      "splat, flow": {"motion": "flow"}, "meshwarp, flow": {"motion": "flow"},
+                      "coarse-meshwarp s=4, flow": {"step": 4, "motion": "flow"},
+                      "gridwarp, flow": {"motion": "flow"}}
     assert motion_variants(default_variants(["none"]), load_scene("dynamic")) == []
+    assert motion_variants(default_variants(["quadtree", "iterative"]), load_scene("dynamic")) == []
 
 
 @pytest.mark.gl
@@ -89,8 +97,8 @@ def test_tiny_pareto_run(tmp_path):
     assert set(v) == {"none", "rotation", "coarse-meshwarp s=2", "coarse-meshwarp s=4", "coarse-meshwarp s=8",
                       "coarse-meshwarp s=16", "proxy", "proxy lod 2px", "proxy lod 16px", "proxy tau 0.05",
                       "proxy tau 0.2", "proxy, no extra view", "proxy, no carving", "proxy, no inpainting", "proxy, no culling",
-                      "proxy, static motion",
-                      "proxy, oracle motion", ORACLE}
+                      "proxy, static motion", "proxy, oracle motion", "rotation, flow",
+                      "coarse-meshwarp s=4, flow", ORACLE}
     assert v["proxy, oracle motion"]["options"] == {"motion": "oracle"}
     assert all(x["quality"]["frames"] == 3 and x["quality"]["flip_frames"] == 2 for x in v.values())
     # One geometric definition: methods drawing from the same views share it; the extra view
@@ -115,3 +123,10 @@ def test_tiny_pareto_run(tmp_path):
     grids = [d[f"coarse-meshwarp s={s}"] for s in (2, 4, 8, 16)]
     assert grids == sorted(grids) and d["rotation"] < 0.85 * d["none"], d
     assert d["proxy"] < d["proxy, no extra view"], d
+    # The per-window record names what won each window (one window here: its means are the totals).
+    (label, row), = room["per_window"].items()
+    assert label == "pred6dof-1 30-30.7 s"
+    assert row["best_competitor"] == min(competitors, key=d.get)
+    assert row["best_competitor_dssim"] == pytest.approx(d[row["best_competitor"]])
+    assert v[row["winner"]]["method"] == "proxy" and row["winner"] == row["best_proxy"]
+    assert ORACLE not in row["dssim"] and row["dssim"]["proxy"] == pytest.approx(d["proxy"])

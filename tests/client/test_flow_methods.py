@@ -13,7 +13,7 @@ from pibr.scenes.registry import load_scene
 
 pytestmark = pytest.mark.gl
 
-FLOW_METHODS = ("none", "rotation", "homography", "splat", "coarse-meshwarp", "proxy")
+FLOW_METHODS = ("none", "rotation", "homography", "splat", "coarse-meshwarp", "gridwarp", "proxy")
 
 
 @pytest.fixture(scope="module")
@@ -60,7 +60,7 @@ def test_flow_brings_the_moving_object_closer_to_the_truth(sim, name):
     assert score["flow"]["psnr"] > score["static"]["psnr"], score
 
 
-@pytest.mark.parametrize("name", ("rotation", "proxy"))
+@pytest.mark.parametrize("name", ("rotation", "gridwarp", "proxy"))
 def test_without_time_or_motion_flow_changes_nothing(sim, name):
     scene = sim.scene
     pose = _pendulum_pose(scene, 3.0)
