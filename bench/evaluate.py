@@ -6,8 +6,8 @@ Writes into the run directory:
 
     metrics.json         per method: psnr_mean, ssim_mean, dssim_mean, flip_mean,
                          geometric_holes_mean (pixels no transmitted view saw, one definition
-                         for every method), hole_fraction_mean (pixels the method left
-                         unfilled), client_ms_median, frames (+ more, see below)
+                         for every method), hole_fraction_mean (own holes: pixels where
+                         the method accepted no transmitted sample, whatever it shows there), client_ms_median, frames (+ more, see below)
     metrics_frames.csv   one row per method and tick
     quality.png          quality and frame age over time
     side_by_side.mp4     per method one row: method | ground truth | error image

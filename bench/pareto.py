@@ -10,8 +10,8 @@ bench/windows.py (disjoint from every window a default was fitted on), beside:
   through the same colour codec, shown as it is: the loss due to coding and resampling alone;
 * **geometric holes**, one definition for every method: the displayed pixels whose surface
   no transmitted view the method draws from saw (``coverage.uncovered``: the primary view for
-  methods that use only it, both views otherwise), reported beside each method's own count of
-  pixels it left unfilled (alpha 0).
+  methods that use only it, both views otherwise), reported beside each method's own holes (alpha 0: pixels where
+  it accepted no transmitted sample, whatever it shows there; README, "Reading the metrics").
 
 Quality runs the real pipeline in one process (``simulation.Simulation``) at the display rate
 divided by ``stride``; metrics are computed in a worker process while the next frame renders.

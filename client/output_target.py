@@ -1,4 +1,4 @@
-"""The client's output framebuffer: RGBA8 (alpha 0 = no source covered the pixel) + depth."""
+"""The client's output framebuffer: RGBA8 (alpha 0 = the method accepted no transmitted sample there: an own hole) + depth."""
 from __future__ import annotations
 
 import numpy as np

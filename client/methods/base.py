@@ -25,8 +25,9 @@ def output_tan_half(output: OutputConfig) -> tuple[float, float]:
 class Method:
     """A way to turn the newest server frame into the current output image.
 
-    Subclasses draw into the bound output framebuffer (RGBA8, row 0 on top; alpha 0 marks
-    pixels no transmitted view covers) on the client's GL thread.
+    Subclasses draw into the bound output framebuffer (RGBA8, row 0 on top; alpha 0 marks the
+    method's own holes: pixels where it accepted no sample of a transmitted view, whatever colour
+    it then shows there; see README "Reading the metrics") on the client's GL thread.
     """
 
     name = "?"

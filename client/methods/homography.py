@@ -5,9 +5,10 @@ The primary view's pixels are taken to lie on the plane ``plane_distance`` metre
 its camera, perpendicular to its view axis. Each output ray is intersected with that plane and
 the hit point is looked up in the primary view: a closed-form backward warp, one full-screen
 pass, no depth used. It corrects rotation exactly and translation only for surfaces near the
-plane; ``rotation`` is the limit of an infinitely distant plane. Rays that miss the plane (it
-lies behind or beside them) fall back to the direction alone, and rays that leave the primary
-view's hemisphere are holes (alpha 0).
+plane; ``rotation`` is the limit of an infinitely distant plane. Rays that miss the plane (the eye has
+passed it) fall back to the direction alone, shown but counted as own holes (alpha 0, as
+``proxy`` counts its fallback along the ray), and rays that leave the primary view's hemisphere
+are black holes.
 """
 from __future__ import annotations
 
@@ -39,7 +40,7 @@ void main() {
     float t = d.z < 0.0 ? (-u_plane - u_eye.z) / d.z : -1.0;
     vec3 p = t > 0.0 ? u_eye + t * d : d;       // on the plane, or along the ray's direction
     if (p.z > 0.0) { f_color = vec4(0.0); return; }
-    f_color = vec4(atlas_rgb(u_color_rect, wa_uv(wa_project(p).xy)), 1.0);
+    f_color = vec4(atlas_rgb(u_color_rect, wa_uv(wa_project(p).xy)), t > 0.0 ? 1.0 : 0.0);
 }
 """
 

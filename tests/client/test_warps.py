@@ -128,3 +128,24 @@ def test_coarse_grid_step_beyond_the_view():
     finally:
         s.close()
         s.ctx.release()
+
+
+def test_own_holes_count_what_the_method_did_not_accept_whatever_it_shows(sim):
+    """One definition of own holes (README, Reading the metrics): alpha 0 where the method
+    accepted no transmitted sample, whatever colour it then shows. ``homography`` past its plane
+    falls back to the ray's direction, shown but counted; ``gridwarp`` fills its holes but counts
+    the same ones as without filling; ``none`` never leaves one."""
+    frame = sim.frame_at(0.0, sim.scene.viewer_origin)
+    past = Pose.make(sim.scene.viewer_origin.p + 1.5 * -sim.scene.viewer_origin.rotation()[:, 2],
+                     sim.scene.viewer_origin.q)            # 1.5 m forward: beyond a 1 m plane
+    rgb, holes, _ = _show(sim, "homography", {"plane_distance": 1.0}, past, frame)
+    assert holes > 0.9 and rgb.mean() > 20                  # shown, not black, yet every pixel counted
+    rgb, holes, _ = _show(sim, "homography", {"plane_distance": 4.0}, past, frame)
+    assert holes < 0.01
+    moved = _translated(sim.scene.viewer_origin, 0.5)
+    filled, filled_holes, _ = _show(sim, "gridwarp", {}, moved, frame)
+    bare, bare_holes, _ = _show(sim, "gridwarp", {"fill": False}, moved, frame)
+    assert bare_holes > 0.001 and filled_holes == bare_holes
+    black = (bare == 0).all(axis=-1)
+    assert black.mean() >= bare_holes and (filled[black] > 0).any()
+    assert _show(sim, "none", {}, moved, frame)[1] == 0.0

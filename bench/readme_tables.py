@@ -1,0 +1,240 @@
+"""The README's benchmark tables, rendered from the result files committed under ``docs/results/``.
+
+A table in the README is announced by a marker on the line before it::
+
+    <!-- table: pareto from docs/results/pareto.json -->
+
+naming a renderer of :data:`RENDERERS` and the result file(s) it reads (comma-separated, paths
+from the repository's root). :func:`check` renders every announced table and compares it with
+the README's lines (bold marks ``**`` are the README's emphasis and are ignored), and reports
+every table of the benchmark section that no marker announces; ``tests/docs`` runs it, so a
+table cannot go stale silently. ``python -m pibr.bench.readme_tables --write`` rewrites the
+announced tables from their files after a re-run (keeping no emphasis: add it again by hand).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import re
+import sys
+
+MARKER = re.compile(r"^<!-- table: (?P<name>[\w-]+) from (?P<files>[^ ]+(?:, ?[^ ]+)*) -->\s*$")
+#: The README's section whose every table must come from a result file.
+SECTION = ("## Benchmarks", "## Known limitations")
+
+
+def _row(cells) -> str:
+    return "| " + " | ".join(str(c) for c in cells) + " |"
+
+
+def _table(head, rows) -> list[str]:
+    return [_row(head), _row(["---"] * len(head)), *(_row(r) for r in rows)]
+
+
+def _pct(x, digits=2) -> str:
+    return "—" if x is None else f"{100 * x:.{digits}f}"
+
+
+def _num(x, fmt) -> str:
+    return "—" if x is None else format(x, fmt)
+
+
+# -- renderers: result dicts -> markdown lines --------------------------------------------------------------------
+
+def realtime(r: dict) -> list[str]:
+    """``pibr bench realtime``: one row per placement x controllers x method, and the virtual clock."""
+    rows = []
+    for run in r["runs"]:
+        c = run["per_client"][0]
+        rows.append([run["placement"], "on" if run["controllers"] else "off", run["method"],
+                     f"{c['server_fps']:.1f}", f"{c['output_hz']:.1f}", f"{100 * c['missed_fraction']:.1f}",
+                     f"{c['age_ms_p50']:.0f}", f"{c['age_ms_p99']:.0f}", f"{c['client_ms_median']:.1f}",
+                     f"{run['shown']['dssim_mean']:.4f}", f"{run['cpu_share']['server']:.2f}",
+                     f"{run['cpu_share']['client']:.2f}"])
+    virtual = r.get("virtual", [])
+    if virtual:
+        s = r["settings"]
+        missed = max(100 * v["per_client"][0]["missed_fraction"] for v in virtual)
+        rows.append(["virtual clock (the reference)", "—", " / ".join(v["method"] for v in virtual),
+                     f"{s['server_fps']:g}", f"{s['rate_hz']:g}", f"{missed:.0f}", "", "", "",
+                     " / ".join(f"{v['shown']['dssim_mean']:.4f}" for v in virtual), "", ""])
+    return _table(["placement", "controllers", "method", "server fps", "output Hz", "missed %", "age p50 ms",
+                   "p99 ms", "client ms", "DSSIM shown", "CPU server", "client"], rows)
+
+
+def levels(r: dict) -> list[str]:
+    """``pibr bench levels``: every level of every method."""
+    rows = [[method, lv["name"], f"{lv['ms_median']:.1f}", f"{lv['cpu_ms_median']:.1f}", f"{lv['ms_of_top']:.2f}",
+             f"{lv['dssim_mean']:.4f}", f"{lv['psnr_mean']:.2f}", _pct(lv["own_holes_mean"])]
+            for method, table in r["methods"].items() for lv in table]
+    return _table(["method", "level", "wall ms", "CPU ms", "× top", "DSSIM", "PSNR", "own holes %"], rows)
+
+
+def upsampling(*results: dict) -> list[str]:
+    """``pibr bench upsampling``, one file per depth codec: per stream, bits, server ms and quality."""
+    def q(x):
+        return f"{x['psnr_mean']:.2f} / {x['dssim_mean']:.4f}"
+
+    rows = []
+    for r in results:
+        for name, s in r["streams"].items():
+            t = s["times_ms_median"]
+            whole = s["colour_scale"] == 1.0
+            label = {"whole": "whole", "quarter": "quarter", "quarter-bits": "quarter, ¼ bits"}.get(name, name)
+            rows.append([r["settings"]["depth_codec"], label, f"{s['video_kbps']:.0f}",
+                         f"{t['render_ms']:.1f} / {t['pack_ms']:.1f} / {t['video_cpu_ms']:.1f}",
+                         f"{t['colour_ms']:.1f}", "—" if whole else f"{t['rebuild_ms']:.1f}",
+                         q(s["still"]["primary"]["rebuilt"]), q(s["moving"]["primary"]["rebuilt"]),
+                         "—" if whole else q(s["moving"]["primary"]["bilinear"]),
+                         q(s["moving"]["extra"]["rebuilt"]), "—" if whole else q(s["moving"]["extra"]["bilinear"])])
+    return _table(["depth", "stream", "colour kbit/s", "server: render / pack / H.264 ms", "colour ms",
+                   "client rebuild ms", "primary, still", "primary, moving", "moving, bilinear",
+                   "extra view, moving", "extra, bilinear"], rows)
+
+
+def pareto(r: dict, scene: str = "room") -> list[str]:
+    """``pibr bench pareto``: every variant's means over all windows and its speed."""
+    s = r["scenes"][scene]
+    sizes = list(next(iter(s["variants"].values()))["speed"])
+    rows = []
+    for label, v in s["variants"].items():
+        qv, sp = v["quality"], v["speed"]
+        rows.append([label, f"{qv['dssim_mean']:.4f}", f"{qv['psnr_mean']:.2f}", _num(qv["flip_mean"], ".3f"),
+                     _pct(qv["geometric_holes_mean"]), _pct(qv["own_holes_mean"]),
+                     *(f"{sp[z]['ms_median']:.1f}" if z in sp else "—" for z in sizes),
+                     f"{qv['primitives_per_view_pixel']:.3f}"])
+    return _table(["method (knob)", "DSSIM", "PSNR dB", "FLIP", "geo holes %", "own holes %",
+                   *(f"ms {z.replace('x', '×')}" for z in sizes), "primitives / view px"], rows)
+
+
+def pareto_windows(r: dict, scene: str = "room") -> list[str]:
+    """``pibr bench pareto``: each variant's DSSIM per window (the oracle aside), and each window's winner."""
+    s = r["scenes"][scene]
+    windows = list(s["per_window"])
+    labels = [k for k in s["variants"] if any(k in s["per_window"][w]["dssim"] for w in windows)]
+    short = [w.replace(" s", "") for w in windows]
+    rows = [[label, *(_num(s["per_window"][w]["dssim"].get(label), ".4f") for w in windows)] for label in labels]
+    rows.append(["**winner**", *(s["per_window"][w]["winner"] for w in windows)])
+    rows.append(["best competitor", *(s["per_window"][w].get("best_competitor", "—") for w in windows)])
+    return _table(["variant", *short], rows)
+
+
+def coverage(r: dict) -> list[str]:
+    """``pibr bench coverage``: uncovered pixels per window and variant, and over all windows."""
+    variants = r["variant_labels"]
+    rows = [[w, *(_pct(r["per_window"][w][k]) for k in variants)] for w in r["per_window"]]
+    rows.append(["all", *(_pct(r["all"][k]) for k in variants)])
+    rows.append(["all, geometry only", *(_pct(r["all_geometry"][k]) for k in variants)])
+    return _table(["window", *r["variant_titles"]], rows)
+
+
+RENDERERS = {"realtime": realtime, "levels": levels, "upsampling": upsampling, "pareto": pareto,
+             "pareto-windows": pareto_windows, "coverage": coverage}
+
+
+# -- the README ---------------------------------------------------------------------------------------------------
+
+def _unbold(line: str) -> str:
+    return line.replace("**", "").rstrip()
+
+
+def _table_at(lines: list[str], i: int) -> list[str]:
+    """The markdown table starting at line ``i`` (its rows up to the first line not starting with '|')."""
+    j = i
+    while j < len(lines) and lines[j].startswith("|"):
+        j += 1
+    return lines[i:j]
+
+
+def _is_table_head(lines, i) -> bool:
+    return lines[i].startswith("|") and i + 1 < len(lines) and lines[i + 1].startswith("| ---") and \
+        (i == 0 or not lines[i - 1].startswith("|"))
+
+
+def announced(lines: list[str]) -> list[tuple[int, str, list[str]]]:
+    """(line index of the table, renderer name, result files) of every marker."""
+    out = []
+    for i, line in enumerate(lines):
+        m = MARKER.match(line)
+        if m:
+            out.append((i + 1, m["name"], [f.strip() for f in m["files"].split(",")]))
+    return out
+
+
+def render(name: str, files: list[str], root: str) -> list[str]:
+    if name not in RENDERERS:
+        raise KeyError(f"unknown README table {name!r}; known: {', '.join(RENDERERS)}")
+    results = []
+    for f in files:
+        with open(os.path.join(root, f)) as fh:
+            results.append(json.load(fh))
+    return RENDERERS[name](*results)
+
+
+def check(readme: str, root: str) -> list[str]:
+    """Every disagreement between the README at ``readme`` and the result files under ``root``,
+    and every benchmark table no marker announces; [] when they all agree."""
+    with open(readme) as f:
+        lines = f.read().split("\n")
+    problems = []
+    marked = set()
+    for i, name, files in announced(lines):
+        marked.add(i)
+        if i >= len(lines) or not _is_table_head(lines, i):
+            problems.append(f"line {i}: the marker for {name!r} is not followed by a table")
+            continue
+        try:
+            want = render(name, files, root)
+        except (OSError, KeyError, ValueError) as e:
+            problems.append(f"line {i}: table {name!r}: {e}")
+            continue
+        have = [_unbold(x) for x in _table_at(lines, i)]
+        want = [_unbold(x) for x in want]
+        if have != want:
+            diff = next((k for k, (a, b) in enumerate(zip(have, want)) if a != b), min(len(have), len(want)))
+            problems.append(f"line {i + 1 + diff}: table {name!r} from {', '.join(files)} differs:\n"
+                            f"  README: {have[diff] if diff < len(have) else '(missing)'}\n"
+                            f"  result: {want[diff] if diff < len(want) else '(missing)'}")
+    inside = False
+    for i, line in enumerate(lines):
+        if line.startswith("## "):
+            inside = line.startswith(SECTION[0]) or (inside and not line.startswith(SECTION[1]))
+        if inside and _is_table_head(lines, i) and i not in marked:
+            problems.append(f"line {i + 1}: a benchmark table with no result file announced ({line[:60]}...)")
+    return problems
+
+
+def write(readme: str, root: str) -> int:
+    """Rewrite every announced table from its files; -> how many changed."""
+    with open(readme) as f:
+        lines = f.read().split("\n")
+    changed = 0
+    for i, name, files in reversed(announced(lines)):
+        old = _table_at(lines, i)
+        new = render(name, files, root)
+        if [_unbold(x) for x in old] != [_unbold(x) for x in new]:
+            lines[i:i + len(old)] = new
+            changed += 1
+    with open(readme, "w") as f:
+        f.write("\n".join(lines))
+    return changed
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(prog="python -m pibr.bench.readme_tables",
+                                description="Check (or rewrite) the README's benchmark tables against docs/results/.")
+    p.add_argument("--readme", default="README.md")
+    p.add_argument("--root", default=".", help="where the paths in the markers start (default: .)")
+    p.add_argument("--write", action="store_true", help="rewrite the announced tables from their files")
+    a = p.parse_args(argv)
+    if a.write:
+        print(f"{write(a.readme, a.root)} table(s) rewritten")
+    problems = check(a.readme, a.root)
+    for x in problems:
+        print(x)
+    return 1 if problems else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
