@@ -6,7 +6,7 @@ A table in the README is announced by a marker on the line before it::
 
 naming a renderer of :data:`RENDERERS` and the result file(s) it reads (comma-separated, paths
 from the repository's root). :func:`check` renders every announced table and compares it with
-the README's lines (bold marks ``**`` are the README's emphasis and are ignored), and reports
+the README's lines (bold marks ``**`` are the README's emphasis and, like the spaces around a cell, are ignored), and reports
 every table of the benchmark section that no marker announces; ``tests/docs`` runs it, so a
 table cannot go stale silently. ``python -m pibr.bench.readme_tables --write`` rewrites the
 announced tables from their files after a re-run (keeping no emphasis: add it again by hand).
@@ -122,11 +122,13 @@ def pareto_windows(r: dict, scene: str = "room") -> list[str]:
 
 def coverage(r: dict) -> list[str]:
     """``pibr bench coverage``: uncovered pixels per window and variant, and over all windows."""
-    variants = r["variant_labels"]
-    rows = [[w, *(_pct(r["per_window"][w][k]) for k in variants)] for w in r["per_window"]]
-    rows.append(["all", *(_pct(r["all"][k]) for k in variants)])
-    rows.append(["all, geometry only", *(_pct(r["all_geometry"][k]) for k in variants)])
-    return _table(["window", *r["variant_titles"]], rows)
+    variants = ("primary", "peel_no_offset", "offset_no_peel", "offset_peel", "floor")
+    titles = ("primary only", "extra: peeling, no offset", "extra: offset, no peeling", "extra: offset + peeling",
+              "no latency (floor)")
+    rows = [[w, *(_pct(d["means"][k]) for k in variants)] for w, d in r["per_window"].items()]
+    rows.append(["all", *(_pct(r["means"][k]) for k in variants)])
+    rows.append(["all, geometry only", *(_pct(r["means"][k + ":geometry"]) for k in variants)])
+    return _table(["window", *titles], rows)
 
 
 RENDERERS = {"realtime": realtime, "levels": levels, "upsampling": upsampling, "pareto": pareto,
@@ -136,7 +138,8 @@ RENDERERS = {"realtime": realtime, "levels": levels, "upsampling": upsampling, "
 # -- the README ---------------------------------------------------------------------------------------------------
 
 def _unbold(line: str) -> str:
-    return line.replace("**", "").rstrip()
+    """A table line as compared: no emphasis, each cell's surrounding spaces dropped."""
+    return "|".join(c.strip() for c in line.replace("**", "").rstrip().split("|"))
 
 
 def _table_at(lines: list[str], i: int) -> list[str]:

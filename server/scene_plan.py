@@ -57,12 +57,15 @@ PAPER_SIZE_FACTOR, PAPER_OUTPUT_FOV_DEG = 1.6, 70.0
 VIEW_DENSITY_RATIO = PAPER_SIZE_FACTOR * math.tan(math.radians(PAPER_OUTPUT_FOV_DEG / 2))
 #: The primary view's side is a multiple of this: the extra view (half of it) stays on the atlas grid.
 VIEW_STEP = 2 * ALIGN
-#: Measured shares of the depth stream (README, "Depth codec", room at 1024^2, evaluation windows):
-#: 8-bit disparity took 1.7 of 16 Mbit/s in the H.264 atlas (colour 14.3); the edge codec at its
-#: default threshold 2083 kbit/s. The edge stream is scaled by the primary view's side (edges are
-#: curves: their samples grow with the side, not the area).
+#: Measured shares of the depth stream (README, "Depth codec", room at 1024^2): 8-bit disparity
+#: took 1.7 of 16 Mbit/s in the H.264 atlas (colour 14.3); the edge codec at its default
+#: threshold 2083 kbit/s. The edge stream is scaled by the primary view's side (edges are curves:
+#: their samples grow with the side, not the area). NOT FITTED on the tuning windows: both were
+#: measured on the evaluation windows and have not been re-measured on tuning data; every plan's
+#: JSON says so (DEPTH_RATES_FITTED_ON).
 H264_DEPTH_SHARE = (16.0 - 14.3) / 16.0
 EDGE_KBPS_AT_1024 = 2083.0
+DEPTH_RATES_FITTED_ON = "not fitted: measured on the room's evaluation windows, not re-measured on tuning windows"
 #: The lowest H.264 bitrate the server accepts (config.py).
 MIN_VIDEO_KBPS = 16.0
 #: The coverage probe's measurement format: bump when what it measures changes (old cache files are ignored).
@@ -321,7 +324,7 @@ def decide_depth_codec(asked: str, server: str, bandwidth_kbps: float | None, vi
     colour more bits (H.264 depth's share of B is more than the edge stream costs)."""
     e = edge_kbps_estimate(primary_side, edge_kbps)
     measured = {"h264_depth_share": round(H264_DEPTH_SHARE, 4), "edge_kbps": round(e, 1),
-                "configured_video_kbps": video_kbps}
+                "configured_video_kbps": video_kbps, "depth_rates_fitted_on": DEPTH_RATES_FITTED_ON}
     if bandwidth_kbps is not None:
         measured["bandwidth_kbps"] = bandwidth_kbps
     if asked or server != "auto":

@@ -134,6 +134,9 @@ def test_depth_codec_from_bandwidth():
     assert decide_depth_codec("", "auto", 2000, 16000, 1024, 500).value == {"codec": "h264", "video_kbps": 2000}
     # the edge codec's fixed threshold: the measured 2083 kbit/s at 1024^2, by the side
     assert decide_depth_codec("", "auto", 8000, 16000, 512, 0).measured["edge_kbps"] == pytest.approx(1041.5)
+    # neither rate was fitted on tuning windows, and every plan says so (issue 26, item 2)
+    assert decide_depth_codec("", "auto", 8000, 16000, 512, 0).measured["depth_rates_fitted_on"].startswith(
+        "not fitted")
     # explicit choices win, and the video is still fitted into the bandwidth
     asked = decide_depth_codec("edge", "auto", 8000, 16000, 1024, 500)
     assert asked.value == {"codec": "edge", "video_kbps": 7500.0} and "client asked" in asked.reason
