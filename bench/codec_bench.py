@@ -4,15 +4,20 @@ Along the evaluation windows (``bench/windows.py``) on a built-in scene, per ser
 the primary view, each codec over its rate settings:
 
 * ``edge``           the edge codec (Pajak et al. 2011) as the server and client run it
-                     (temporal context, rate-free threshold), over a sweep of significance
-                     thresholds; at the default threshold also ``edge-intra`` (no temporal
-                     context), ``edge-raster`` (one raster pass) and ``edge-plain-diffusion``
-                     (plain push-pull instead of edge-aware diffusion on the client);
+                     (12-bit codes, temporal context, rate-free threshold), over a sweep of
+                     significance thresholds; at the default threshold also ``edge-intra`` (no
+                     temporal context), ``edge-raster`` (one raster pass) and
+                     ``edge-plain-diffusion`` (plain push-pull instead of edge-aware diffusion);
+* ``edge-8bit``, ``edge-10bit``  the same sweep with 8- and 10-bit codes, so the coding and the
+                     precision can be told apart (Pajak et al. compared at equal precision);
 * ``h264-8bit``      8-bit disparity in its *own* monochrome libx264 stream, rate control
-                     targeted at the edge codec's measured bits per frame of each threshold
-                     (per window): Pajak et al.'s comparison at equal bandwidth (their Table 2);
-* ``h264-10bit``     the same at 10 bits (``gray10le``), when PyAV's libx264 offers it
-                     (``h264_10bit`` in the JSON says whether, and the error if not);
+                     targeted at ``edge-8bit``'s measured bits per frame of each threshold (per
+                     window): Pajak et al.'s comparison at equal bandwidth and equal precision
+                     (their Table 2);
+* ``h264-10bit``     the same at 10 bits (``gray10le``) against ``edge-10bit``, when PyAV's
+                     libx264 offers it (``h264_10bit`` in the JSON says whether, and the error
+                     if not); x264 codes at most 10 bits, so there is no 12-bit H.264 to set
+                     beside the 12-bit ``edge``;
 * ``log-zstd``       Koniaris et al. 2018: log-quantised distance (16 bits in the paper, fewer
                      as rate settings) with block-skip temporal coding and zstd
                      (``bench/depth_codecs.py``);
@@ -130,17 +135,25 @@ def winners(curves: dict, metric: str, higher_is_better: bool) -> list[dict]:
     return out
 
 
+#: H.264 depth alone is coded at the rate of the edge curve of its own precision.
+MATCHED_EDGE_CURVE = {"h264-8bit": "edge-8bit", "h264-10bit": "edge-10bit"}
+#: The edge curves by code bits (12: the codec's default, ``edge``).
+EDGE_CURVE_BITS = {"edge-8bit": 8, "edge-10bit": 10, "edge": 12}
+
+
 def matched_pairs(curves: dict) -> list[dict]:
-    """Per edge threshold, the edge codec beside H.264 depth alone coded at its rate (Pajak et al.'s
-    Table 2 comparison): [{"threshold", codec: {"bits_per_frame", "psnr_db", "outliers_1pct",
+    """Per edge threshold, the edge codec at 8, 10 and 12 bits, each H.264 depth stream beside
+    the edge curve of its precision coded at its rate (Pajak et al.'s Table 2 comparison at equal
+    precision): [{"threshold", codec: {"bits_per_frame", "psnr_db", "outliers_1pct",
     "outliers_5pct"}}]."""
     keys = ("bits_per_frame", "psnr_db", "outliers_1pct", "outliers_5pct")
     rows = []
     for e in curves["edge"]:
         t = e["setting"]["threshold"]
-        row = {"threshold": t, "edge": {k: e[k] for k in keys}}
-        for name in ("h264-8bit", "h264-10bit"):
-            m = [p for p in curves.get(name, []) if p["setting"]["matched_to_edge_threshold"] == t]
+        row = {"threshold": t}
+        for name in (*EDGE_CURVE_BITS, *MATCHED_EDGE_CURVE):
+            m = [p for p in curves.get(name, []) if p["setting"].get("threshold",
+                                                                     p["setting"].get("matched_to_edge_threshold")) == t]
             if m:
                 row[name] = {k: m[0][k] for k in keys}
         rows.append(row)
@@ -183,6 +196,7 @@ def run_codec_bench(scene_spec="room", windows=None, window_s=2.0, fps=10.0, vie
     near, far = scene.near, scene.far
     q8 = h264_quantizer(near, far)
     q12 = edge_quantizer(near, far, EDGE_BITS)
+    q_edge = {name: edge_quantizer(near, far, bits) for name, bits in EDGE_CURVE_BITS.items()}
     ten_bit = probe_h264_10bit()
     h264_codecs = ("h264-8bit", "h264-10bit") if ten_bit["available"] else ("h264-8bit",)
     ctx = create_context()
@@ -191,6 +205,8 @@ def run_codec_bench(scene_spec="room", windows=None, window_s=2.0, fps=10.0, vie
                                deterministic=True, keep_distance=True).open(ctx)
     with_depth = pipeline.spec.layout
     edge_pts = {t: _Point("edge", {"threshold": t}) for t in thresholds}
+    low_bit_pts = {(name, t): _Point(name, {"threshold": t, "bits": bits}) for name, bits in EDGE_CURVE_BITS.items()
+                   if name != "edge" for t in thresholds}
     variant_pts = {"edge-intra": _Point("edge-intra", {"threshold": 3.5, "temporal": False}),
                    "edge-raster": _Point("edge-raster", {"threshold": 3.5, "passes": 1}),
                    "edge-plain-diffusion": _Point("edge-plain-diffusion", {"threshold": 3.5, "edge_aware": False})}
@@ -215,9 +231,9 @@ def run_codec_bench(scene_spec="room", windows=None, window_s=2.0, fps=10.0, vie
                 frames.append((pose, p.distances["primary"].copy(), p.yuv.copy()))
             label = win.label
 
-            def run_edge(point, edge_aware=True, **opts):
-                enc = EdgeDepthStream(w, h, q12, fps, **opts)
-                dec = EdgeDepthStreamDecoder(w, h, q12, edge_aware=edge_aware)
+            def run_edge(point, edge_aware=True, quantizer=q12, **opts):
+                enc = EdgeDepthStream(w, h, quantizer, fps, **opts)
+                dec = EdgeDepthStreamDecoder(w, h, quantizer, edge_aware=edge_aware)
                 for pose, r, _ in frames:
                     (payload, stats), e_ms = _timed(enc.encode, r, pose)
                     (dense, _), d_ms = _timed(dec.decode, payload, pose)
@@ -227,13 +243,16 @@ def run_codec_bench(scene_spec="room", windows=None, window_s=2.0, fps=10.0, vie
 
             for t, pt in edge_pts.items():
                 run_edge(pt, threshold=t)
+            for (name, t), pt in low_bit_pts.items():
+                run_edge(pt, threshold=t, quantizer=q_edge[name])
             run_edge(variant_pts["edge-intra"], temporal=False)
             run_edge(variant_pts["edge-raster"], passes=1)
             run_edge(variant_pts["edge-plain-diffusion"], edge_aware=False)
             # the other codecs' streams
             streams = [(zstd_pt, make_pair("zstd", w, h, near, far, fps))]
             streams += [(pt, make_pair("log", w, h, near, far, fps, bits=b)) for b, pt in log_pts.items()]
-            streams += [(pt, make_pair(c, w, h, near, far, fps, edge_pts[t].window_bits(label) * fps / 1000))
+            streams += [(pt, make_pair(c, w, h, near, far, fps,
+                                       low_bit_pts[MATCHED_EDGE_CURVE[c], t].window_bits(label) * fps / 1000))
                         for (c, t), pt in h264_pts.items()]
             for pt, (enc, dec) in streams:
                 for _, r, _ in frames:
@@ -265,6 +284,9 @@ def run_codec_bench(scene_spec="room", windows=None, window_s=2.0, fps=10.0, vie
         return sorted((p.summary(fps) for p in points), key=lambda s: (s["bits_per_frame"] or 0.0))
 
     curves = {"edge": curve(edge_pts.values())}
+    for name in EDGE_CURVE_BITS:
+        if name != "edge":
+            curves[name] = curve(pt for (n, _), pt in low_bit_pts.items() if n == name)
     for c in h264_codecs:
         curves[c] = curve(pt for (cc, _), pt in h264_pts.items() if cc == c)
     curves["log-zstd"] = curve(log_pts.values())

@@ -194,7 +194,7 @@ def plot_depth_rd(result: dict, path: str) -> None:
     plt = _pyplot()
     e2e = result.get("end_to_end")
     fig, axes = plt.subplots(1, 3 if e2e else 2, figsize=(17 if e2e else 12, 4.6))
-    styles = {"edge": "o-", "edge-rc": "o--", "h264-8bit": "s-", "h264-10bit": "D-", "log-zstd": "^-",
+    styles = {"edge": "o-", "edge-8bit": "o:", "edge-10bit": "o-.", "edge-rc": "o--", "h264-8bit": "s-", "h264-10bit": "D-", "log-zstd": "^-",
               "zstd-lossless": "*", "h264-8bit-atlas": "x-"}
     for name, pts in result["curves"].items():
         x = np.array([p["bits_per_frame"] for p in pts]) / 1000

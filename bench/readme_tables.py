@@ -131,7 +131,31 @@ def coverage(r: dict) -> list[str]:
     return _table(["window", *titles], rows)
 
 
-RENDERERS = {"realtime": realtime, "levels": levels, "upsampling": upsampling, "pareto": pareto,
+def dynamic(r: dict, scene: str = "dynamic") -> list[str]:
+    """``pibr bench dynamic``: DSSIM over the whole frame / over the moving objects' pixels per
+    motion mode and latency, and the motion bits per frame at the middle latency."""
+    from pibr.client.object_motion import DEFAULT_MOTION
+
+    s = r["scenes"][scene]
+    latencies = [f"{x:g}" for x in r["latencies_ms"]]
+    middle = latencies[len(latencies) // 2]
+    rows = []
+    for key, m in s["latency"][middle]["methods"].items():
+        if m["method"] == "proxy":
+            mode = m["options"]["motion"]
+            label = f"proxy, {mode}" + (" (default)" if mode == DEFAULT_MOTION else "") + \
+                (" (benchmarks only)" if mode == "oracle" else "")
+        else:
+            label = key.replace("+", ", ")
+        cells = []
+        for lat in latencies:
+            x = s["latency"][lat]["methods"][key]
+            cells.append(f"{x['dssim']:.4f}"[1:] + " / " + _num(x["dssim_moving"], ".4f")[1:])
+        rows.append([label, *cells, f"{m['motion_bits_per_frame']:,.0f}"])
+    return _table(["method", *(f"{x} ms" for x in latencies), f"motion bits per frame ({middle} ms)"], rows)
+
+
+RENDERERS = {"dynamic": dynamic, "realtime": realtime, "levels": levels, "upsampling": upsampling, "pareto": pareto,
              "pareto-windows": pareto_windows, "coverage": coverage}
 
 

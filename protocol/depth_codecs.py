@@ -53,7 +53,7 @@ DEPTH_CODECS: dict[str, DepthCodec] = {c.name: c for c in (
     DepthCodec("h264", True, {}, 8, 16, (1, 16), "depth in the H.264 atlas", "8-bit disparity in the H.264 atlas"),
     # the edge bitstream's range (edgecodec/bitstream.py MIN_BITS..MAX_BITS; a test keeps them equal)
     DepthCodec("edge", False, {"primary": PayloadKind.EDGE_DEPTH, "extra": PayloadKind.EDGE_DEPTH_EXTRA},
-               EDGE_BITS, 2, (10, 16), "the edge codec", "the edge codec (Pajak et al. 2011), 12-bit disparity"),
+               EDGE_BITS, 2, (8, 16), "the edge codec", "the edge codec (Pajak et al. 2011), 12-bit disparity"),
 )}
 
 #: What a server or client may ask for: a codec by name, or ``auto`` (the server decides for the bandwidth).

@@ -33,7 +33,8 @@ from .edges import BLOCK_LOG2
 MAGIC = b"PIBE"
 VERSION = 2
 MAX_SIZE = 8192
-MIN_BITS, MAX_BITS = 10, 16
+#: 8 bits lets the codec be compared with 8-bit H.264 depth at equal precision (issue 26).
+MIN_BITS, MAX_BITS = 8, 16
 MIN_SPACING_LOG2, MAX_SPACING_LOG2 = 2, 7
 
 FLAG_TEMPORAL = 1

@@ -78,7 +78,8 @@ def test_bench_codec(tmp_path, capsys):
     assert r["windows"]["disjoint_from_tuning"] and r["frames"] == 3
     curves = r["curves"]
     h264 = ["h264-8bit", "h264-10bit"] if r["h264_10bit"]["available"] else ["h264-8bit"]
-    assert set(curves) == {"edge", *h264, "log-zstd", "zstd-lossless"}
+    assert set(curves) == {"edge", "edge-8bit", "edge-10bit", *h264, "log-zstd", "zstd-lossless"}
+    assert {p["setting"]["bits"] for p in curves["edge-8bit"]} == {8}
     assert [p["setting"]["threshold"] for p in curves["edge"]] == [128.0, 16.0, 2.0]   # sorted by bits
     for name, pts in curves.items():
         bits = [p["bits_per_frame"] for p in pts]
@@ -86,9 +87,10 @@ def test_bench_codec(tmp_path, capsys):
         psnr = [p["psnr_db"] for p in pts]
         assert psnr == sorted(psnr), name                     # more bits: PSNR not lower
         assert all(p["frames"] == 3 for p in pts)
-    for name in h264:   # rate control targets the edge codec's bits of the same threshold
+    for name in h264:   # rate control targets the edge codec's bits of the same threshold and precision
+        matched = "edge-8bit" if name == "h264-8bit" else "edge-10bit"
         for p in curves[name]:
-            edge = next(e for e in curves["edge"] if e["setting"]["threshold"] == p["setting"]["matched_to_edge_threshold"])
+            edge = next(e for e in curves[matched] if e["setting"]["threshold"] == p["setting"]["matched_to_edge_threshold"])
             assert 0.5 < p["bits_per_frame"] / edge["bits_per_frame"] < 2.0
     assert curves["zstd-lossless"][0]["exact_codes"] == 1.0
     assert all(p["exact_codes"] == 1.0 for p in curves["log-zstd"])
@@ -98,8 +100,13 @@ def test_bench_codec(tmp_path, capsys):
     assert all(default[f"bits_{k}"] > 0 for k in ("edges", "values", "regular", "header"))
     assert sum(default[f"bits_{k}"] for k in ("edges", "values", "regular", "header")) == \
         pytest.approx(default["bits_per_frame"])
-    assert [m["threshold"] for m in r["matched"]] == [128.0, 16.0, 2.0] and all(set(h264) <= set(m)
-                                                                                  for m in r["matched"])
+    assert [m["threshold"] for m in r["matched"]] == [128.0, 16.0, 2.0] and all(
+        {*h264, "edge", "edge-8bit", "edge-10bit"} <= set(m) for m in r["matched"])
+    # precision: at the finest threshold, more code bits leave fewer pixels more than 1 % off
+    finest = r["matched"][-1]
+    print({k: (v["bits_per_frame"], v["outliers_1pct"]) for k, v in finest.items() if k != "threshold"})
+    assert finest["edge"]["outliers_1pct"] < finest["edge-10bit"]["outliers_1pct"] < \
+        finest["edge-8bit"]["outliers_1pct"]
     assert [p["setting"]["total_kbps"] for p in r["h264_8bit_atlas"]] == [600.0, 2000.0]
     assert all(p["bits_per_frame"] is None and p["atlas_kbps"] > 0 for p in r["h264_8bit_atlas"])
     for metric in ("psnr_db", "outliers_1pct"):

@@ -322,9 +322,12 @@ def test_explicit_edges_and_threshold():
     np.testing.assert_array_equal(dec.codes[mask], enc.codes(distance)[mask])
 
 
-def test_bits_must_be_at_least_ten():
+def test_bits_from_eight_to_sixteen():
     with pytest.raises(ValueError):
-        EdgeEncoder(8, 8, 8, DepthQuantizer(0.1, 10.0, bits=8, min_code=1))
+        EdgeEncoder(8, 8, 7, DepthQuantizer(0.1, 10.0, bits=7, min_code=1))
+    eight = DepthQuantizer(0.1, 1000.0, bits=8, min_code=1)
+    codes, _, dec = _round_trip(piecewise_planar(20, 30, quantizer=eight), eight)
+    _assert_lossless(codes, dec)
     sixteen = DepthQuantizer(0.1, 1000.0, bits=16, min_code=1)
     codes, _, dec = _round_trip(piecewise_planar(20, 30, quantizer=sixteen), sixteen)
     _assert_lossless(codes, dec)

@@ -221,8 +221,8 @@ def test_a_depth_codec_that_is_no_name_is_refused(codec):
 
 def test_edge_codec_bits_must_be_decodable():
     o = _config("edge")
-    o["depth_bits"] = 8
-    with pytest.raises(MalformedMessage, match="edge codec carries 10..16 bits"):
+    o["depth_bits"] = 7
+    with pytest.raises(MalformedMessage, match="edge codec carries 8..16 bits"):
         SessionConfig.from_json(o)
 
 
