@@ -18,13 +18,15 @@ Pajak et al. 2011's temporal upsampling done on object transforms instead of pix
 * ``flow``: not per object but per pixel: the moving pixels of the newest frame warped along
   their decoded motion flow (client/flow_warp.py); no proxy needed.
 
-Measured (``python -m pibr.bench.motion_eval``, 128 ms, DSSIM over the moving objects' pixels,
-see bench/motion_eval.py): in ``dynamic`` over the seven evaluation windows static 0.326,
-velocity 0.227, accel 0.195, oracle 0.178; in ``room`` over three of them (pred6dof-1 and -2 at
-30 s, synth-turns) static 0.346, velocity 0.224, accel 0.215, oracle 0.211. The second order
-follows curves (the ball's circle, the pendulum's arc) that a straight line leaves; hence the
-default. Without ACCEL_LIMIT it measured within 1 % of that (dynamic at 256 ms: 0.236 against
-0.238).
+Fitted on the tuning windows (issue 26: the first choice was made on evaluation windows):
+``pibr bench dynamic --windows tuning --latency-ms 128 --stride 6`` (pred6dof-1 and -2 from 10 s
+for 12 s, where the moving objects are in view on 94 and 65 of 120 scored ticks;
+docs/results/dynamic-tuning.json), DSSIM over the moving objects' pixels: in ``dynamic`` static
+0.257, velocity 0.149, accel 0.115, flow 0.181 (oracle 0.093); in ``room`` static 0.388,
+velocity 0.186, accel 0.177, flow 0.225 (oracle 0.175). The second order follows curves (the
+ball's circle, the pendulum's arc) that a straight line leaves; hence the default, which the
+evaluation windows confirm (README, "Moving objects"). Without ACCEL_LIMIT it measured within
+1 % of that (dynamic at 256 ms: 0.236 against 0.238; evaluation windows, before the split).
 
 The horizon is bounded: the extrapolation runs at full speed for ``horizon_frames`` frame
 intervals past the newest transform (3: a frame is normally shown 1.5 to 2.5 intervals after
