@@ -155,7 +155,136 @@ def dynamic(r: dict, scene: str = "dynamic") -> list[str]:
     return _table(["method", *(f"{x} ms" for x in latencies), f"motion bits per frame ({middle} ms)"], rows)
 
 
-RENDERERS = {"dynamic": dynamic, "realtime": realtime, "levels": levels, "upsampling": upsampling, "pareto": pareto,
+def ibr(r: dict) -> list[str]:
+    """``pibr bench ibr``: DSSIM (PSNR dB) of none, rotation and proxy per window, proxy's own holes."""
+    rows = []
+    for w, q in r["quality"].items():
+        best = min(q, key=lambda k: q[k]["dssim_mean"])
+        cells = [(f"**{q[k]['dssim_mean']:.4f}**" if k == best else f"{q[k]['dssim_mean']:.4f}")
+                 + f" ({q[k]['psnr_mean']:.1f})" for k in ("none", "rotation", "proxy")]
+        rows.append([w, *cells, _pct(q["proxy"]["hole_fraction_mean"])])
+    return _table(["window", "none", "rotation", "proxy", "proxy's own holes %"], rows)
+
+
+def split(r: dict) -> list[str]:
+    """``pibr bench split``: the one-mesh level whole and cut into pieces."""
+    rows = []
+    for label, v in r["variants"].items():
+        cells = []
+        for tr, q in v["quality"].items():
+            s = q["proxy"]
+            cells.append(f"{s['client_ms_median']:.1f}, {s['triangles_mean'] / 1000:.0f}k, {s['dssim_mean']:.4f}")
+        rows.append([{"whole": "whole", "pieces": "cut into pieces"}.get(label, label), v["objects"],
+                     f"{v['lod_seconds']:.1f} s", v["proxy_triangles"], *cells])
+    traces = list(next(iter(r["variants"].values()))["quality"])
+    return _table(["", "objects", "LoD build", "proxy triangles",
+                   *(f"{t}: proxy ms, triangles drawn, DSSIM" for t in traces)], rows)
+
+
+def server_projection(r: dict) -> list[str]:
+    """``pibr bench server``: median ms per stage and kbit/s per projection and extra view."""
+    rows = []
+    for x in r["rows"]:
+        rows.append([x["projection"], "on" if x["extra_view"] else "off", f"{x['atlas'][0]}×{x['atlas'][1]}",
+                     f"{x['rasterised_triangles']:,}", f"{x['render_ms']:.1f}", f"{x['readback_ms']:.1f}",
+                     f"{x['pack_ms']:.1f}", f"{x['encode_ms']:.1f}", f"{x['total_ms']:.1f}", f"{x['kbps']:.0f}"])
+    return _table(["projection", "extra view", "atlas", "triangles", "render", "read back", "pack", "encode (x264)",
+                   "total", "kbit/s"], rows)
+
+
+def server_edges(r: dict) -> list[str]:
+    """``pibr bench server --max-edge-deg ... --accuracy``: the pre-tessellation's edge angle."""
+    rows = [[f"{x['max_edge_deg']:g}°", f"{x['rasterised_triangles']:,}", f"{x['render_ms']:.1f}",
+             f"{x['total_ms']:.1f}", f"{x['psnr_vs_reference_db']:.1f} dB", f"{100 * x['distance_off_fraction']:.3f} %"]
+            for x in r["rows"]]
+    return _table(["edge angle", "triangles", "render ms", "total ms",
+                   f"colour PSNR vs {r['reference_edge_deg']:g}°", "pixels > 1 % off in distance"], rows)
+
+
+def _knob_value(name: str, value) -> str:
+    from .trade import KNOBS
+
+    unit = KNOBS[name].unit if name in KNOBS else ""
+    if isinstance(value, str):
+        return value
+    if unit == "kbit/s":
+        return "none" if value == 0 else f"{value / 1000:g} Mbit/s"
+    if name == "lod_fraction":
+        return f"{100 * value:g} %"
+    if name == "lod_resolution":
+        return f"{value:g}³"
+    if name == "extra":
+        return "off" if value == 0 else f"{value:g}"
+    return f"{value:g} {unit}".strip()
+
+
+def trade_wide(r: dict, knob: str = "bitrate", scene: str = "room") -> list[str]:
+    """``pibr bench trade``: one knob's sweep, each method's DSSIM per value (the default marked *)."""
+    from pibr.bench.variants import sweep_labels
+
+    rows = r["scenes"][scene]["sweeps"][knob]
+    values = [_knob_value(knob, x["value"]) + ("*" if x["default"] else "") for x in rows]
+    return _table([knob, *values], [[label, *(f"{x['methods'][label]['dssim']:.4f}" for x in rows)]
+                                    for label in sweep_labels(rows)])
+
+
+def trade_long(r: dict, scene: str = "room") -> list[str]:
+    """``pibr bench trade``: every knob of the file, per value the DSSIM of each method scored at
+    every value, the server's CPU ms per frame, the Mbit/s sent and the mean frame age."""
+    from pibr.bench.variants import sweep_labels
+
+    sweeps = r["scenes"][scene]["sweeps"]
+    labels = None
+    out_rows = []
+    for knob, rows in sweeps.items():
+        here = sweep_labels(rows)
+        labels = labels or here
+        for x in rows:
+            st = x["stream"]
+            out_rows.append([knob, _knob_value(knob, x["value"]) + ("*" if x["default"] else ""),
+                             *(_num(x["methods"][lab]["dssim"], ".4f") if lab in x["methods"] else "—"
+                               for lab in labels),
+                             f"{st['server_cpu_ms']:.0f}", f"{st['kbps'] / 1000:.1f}",
+                             _num(st["age_ms_mean"], ".0f")])
+    return _table(["knob", "value", *(f"{lab} DSSIM" for lab in labels), "server CPU ms", "Mbit/s sent",
+                   "age ms"], out_rows)
+
+
+def codec_matched(r: dict) -> list[str]:
+    """``pibr bench codec``: per edge threshold, the edge codec at 8, 10 and 12 bits and H.264
+    depth alone at the rate of the edge curve of its precision: kbit/frame, disparity PSNR, share
+    of pixels more than 1 % off in distance."""
+    from pibr.protocol.edgecodec.codec import DEFAULT_THRESHOLD
+
+    def cell(v):
+        return "—" if v is None else f"{v['bits_per_frame'] / 1000:.1f}, {v['psnr_db']:.1f} dB, {100 * v['outliers_1pct']:.1f} %"
+
+    names = [n for n in ("edge-8bit", "h264-8bit", "edge-10bit", "h264-10bit", "edge")
+             if any(n in m for m in r["matched"])]
+    titles = {"edge-8bit": "edge 8-bit", "h264-8bit": "H.264 8-bit at its rate", "edge-10bit": "edge 10-bit",
+              "h264-10bit": "H.264 10-bit at its rate", "edge": "edge 12-bit (default)"}
+    rows = [[f"{m['threshold']:g}" + (" (default)" if m["threshold"] == DEFAULT_THRESHOLD else ""),
+             *(cell(m.get(n)) for n in names)] for m in sorted(r["matched"], key=lambda m: -m["threshold"])]
+    return _table(["edge threshold", *(titles[n] for n in names)], rows)
+
+
+def codec_end_to_end(r: dict) -> list[str]:
+    """``pibr bench codec``: proxy DSSIM at equal total bitrate per depth codec (— where its depth
+    leaves the colour too little)."""
+    e2e = r["end_to_end"]
+    codecs = list(dict.fromkeys(v["codec"] for v in e2e["results"].values()))
+    totals = list(dict.fromkeys(v["total_kbps"] for v in e2e["results"].values()))
+    rows = []
+    for t in totals:
+        cells = []
+        for c in codecs:
+            v = e2e["results"].get(f"{t:g}/{c}")
+            cells.append("—" if v is None or not v["feasible"] else f"{v['dssim_mean']:.4f}")
+        rows.append([f"{t / 1000:g} Mbit/s", *cells])
+    return _table(["total", *codecs], rows)
+
+
+RENDERERS = {"codec-matched": codec_matched, "codec-end-to-end": codec_end_to_end, "trade-wide": trade_wide, "trade": trade_long, "ibr": ibr, "split": split, "server-projection": server_projection, "server-edges": server_edges, "dynamic": dynamic, "realtime": realtime, "levels": levels, "upsampling": upsampling, "pareto": pareto,
              "pareto-windows": pareto_windows, "coverage": coverage}
 
 
