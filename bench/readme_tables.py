@@ -284,7 +284,28 @@ def codec_end_to_end(r: dict) -> list[str]:
     return _table(["total", *codecs], rows)
 
 
-RENDERERS = {"codec-matched": codec_matched, "codec-end-to-end": codec_end_to_end, "trade-wide": trade_wide, "trade": trade_long, "ibr": ibr, "split": split, "server-projection": server_projection, "server-edges": server_edges, "dynamic": dynamic, "realtime": realtime, "levels": levels, "upsampling": upsampling, "pareto": pareto,
+def lod_target(r: dict) -> list[str]:
+    """The LoD target's study (docs/results/lod-target.json): per scene and output size, proxy's
+    mean DSSIM over the windows at each target in pixels of that output; the default's angle
+    (6 px of a 960-wide output) is marked where a target of that run equals it."""
+    from pibr.client.lod_select import DEFAULT_TARGET_PX, REFERENCE_FOCAL_PX
+
+    rows, targets = [], None
+    for name, run in r["runs"].items():
+        per = next(iter(run["lod"].values()))
+        targets = targets or list(per)
+        width = run["output"][0]
+        now = DEFAULT_TARGET_PX * width / (2 * REFERENCE_FOCAL_PX)   # 90-degree outputs
+        cells = []
+        for label in targets:
+            px = float(label.split()[-1].rstrip("px"))
+            mean = sum(run["lod"][w][label]["dssim_mean"] for w in run["lod"]) / len(run["lod"])
+            cells.append(f"{mean:.4f}" + (" ←" if abs(px - now) < 1e-9 else ""))
+        rows.append([name.replace("x", "×"), *cells])
+    return _table(["scene, output", *(t.replace("proxy lod ", "") for t in targets)], rows)
+
+
+RENDERERS = {"lod-target": lod_target, "codec-matched": codec_matched, "codec-end-to-end": codec_end_to_end, "trade-wide": trade_wide, "trade": trade_long, "ibr": ibr, "split": split, "server-projection": server_projection, "server-edges": server_edges, "dynamic": dynamic, "realtime": realtime, "levels": levels, "upsampling": upsampling, "pareto": pareto,
              "pareto-windows": pareto_windows, "coverage": coverage}
 
 

@@ -83,4 +83,30 @@ def plan_for(spec: str, output=(960, 540), fov_deg: float = 90.0, bandwidth_kbps
             coverage = cached_extra_view(ctx, scene, extra_offset_for(cfg, scene), cfg.projection)
         finally:
             ctx.release()
-    return scene_plan(cfg, scene, hello, coverage, decide_proxies(scene, lods)).to_json()
+    plan = scene_plan(cfg, scene, hello, coverage, decide_proxies(scene, lods)).to_json()
+    plan["lod"] = lod_distances(scene, lods, plan["proxies"]["value"])
+    return plan
+
+
+def lod_distances(scene, lods: dict, levels: dict, target_px: float | None = None) -> dict:
+    """What a client's LoD selection (client/lod_select.py) draws of each object, by distance:
+    {"target_px", "angle_rad", "reason", "objects": {name: {"original_within_m", "level_within_m"}}}
+    (the original mesh nearer than the first, the object's proxy level -- its encaging proxy or its
+    box, as ``levels`` says -- nearer than the second, its box beyond)."""
+    from pibr.client.lod_select import DEFAULT_TARGET_PX, REFERENCE_FOCAL_PX, switch_distances
+    from pibr.protocol.proxy import ProxyObject
+
+    target = DEFAULT_TARGET_PX if target_px is None else target_px
+    boxed = set(levels["box"])
+    objects = []
+    for obj in scene.objects:
+        lod = lods[obj.name]
+        proxy = lod.box if obj.name in boxed and lod.kind != "empty" else lod.proxy
+        objects.append(ProxyObject(obj.name, obj.transform, obj.is_dynamic, obj.mesh.bounds().astype("f8"),
+                                   (obj.mesh.vertices, obj.mesh.faces), (proxy.vertices, proxy.faces)))
+    d = switch_distances(objects, target)
+    return {"target_px": target, "angle_rad": round(target / REFERENCE_FOCAL_PX, 6),
+            "reason": f"--lod-pixels {target:g}: the finest level whose mean edge subtends {target:g} px of a 960-px-wide "
+                      f"90-degree output ({target / REFERENCE_FOCAL_PX:.4f} rad), at every output size",
+            "objects": {o.name: {"original_within_m": round(float(a), 3), "level_within_m": round(float(b), 3)}
+                        for o, (a, b) in zip(objects, d)}}

@@ -58,7 +58,8 @@ def register(sub) -> None:
     p.add_argument("--tau", type=float, default=0.1,
                    help="proxy: relative depth error still taken as the same surface (default 0.1)")
     p.add_argument("--lod-pixels", type=float, default=6.0,
-                   help="proxy: finest LoD whose edges cover at least this many pixels (default 6)")
+                   help="proxy: finest LoD whose edges cover at least this many pixels of a 960-pixel-wide "
+                        "90-degree output (an angle, the same at every output size; default 6)")
     p.add_argument("--lod-level", choices=("original", "proxy", "box"), default=None,
                    help="proxy: draw this level for every object instead of choosing by distance")
     p.add_argument("--deadline", choices=DEADLINE_MODES, default="auto",

@@ -38,7 +38,7 @@ class ClientConfig:
     receive_timeout_s: float = 30.0  # longest silence from the server while waiting for it
     progress: str = "bar"    # bar, lines (machine-readable on stdout), none
     tau: float = 0.1         # proxy IBR: relative depth error accepted as the same surface
-    lod_pixels: float = 6.0  # proxy IBR: on-screen edge length that selects an object's LoD
+    lod_pixels: float = 6.0  # proxy IBR: edge length, in pixels of a 960-wide 90-degree output, that selects the LoD
     lod_level: str | None = None  # proxy IBR: force original, proxy or box for every object
     deadline: str = "auto"   # quality levels chosen to keep the output rate (client/deadline.py): auto, on, off
     cost_table: str | None = None  # JSON of each level's ms (or a session.json), for the virtual clock

@@ -1,10 +1,21 @@
 """Per object and output frame: cull against the view frustum, then pick the level of detail.
 
 Levels: the original mesh, the encaging proxy, the bounding box. A level's mean edge length
-L projects to about L * f / d pixels at distance d (f: focal length in pixels). The finest
-level whose edges still cover at least ``target_px`` pixels is drawn, so the proxy's
-screen-space complexity stays roughly constant however far objects are: each level has a
-distance threshold ``L * f / target_px`` below which it is used.
+L subtends about L / d radians at distance d. The finest level whose edges still subtend at
+least the target angle is drawn, so the proxy's angular complexity stays roughly constant however
+far objects are: each level has a distance threshold ``L / angle`` below which it is used.
+
+The target is an angle, given as pixels of a reference output (``target_px`` pixels at
+REFERENCE_FOCAL_PX pixels per radian: 960 pixels across 90 degrees), whatever the output's
+size. It was pixels of the output until issue 26: a smaller output then picked coarser proxies,
+while what a proxy's error costs is the reprojection's error, an angle (the proxy's geometric
+error against the head's displacement), which the output's pixel count does not change.
+Measured on the tuning windows (``pibr bench ibr --windows tuning --lod-targets
+1.5,3,6,12,24``, docs/results/lod-target.json): on a close-up scene (a detailed object from
+0.7 m) the quality first drops at 12 px of a 960-wide output and 6 px of a 480-wide one (both
+0.025 rad) and at 24 px of a 1440-wide one (0.033 rad; 12 px there, 0.017 rad, cost nothing):
+at about one angle. The default, 6 px of the reference (0.0125 rad), keeps below it; 3 px buys
+the room about 1 % at 960x540 for more triangles.
 """
 from __future__ import annotations
 
@@ -18,6 +29,20 @@ from pibr.protocol.pose import Pose
 from pibr.protocol.proxy import LEVELS, ProxyObject
 
 DEFAULT_TARGET_PX = 6.0
+#: Pixels per radian at the centre of the reference output the target is given for (960 px
+#: across a 90-degree field of view): the default target is 6 / 480 = 0.0125 rad.
+REFERENCE_FOCAL_PX = 480.0
+
+
+def switch_distances(objects: list[ProxyObject], target_px: float = DEFAULT_TARGET_PX) -> np.ndarray:
+    """(n, 2): per object the distance (metres) below which its original mesh, then its proxy
+    level, is drawn; beyond both, its box. ``target_px``: pixels of the reference output."""
+    out = []
+    for o in objects:
+        scale = float(np.cbrt(abs(np.linalg.det(o.transform[:3, :3])))) or 1.0
+        lengths = [mean_edge_length(*o.level(level)) * scale for level in ("original", "proxy")]
+        out.append([L * REFERENCE_FOCAL_PX / target_px for L in lengths])
+    return np.array(out, dtype=np.float64).reshape(len(objects), 2)
 
 
 def mean_edge_length(vertices: np.ndarray, faces: np.ndarray) -> float:
@@ -49,14 +74,8 @@ class LodSelector:
         self.force_level = force_level
         self.tan_x = math.tan(math.radians(output.fov_deg) / 2)
         self.tan_y = self.tan_x * output.height / output.width
-        self.focal_px = output.width / 2 / self.tan_x
-        thresholds = []
-        for o in objects:
-            scale = float(np.cbrt(abs(np.linalg.det(o.transform[:3, :3])))) or 1.0
-            lengths = [mean_edge_length(*o.level(level)) * scale for level in ("original", "proxy")]
-            thresholds.append([L * self.focal_px / target_px for L in lengths])
         #: (n, 2): per object the distance below which its original mesh, then its proxy, is used
-        self.thresholds = np.array(thresholds, dtype=np.float64).reshape(len(objects), 2)
+        self.thresholds = switch_distances(objects, target_px)
         #: (n, 8, 4) box corners of every object, object space and (at rest) world space, homogeneous
         self._corners = np.array([[[x, y, z, 1.0] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])]
                                   for lo, hi in (o.bounds for o in objects)]).reshape(len(objects), 8, 4)

@@ -41,11 +41,21 @@ def scaled_output(output: OutputConfig, scale: float) -> OutputConfig:
 
 def make_level(ctx, level, output: OutputConfig, config, proxies=None, **options):
     """The method of a quality level (client/deadline.py ``Level``) for ``output``: made with the
-    level's options over ``options``, at the level's scale (a :class:`ScaledRender` below 1)."""
-    from .methods import make_method
+    level's options over ``options``, at the level's scale (a :class:`ScaledRender` below 1).
+
+    A level drawn at ``scale`` also takes its LoD target ``1 / scale`` times coarser: the target
+    is an angle (client/lod_select.py), and a level with fewer pixels is meant to be cheaper in
+    geometry too; at a 960-wide output this is exactly what the levels were measured with
+    (``pibr bench levels``, docs/results/levels.json), when the target was in output pixels."""
+    from .lod_select import DEFAULT_TARGET_PX
+    from .methods import make_method, method_options
+
+    opts = {**options, **level.options}
+    if level.scale != 1.0 and "lod_target_px" in method_options(level.method):
+        opts["lod_target_px"] = (opts.get("lod_target_px") or DEFAULT_TARGET_PX) / level.scale
 
     def make(out):
-        return make_method(level.method, ctx, out, config, proxies=proxies, **{**options, **level.options})
+        return make_method(level.method, ctx, out, config, proxies=proxies, **opts)
 
     return make(output) if level.scale == 1.0 else ScaledRender(ctx, output, level.scale, make)
 

@@ -392,12 +392,20 @@ def format_plan(plan: dict) -> str:
             shown = str(value)
         lines.append(f"{aspect:<12} {shown:<26} {d['reason']}")
     objects = plan["proxies"]["measured"].get("objects", {})
+    lod = plan.get("lod") or {}
+    if lod:
+        lines.append(f"{'lod':<12} {str(lod['target_px']) + ' px':<26} {lod['reason']}")
     if objects:
         lines.append("")
         width = max(len(n) for n in objects)
-        lines.append(f"{'object':<{width}}  level  tris orig  tris proxy  vol/box  why")
+        near = lod.get("objects", {})
+        head = "original <  level <  " if near else ""
+        lines.append(f"{'object':<{width}}  level  tris orig  tris proxy  vol/box  {head}why")
         for name, o in objects.items():
             ratio = o.get("volume_ratio_to_box")
+            dist = ""
+            if name in near:
+                dist = f"{near[name]['original_within_m']:>8.2f}m {near[name]['level_within_m']:>7.2f}m  "
             lines.append(f"{name:<{width}}  {o['level']:<5}  {o['triangles_original']:>9}  {o['triangles_proxy']:>10}  "
-                         f"{'-' if ratio is None else f'{ratio:.3f}':>7}  {o['why']}")
+                         f"{'-' if ratio is None else f'{ratio:.3f}':>7}  {dist}{o['why']}")
     return "\n".join(lines)

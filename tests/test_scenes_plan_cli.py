@@ -19,6 +19,19 @@ def test_plan_table_for_a_builtin_scene(capsys):
     assert "2048x2048" in lines["view_size"]          # Reinert et al.'s size for 1280x720 at 70 degrees
     assert "1 proxy, 0 box" in lines["proxies"]
     assert "sphere  proxy" in out                      # the per-object table
+    lod = next(line for line in out.splitlines() if line.startswith("lod "))
+    assert "6.0 px" in lod and "0.0125 rad" in lod and "at every output size" in lod
+
+
+def test_plan_says_where_each_level_is_drawn_and_the_output_size_does_not_change_it(capsys):
+    plans = {}
+    for size in ("480x270", "1920x1080"):
+        assert main(["scenes", "--plan", "sphere", "--json", "--output", size]) == 0
+        plans[size] = json.loads(capsys.readouterr().out)
+    lod = plans["480x270"]["lod"]
+    assert lod == plans["1920x1080"]["lod"] and lod["target_px"] == 6.0
+    sphere = lod["objects"]["sphere"]
+    assert 0 < sphere["original_within_m"] < sphere["level_within_m"]
 
 
 def test_plan_json_with_a_bandwidth_and_a_dynamic_scene(capsys):

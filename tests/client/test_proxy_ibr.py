@@ -43,6 +43,26 @@ def test_lod_selection_by_distance_and_frustum(room):
     assert {c.level for c in boxes} == {"box"}
 
 
+def test_lod_target_is_an_angle_whatever_the_output_size(room):
+    """A smaller output used to pick coarser levels (issue 26, item 9); the target is pixels of a
+    960-wide 90-degree output, so every size picks the same levels, and the reference size's
+    pick is the old pixel rule's at that size."""
+    from pibr.client.lod_select import REFERENCE_FOCAL_PX, switch_distances
+
+    scene, proxies = room
+    pose = scene.viewer_origin
+    picks = {}
+    for w, h in ((480, 270), (960, 540), (1920, 1080)):
+        sel = LodSelector(proxies, OutputConfig(w, h, 90.0, 30.0), target_px=6.0)
+        picks[w] = {c.index: c.level for c in sel.select(pose, 0.0)}
+    assert picks[480] == picks[960] == picks[1920]
+    assert "original" in picks[960].values()
+    # at the reference output (960 px across 90 degrees: 480 px per radian) the threshold is L * f / 6
+    assert REFERENCE_FOCAL_PX == pytest.approx(960 / 2 / np.tan(np.radians(45)))
+    d = switch_distances(proxies, 6.0)
+    assert np.allclose(switch_distances(proxies, 3.0), 2 * d) and (d[:, 0] <= d[:, 1] + 1e-9).all()
+
+
 @pytest.fixture(scope="module")
 def sim(room):
     scene, proxies = room

@@ -75,3 +75,23 @@ def test_every_level_draws(sim, sample, method):
         rgb, holes, _ = _draw(sim, sample, level)
         assert rgb.shape == (108, 192, 3) and 0.0 <= holes <= 1.0
         assert rgb.reshape(-1, 3).std(axis=0).max() > 5.0     # a picture, not a blank
+
+
+def test_a_scaled_level_draws_its_lod_coarser_by_its_scale(sim):
+    """The LoD target is an angle (client/lod_select.py); a level at half the pixels takes a
+    target twice as coarse, its own or the user's, as the levels were measured with at 960x540."""
+    from pibr.client.lod_select import switch_distances
+
+    for options, target in (({}, 6.0), ({"lod_target_px": 4.0}, 4.0)):
+        method = make_level(sim.ctx, Level("1/2", "proxy", 0.5), sim.output, sim.session, sim.proxies,
+                            poses=sim.poses, **options)
+        try:
+            np.testing.assert_allclose(method.method.selector.thresholds, switch_distances(sim.proxies, 2 * target))
+        finally:
+            method.release()
+        whole = make_level(sim.ctx, Level("full", "proxy"), sim.output, sim.session, sim.proxies, poses=sim.poses,
+                           **options)
+        try:
+            np.testing.assert_allclose(whole.selector.thresholds, switch_distances(sim.proxies, target))
+        finally:
+            whole.release()
