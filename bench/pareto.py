@@ -187,8 +187,9 @@ def measure_scene(scene, variants, windows, latency_ms=128.0, rate_hz=30.0, stri
     pool = (concurrent.futures.ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"))
             if workers > 0 else None)
     pending = []
+    # frames carry and decode their motion flow, as a client's do, for the competitors' ``flow`` variants
     sim = Simulation(scene, bench_server_config(view_size, depth_codec=depth_codec), out_size, proxies=proxies,
-                     keep_distances=True)
+                     keep_distances=True, flow_frames=True)
     rays = camera_rays(*out_size, sim.output.fov_deg)
     try:
         methods = {v.label: sim.make_method(v.method, **v.options) for v in variants}
@@ -232,6 +233,7 @@ def measure_scene(scene, variants, windows, latency_ms=128.0, rate_hz=30.0, stri
     speed = _measure_speed(scene, variants, samples, proxies, view_size, speed_sizes, speed_frames, depth_codec, bar)
     views_px = view_size[0] * view_size[1]
     result = {"scene": scene.name, "view_size": list(view_size), "output": list(out_size), "stride": stride,
+              "flow_frames": sim.motion_decoder is not None,   # frames decoded with their motion flow
               "oracle_rate_hz": oracle_rate, "frames": {w: len(s) for w, s in samples.items()},
               "nearly_uniform_frames": uniform, "variants": {}}
     if bundle is not None:
@@ -261,7 +263,7 @@ def _measure_speed(scene, variants, samples, proxies, view_size, sizes, frames, 
     for size in sizes:
         key = f"{size[0]}x{size[1]}"
         sim = Simulation(scene, bench_server_config(view_size, depth_codec=depth_codec), size, proxies=proxies,
-                         keep_distances=True)
+                         keep_distances=True, flow_frames=True)
         try:
             methods = {v.label: sim.make_method(v.method, **v.options) for v in variants}
             methods[ORACLE] = sim.make_method("none")

@@ -100,6 +100,8 @@ def test_tiny_pareto_run(tmp_path):
                       "proxy, static motion", "proxy, oracle motion", "rotation, flow",
                       "coarse-meshwarp s=4, flow", ORACLE}
     assert v["proxy, oracle motion"]["options"] == {"motion": "oracle"}
+    # the competitors' flow variants get frames with their motion flow decoded, as a client does
+    assert room["flow_frames"] is True
     assert all(x["quality"]["frames"] == 3 and x["quality"]["flip_frames"] == 2 for x in v.values())
     # One geometric definition: methods drawing from the same views share it; the extra view
     # only ever removes holes.
