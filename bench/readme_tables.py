@@ -194,7 +194,10 @@ def server_projection(r: dict) -> list[str]:
 
 def server_edges(r: dict) -> list[str]:
     """``pibr bench server --max-edge-deg ... --accuracy``: the pre-tessellation's edge angle."""
-    rows = [[f"{x['max_edge_deg']:g}°", f"{x['rasterised_triangles']:,}", f"{x['render_ms']:.1f}",
+    from pibr.server.config import MAX_EDGE_ANGLE_DEG
+
+    rows = [[f"{x['max_edge_deg']:g}°" + (" (default)" if x["max_edge_deg"] == MAX_EDGE_ANGLE_DEG else ""),
+             f"{x['rasterised_triangles']:,}", f"{x['render_ms']:.1f}",
              f"{x['total_ms']:.1f}", f"{x['psnr_vs_reference_db']:.1f} dB", f"{100 * x['distance_off_fraction']:.3f} %"]
             for x in r["rows"]]
     return _table(["edge angle", "triangles", "render ms", "total ms",
