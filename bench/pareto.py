@@ -116,17 +116,20 @@ def _at_defaults(v: Variant) -> bool:
 
 
 def window_winners(variants: dict, windows) -> dict:
-    """Per window, every variant's DSSIM, the lowest of all (the oracle aside), the best ``proxy``
-    variant and the best competitor. ``variants``: label -> the scene's variant record."""
+    """Per window, every variant's DSSIM, the lowest of all, the best ``proxy`` variant and the
+    best competitor; the zero-latency oracle and ``oracle`` motion (the scene's animation, which
+    no client has) are bounds, recorded but never a winner. ``variants``: label -> the scene's
+    variant record."""
     out = {}
     for w in windows:
         dssim = {label: v["quality"]["per_window"][w]["dssim_mean"] for label, v in variants.items()
                  if label != ORACLE and v["quality"]["per_window"][w]["dssim_mean"] is not None}
         if not dssim:
             continue
-        proxies = {k: x for k, x in dssim.items() if variants[k]["method"] == "proxy"}
-        others = {k: x for k, x in dssim.items() if variants[k]["method"] != "proxy"}
-        best = min(dssim, key=dssim.get)
+        runnable = {k: x for k, x in dssim.items() if variants[k]["options"].get("motion") != "oracle"}
+        proxies = {k: x for k, x in runnable.items() if variants[k]["method"] == "proxy"}
+        others = {k: x for k, x in runnable.items() if variants[k]["method"] != "proxy"}
+        best = min(runnable, key=runnable.get)
         row = {"dssim": dssim, "winner": best, "winner_dssim": dssim[best]}
         if proxies:
             k = min(proxies, key=proxies.get)

@@ -132,3 +132,20 @@ def test_tiny_pareto_run(tmp_path):
     assert row["best_competitor_dssim"] == pytest.approx(d[row["best_competitor"]])
     assert v[row["winner"]]["method"] == "proxy" and row["winner"] == row["best_proxy"]
     assert ORACLE not in row["dssim"] and row["dssim"]["proxy"] == pytest.approx(d["proxy"])
+
+
+def test_window_winners_leave_out_the_bounds():
+    """Oracle motion (the scene's animation) and the zero-latency oracle are bounds: recorded per
+    window, never the winner, the best proxy variant or the best competitor."""
+    from pibr.bench.pareto import window_winners
+
+    def record(method, dssim, **options):
+        return {"method": method, "options": options, "quality": {"per_window": {"w": {"dssim_mean": dssim}}}}
+
+    variants = {"proxy": record("proxy", 0.05), "proxy, oracle motion": record("proxy", 0.03, motion="oracle"),
+                "gridwarp": record("gridwarp", 0.06), "gridwarp, flow": record("gridwarp", 0.055, motion="flow"),
+                ORACLE: record("none", 0.01)}
+    row = window_winners(variants, ["w"])["w"]
+    assert row["winner"] == row["best_proxy"] == "proxy" and row["winner_dssim"] == 0.05
+    assert row["best_competitor"] == "gridwarp, flow"
+    assert row["dssim"]["proxy, oracle motion"] == 0.03 and ORACLE not in row["dssim"]
