@@ -204,55 +204,6 @@ def server_edges(r: dict) -> list[str]:
                    f"colour PSNR vs {r['reference_edge_deg']:g}°", "pixels > 1 % off in distance"], rows)
 
 
-def _knob_value(name: str, value) -> str:
-    from .trade import KNOBS
-
-    unit = KNOBS[name].unit if name in KNOBS else ""
-    if isinstance(value, str):
-        return value
-    if unit == "kbit/s":
-        return "none" if value == 0 else f"{value / 1000:g} Mbit/s"
-    if name == "lod_fraction":
-        return f"{100 * value:g} %"
-    if name == "lod_resolution":
-        return f"{value:g}³"
-    if name == "extra":
-        return "off" if value == 0 else f"{value:g}"
-    return f"{value:g} {unit}".strip()
-
-
-def trade_wide(r: dict, knob: str = "bitrate", scene: str = "room") -> list[str]:
-    """``pibr bench trade``: one knob's sweep, each method's DSSIM per value (the default marked *)."""
-    from pibr.bench.variants import sweep_labels
-
-    rows = r["scenes"][scene]["sweeps"][knob]
-    values = [_knob_value(knob, x["value"]) + ("*" if x["default"] else "") for x in rows]
-    return _table([knob, *values], [[label, *(f"{x['methods'][label]['dssim']:.4f}" for x in rows)]
-                                    for label in sweep_labels(rows)])
-
-
-def trade_long(r: dict, scene: str = "room") -> list[str]:
-    """``pibr bench trade``: every knob of the file, per value the DSSIM of each method scored at
-    every value, the server's CPU ms per frame, the Mbit/s sent and the mean frame age."""
-    from pibr.bench.variants import sweep_labels
-
-    sweeps = r["scenes"][scene]["sweeps"]
-    labels = None
-    out_rows = []
-    for knob, rows in sweeps.items():
-        here = sweep_labels(rows)
-        labels = labels or here
-        for x in rows:
-            st = x["stream"]
-            out_rows.append([knob, _knob_value(knob, x["value"]) + ("*" if x["default"] else ""),
-                             *(_num(x["methods"][lab]["dssim"], ".4f") if lab in x["methods"] else "—"
-                               for lab in labels),
-                             f"{st['server_cpu_ms']:.0f}", f"{st['kbps'] / 1000:.1f}",
-                             _num(st["age_ms_mean"], ".0f")])
-    return _table(["knob", "value", *(f"{lab} DSSIM" for lab in labels), "server CPU ms", "Mbit/s sent",
-                   "age ms"], out_rows)
-
-
 def codec_matched(r: dict) -> list[str]:
     """``pibr bench codec``: per edge threshold, the edge codec at 8, 10 and 12 bits and H.264
     depth alone at the rate of the edge curve of its precision: kbit/frame, disparity PSNR, share
@@ -308,8 +259,10 @@ def lod_target(r: dict) -> list[str]:
     return _table(["scene, output", *(t.replace("proxy lod ", "") for t in targets)], rows)
 
 
-RENDERERS = {"lod-target": lod_target, "codec-matched": codec_matched, "codec-end-to-end": codec_end_to_end, "trade-wide": trade_wide, "trade": trade_long, "ibr": ibr, "split": split, "server-projection": server_projection, "server-edges": server_edges, "dynamic": dynamic, "realtime": realtime, "levels": levels, "upsampling": upsampling, "pareto": pareto,
-             "pareto-windows": pareto_windows, "coverage": coverage}
+RENDERERS = {"realtime": realtime, "levels": levels, "upsampling": upsampling, "pareto": pareto,
+             "pareto-windows": pareto_windows, "coverage": coverage, "dynamic": dynamic, "ibr": ibr,
+             "split": split, "server-projection": server_projection, "server-edges": server_edges,
+             "codec-matched": codec_matched, "codec-end-to-end": codec_end_to_end, "lod-target": lod_target}
 
 
 # -- the README ---------------------------------------------------------------------------------------------------
@@ -408,6 +361,9 @@ def main(argv=None) -> int:
     p.add_argument("--root", default=".", help="where the paths in the markers start (default: .)")
     p.add_argument("--write", action="store_true", help="rewrite the announced tables from their files")
     a = p.parse_args(argv)
+    if not os.path.isfile(a.readme):
+        print(f"no README at {a.readme!r}: run from the repository's root or pass --readme", file=sys.stderr)
+        return 2
     if a.write:
         print(f"{write(a.readme, a.root)} table(s) rewritten")
     problems = check(a.readme, a.root)
