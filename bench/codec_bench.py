@@ -206,7 +206,7 @@ def run_codec_bench(scene_spec="room", windows=None, window_s=2.0, fps=10.0, vie
     with_depth = pipeline.spec.layout
     edge_pts = {t: _Point("edge", {"threshold": t}) for t in thresholds}
     low_bit_pts = {(name, t): _Point(name, {"threshold": t, "bits": bits}) for name, bits in EDGE_CURVE_BITS.items()
-                   if name != "edge" for t in thresholds}
+                   if bits != EDGE_BITS for t in thresholds}
     variant_pts = {"edge-intra": _Point("edge-intra", {"threshold": 3.5, "temporal": False}),
                    "edge-raster": _Point("edge-raster", {"threshold": 3.5, "passes": 1}),
                    "edge-plain-diffusion": _Point("edge-plain-diffusion", {"threshold": 3.5, "edge_aware": False})}
@@ -284,8 +284,8 @@ def run_codec_bench(scene_spec="room", windows=None, window_s=2.0, fps=10.0, vie
         return sorted((p.summary(fps) for p in points), key=lambda s: (s["bits_per_frame"] or 0.0))
 
     curves = {"edge": curve(edge_pts.values())}
-    for name in EDGE_CURVE_BITS:
-        if name != "edge":
+    for name, bits in EDGE_CURVE_BITS.items():
+        if bits != EDGE_BITS:
             curves[name] = curve(pt for (n, _), pt in low_bit_pts.items() if n == name)
     for c in h264_codecs:
         curves[c] = curve(pt for (cc, _), pt in h264_pts.items() if cc == c)
