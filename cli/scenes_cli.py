@@ -94,16 +94,10 @@ def lod_distances(scene, lods: dict, levels: dict, target_px: float | None = Non
     (the original mesh nearer than the first, the object's proxy level -- its encaging proxy or its
     box, as ``levels`` says -- nearer than the second, its box beyond)."""
     from pibr.client.lod_select import DEFAULT_TARGET_PX, REFERENCE_FOCAL_PX, switch_distances
-    from pibr.protocol.proxy import ProxyObject
+    from pibr.server.proxies import proxy_objects
 
     target = DEFAULT_TARGET_PX if target_px is None else target_px
-    boxed = set(levels["box"])
-    objects = []
-    for obj in scene.objects:
-        lod = lods[obj.name]
-        proxy = lod.box if obj.name in boxed and lod.kind != "empty" else lod.proxy
-        objects.append(ProxyObject(obj.name, obj.transform, obj.is_dynamic, obj.mesh.bounds().astype("f8"),
-                                   (obj.mesh.vertices, obj.mesh.faces), (proxy.vertices, proxy.faces)))
+    objects = proxy_objects(scene, lods, levels)
     d = switch_distances(objects, target)
     return {"target_px": target, "angle_rad": round(target / REFERENCE_FOCAL_PX, 6),
             "reason": f"--lod-pixels {target:g}: the finest level whose mean edge subtends {target:g} px of a 960-px-wide "

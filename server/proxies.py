@@ -40,6 +40,20 @@ class ProxyBundle:
         return BundleInfo(self.objects, len(self.compressed), self.raw_bytes, chunk_bytes, self.triangles).to_json()
 
 
+def proxy_objects(scene, lods: dict, levels: dict) -> list[ProxyObject]:
+    """Per object of ``scene`` what the client receives: its original mesh and its proxy level,
+    the encaging proxy or the box as ``levels`` ({"proxy": [...], "box": [...]}) says."""
+    boxed = set(levels["box"])
+    objects = []
+    for obj in scene.objects:
+        lod = lods[obj.name]
+        m = obj.mesh
+        proxy = lod.box if obj.name in boxed and lod.kind != "empty" else lod.proxy
+        objects.append(ProxyObject(obj.name, obj.transform, obj.is_dynamic, m.bounds().astype("f8"),
+                                   (m.vertices, m.faces), (proxy.vertices, proxy.faces)))
+    return objects
+
+
 def build_bundle(scene, settings: ProxySettings = ProxySettings(), progress: bool = False) -> ProxyBundle:
     """LoDs for every object (from the cache when it has them), packed and compressed."""
     from pibr.scenes.lod_cache import lods_for_scene
@@ -50,18 +64,9 @@ def build_bundle(scene, settings: ProxySettings = ProxySettings(), progress: boo
     lods = lods_for_scene(scene, resolution=settings.resolution, target_fraction=settings.target_fraction,
                           progress=progress)
     levels = decide_proxies(scene, lods)
-    boxed = set(levels.value["box"])
-    objects = []
-    tris = {"original": 0, "proxy": 0, "box": 0}
-    for obj in scene.objects:
-        lod = lods[obj.name]
-        m = obj.mesh
-        proxy = lod.box if obj.name in boxed and lod.kind != "empty" else lod.proxy
-        objects.append(ProxyObject(obj.name, obj.transform, obj.is_dynamic, m.bounds().astype("f8"),
-                                   (m.vertices, m.faces), (proxy.vertices, proxy.faces)))
-        tris["original"] += m.triangle_count
-        tris["proxy"] += proxy.triangle_count
-        tris["box"] += 12
+    objects = proxy_objects(scene, lods, levels.value)
+    tris = {"original": sum(obj.mesh.triangle_count for obj in scene.objects),
+            "proxy": sum(len(o.proxy[1]) for o in objects), "box": 12 * len(objects)}
     raw = encode_bundle(objects)
     bundle = ProxyBundle(compress_bundle(raw), len(raw), len(objects), tris, time.perf_counter() - t0, levels)
     log.info("proxies of %s: %d objects, %d -> %d triangles, %.1f MB -> %.1f MB zstd, %.1f s", scene.name,
