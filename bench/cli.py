@@ -338,6 +338,37 @@ def register(sub) -> None:
     _out(dy)
     dy.set_defaults(func=commands.cmd_bench_dynamic)
 
+    st = bs.add_parser("stereo", help="two eyes from one stream: mono, cyclops, alternate and per-eye references per "
+                                      "method; per-eye quality, binocular consistency, ms per pair",
+                       description="Every server reference for a headset's two eyes (mono at the head's centre, "
+                                   "cyclops, alternate, per-eye; protocol/stereo.py) with each method, on the "
+                                   "virtual clock: per-eye DSSIM, PSNR, FLIP and holes against each eye's ground "
+                                   "truth, the binocular consistency of each pair (bench/stereo_metrics.py), client "
+                                   "CPU ms per pair against one mono view, server CPU ms and bits per second per "
+                                   "reference. Writes stereo.json, stereo.png, stereo-pair.png and "
+                                   "stereo-anaglyph.png. About 20 min on 2 cores with the defaults.")
+    st.add_argument("--scene", type=arguments.names, default=("room", "dynamic"),
+                    help="scenes (default room,dynamic)")
+    st.add_argument("--windows", type=_windows, default=None,
+                    help="windows of every scene but dynamic (default: pred6dof-1@30+4, synth-walk@5+4, "
+                         "synth-turns@5+4 and a walk that comes to rest in synth-mixed; " + _WINDOWS_HELP + ")")
+    st.add_argument("--dynamic-windows", type=_windows, default=None,
+                    help="windows of the dynamic scene (default pred6dof-2@50+2,synth-turns@5+2)")
+    st.add_argument("--method", type=parse_methods, default=("proxy", "gridwarp", "rotation"),
+                    help="methods (default proxy,gridwarp,rotation)")
+    st.add_argument("--modes", type=arguments.names, default=("mono", "cyclops", "alternate", "per-eye"),
+                    help="server references, mono among them (default mono,cyclops,alternate,per-eye)")
+    st.add_argument("--ipd-mm", type=arguments.positive, default=64.0, help="interpupillary distance (default 64)")
+    _latency(st)
+    _rate(st)
+    st.add_argument("--stride", type=arguments.positive_int, default=4, help="score every Nth displayed tick (default 4)")
+    st.add_argument("--flip-every", type=arguments.non_negative_int, default=4,
+                    help="FLIP on every Nth scored tick, 0: never (default 4)")
+    _view_size(st)
+    _output_size(st)
+    _out(st)
+    st.set_defaults(func=commands.cmd_bench_stereo)
+
     sp = bs.add_parser("split", help="a one-mesh level, whole against cut into pieces: LoD, client ms, DSSIM",
                        description="Generates a one-mesh atrium (167k triangles) and serves it whole and cut into "
                                    "pieces (scenes/split.py): LoD build time, proxy's client ms and quality on "

@@ -74,6 +74,18 @@ def cmd_bench_dynamic(args) -> int:
     return 0
 
 
+def cmd_bench_stereo(args) -> int:
+    from .stereo_bench import print_stereo, run_stereo_bench
+
+    r = run_stereo_bench(windows=args.windows, dynamic_windows=args.dynamic_windows, methods=args.method,
+                         modes=args.modes, ipd_mm=args.ipd_mm, latency_ms=args.latency_ms, rate_hz=args.rate,
+                         view_size=args.view_size, out_size=args.size, stride=args.stride, flip_every=args.flip_every,
+                         scenes=args.scene, out_dir=args.out)
+    print_stereo(r)
+    print(f"written: {args.out}/stereo.json, stereo.png, stereo-pair.png, stereo-anaglyph.png")
+    return 0
+
+
 def cmd_bench_split(args) -> int:
     from .split_bench import print_split_table, run_split_bench
 

@@ -289,3 +289,30 @@ def plot_trade(result: dict, knob: str, path: str, client: bool, unit: str) -> N
     fig.tight_layout()
     fig.savefig(path, dpi=100)
     plt.close(fig)
+
+
+def plot_stereo(result: dict, path: str) -> None:
+    """``pibr bench stereo``: per scene, each method's per-eye DSSIM and binocular inconsistency by
+    server reference (mono: one view at the head's centre, its consistency that of one image shown
+    to both eyes)."""
+    plt = _pyplot()
+    scenes = list(result["scenes"])
+    fig, axes = plt.subplots(2, max(1, len(scenes)), figsize=(5.5 * max(1, len(scenes)), 7), squeeze=False)
+    modes, methods = result["modes"], result["methods"]
+    width = 0.8 / max(1, len(modes))
+    for col, scene in enumerate(scenes):
+        variants = result["scenes"][scene]["variants"]
+        for row, (key, title) in enumerate((("dssim_mean", "per-eye DSSIM (lower is better)"),
+                                            ("inconsistent_mean", "binocular pairs inconsistent"))):
+            ax = axes[row][col]
+            for j, mode in enumerate(modes):
+                values = [variants[f"{m} {mode}"][key] or 0.0 for m in methods]
+                ax.bar(np.arange(len(methods)) + (j - (len(modes) - 1) / 2) * width, values, width, label=mode)
+            ax.set_xticks(np.arange(len(methods)))
+            ax.set_xticklabels(methods)
+            ax.set_title(f"{scene}: {title}", fontsize=9)
+            ax.grid(alpha=0.3, axis="y")
+    axes[0][0].legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)

@@ -187,9 +187,11 @@ class Simulation:
                 total += series[index]
         return 8 * total
 
-    def receive(self, frame, distances=None) -> None:
+    def receive(self, frame, distances=None, textures=None) -> None:
         """The client's half: decode ``frame`` and upload it as the newest. ``distances``: the
-        frame's true distances (from :meth:`serve`), kept as ``self.distances`` for geometric holes."""
+        frame's true distances (from :meth:`serve`), kept as ``self.distances`` for geometric holes;
+        ``textures``: the FrameTextures to upload to (default :attr:`textures`; a stereo client keeps
+        one set per eye)."""
         t_render = frame.render_t_us / 1e6
         if distances is not None:
             self.distances = distances
@@ -210,7 +212,7 @@ class Simulation:
             flow_frame = primary_flow_frame(self.session, image, distances, *self.flow, t_render)
             self.flow_decode_ms.append((t1 - t0) * 1e3)
             self.flow_prepare_ms.append((time.perf_counter() - t1) * 1e3)
-        self.textures.upload(image, frame, distances, flow_frame)
+        (textures or self.textures).upload(image, frame, distances, flow_frame)
 
     def restart_stream(self) -> None:
         """A new session's stream: fresh encoders and decoders (the next frame is a keyframe);
@@ -237,6 +239,8 @@ class Simulation:
 
         interval = 1.0 / self.fps
         newest = self.poses.newest_time
+        if newest is not None and abs(newest - t_render) < 1e-9:   # a second frame of the tick (stereo per-eye)
+            return
         if newest is None or newest >= t_render:   # a new timeline: the frames before it, as a pre-roll
             newest = t_render - HISTORY * interval
         k0 = int(math.floor(newest / interval + 1e-6)) + 1

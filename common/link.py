@@ -137,8 +137,11 @@ class SessionSchedule:
             raise ValueError("frame_for needs an ideal link (no jitter, no cap, no skipped frames); "
                              "follow the schedule with next_due and sent")
         render = ((t_us - self.delay_us - self.down._delay_us) // self.interval_us) * self.interval_us
-        pose_t = ((render - self.up._delay_us) // self.tick_us) * self.tick_us
-        return render, pose_t
+        return render, self.pose_for(render)
+
+    def pose_for(self, render_us: int) -> int:
+        """Client time of the pose the frame rendered at ``render_us`` uses, on an ideal link."""
+        return ((render_us - self.up._delay_us) // self.tick_us) * self.tick_us
 
     def _pose_arrival(self, i: int) -> int:
         while len(self._pose_arrivals) <= i:
