@@ -5,10 +5,12 @@ x264's VBV (about two frames of buffer) and keyframe interval. Encoding releases
 so the server runs it in a thread pool, never on the event loop.
 
 x264 under so tight a VBV delivers 10-20 % less than its target (measured on the tuning
-windows, room at 1024^2: 0.81-0.97 of 1, 4 and 16 Mbit/s per group of pictures). Those bits
-would be lost to the colour, so the encoder measures what each group of pictures delivered
-and asks x264 for more (or less) in the next one: the factor follows target/delivered with
-gain :data:`UNDERSHOOT_GAIN`, within :data:`TARGET_FACTOR_RANGE`. The bitrate of an open
+windows, room at 1024^2: 0.81-0.97 of 1 to 16 Mbit/s per group of pictures, 0.87 on average;
+with the correction below 0.92-1.10, 0.99 on average). Those bits
+would be lost to the colour, so the encoder asks x264 for :data:`INITIAL_TARGET_FACTOR` times
+its target at first, then measures what each group of pictures delivered and asks for more (or
+less) in the next one: the factor follows target/delivered with gain :data:`UNDERSHOOT_GAIN`,
+within :data:`TARGET_FACTOR_RANGE`. The bitrate of an open
 libx264 context cannot be raised past its VBV (libavcodec reconfigures the bitrate, not the
 VBV given in x264-params), so the encoder is re-created where a keyframe falls anyway.
 
@@ -28,6 +30,11 @@ from pibr.protocol.errors import CodecError
 #: the tuning windows (room, 1024^2 dual view, 1-16 Mbit/s): gain 1 reached 1.00 of the target on
 #: average but swung to 1.08 in a group; 0.5 reached 0.97-0.99 and stayed within 1.06.
 UNDERSHOOT_GAIN = 0.5
+#: The factor a stream starts with, before any group was measured: the inverse of the mean share of
+#: its target x264 delivered in the first group of pictures on the tuning windows (0.873: room,
+#: 1024^2 dual view, 1, 2, 4, 8 and 16 Mbit/s, both tuning traces). Without it a session shorter
+#: than a group (3 s at 10 fps) would keep all of x264's undershoot.
+INITIAL_TARGET_FACTOR = 1.14
 #: The factor on x264's target never leaves this range (a group that sends next to nothing, a
 #: black screen, must not make the next one ask for ten times the rate).
 TARGET_FACTOR_RANGE = (0.5, 1.5)
@@ -49,7 +56,7 @@ class H264Encoder:
         self.target_kbps, self.fps, self.keyint, self.preset = float(bitrate_kbps), fps, keyint, preset
         self._threads = 1 if deterministic else 0
         #: x264's target is target_kbps times this (the undershoot correction, module docstring)
-        self.target_factor = 1.0
+        self.target_factor = INITIAL_TARGET_FACTOR
         self._group_bits = 0
         self._group_frames = 0
         self._av = av
