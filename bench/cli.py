@@ -124,6 +124,12 @@ def register(sub) -> None:
     d.add_argument("--motion", choices=CLIENT_MOTION_MODES, default=None,
                    help="how the client brings moving objects to the display time (see 'pibr client --help'; "
                         "try --scene dynamic --motion flow)")
+    d.add_argument("--stereo", choices=("cyclops", "alternate", "per-eye"), default=None,
+                   help="two eyes (see 'pibr client --help'): each scored against its own ground truth, and each "
+                        "pair's binocular consistency (default: one view)")
+    d.add_argument("--ipd-mm", type=arguments.positive, default=None, help="with --stereo: the eyes' distance "
+                                                                            "(default 64)")
+    d.add_argument("--anaglyph", action="store_true", help="with --stereo: also a red-cyan anaglyph video per method")
     d.set_defaults(func=commands.cmd_demo)
 
     e = sub.add_parser("evaluate", help="score a client recording against ground truth",

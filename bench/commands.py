@@ -119,16 +119,30 @@ def cmd_bench_trade(args) -> int:
     return 0
 
 
+def demo_client_args(args) -> tuple:
+    """The client options ``pibr demo`` passes on: only those the user set."""
+    from pibr.protocol.errors import ConfigError
+
+    if (args.ipd_mm is not None or args.anaglyph) and not args.stereo:
+        raise ConfigError("--ipd-mm and --anaglyph need two eyes: add --stereo cyclops, alternate or per-eye")
+    out = ("--motion", args.motion) if args.motion else ()
+    if args.stereo:
+        out += ("--stereo", args.stereo)
+    if args.ipd_mm is not None:
+        out += ("--ipd-mm", str(args.ipd_mm))
+    return out + (("--anaglyph",) if args.anaglyph else ())
+
+
 def cmd_demo(args) -> int:
     from .demo import print_report, run_demo
 
     from pibr.scenes.registry import with_up
 
+    client_args = demo_client_args(args)
     metrics = run_demo(out_dir=args.out, scene=with_up(args.scene, args.up), trace=args.trace, start_s=args.start,
                        duration_s=args.duration, rate_hz=args.rate, size=args.size, latency_ms=args.latency_ms,
                        methods=args.method, clock=args.clock, flip_every=args.flip_every, anchor=args.anchor,
-                       server_args=("--depth-codec", args.depth_codec),
-                       client_args=("--motion", args.motion) if args.motion else ())
+                       server_args=("--depth-codec", args.depth_codec), client_args=client_args)
     print_report(metrics, args.out)
     return 0
 

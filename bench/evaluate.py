@@ -9,6 +9,12 @@ Writes into the run directory:
                          for every method), hole_fraction_mean (own holes: pixels where
                          the method accepted no transmitted sample, whatever it shows there), client_ms_median, frames (+ more, see below)
     metrics_frames.csv   one row per method and tick
+
+A recording of two eyes (``pibr client --stereo``) holds each eye as a recording of its own,
+``M.left`` and ``M.right``, each scored against the ground truth at its eye's pose; metrics.json
+then also has ``stereo``: per method, the binocular consistency of the shown pairs
+(bench/stereo_metrics.py: the share of surface points both eyes see on which the two images
+disagree beyond what the ground truth's two eyes do).
     quality.png          quality and frame age over time
     side_by_side.mp4     per method one row: method | ground truth | error image
 
@@ -88,7 +94,12 @@ def evaluate_run(run_dir: str, scene_spec: str | None = None, flip_every: int = 
         raise ConfigError("flip_every must be >= 0 (0: no FLIP)")
     info = read_session(run_dir)
     client = info["client"]
-    methods = list(client["methods"])
+    recordings = info.get("recordings") or {m: {"method": m, "eye": "centre"} for m in client["methods"]}
+    if not isinstance(recordings, dict) or not all(isinstance(r, dict) and "eye" in r for r in recordings.values()):
+        raise ConfigError(f"{run_dir}/session.json: 'recordings' must map each recording to its method and eye")
+    methods = list(recordings)
+    eyes = list(dict.fromkeys(r["eye"] for r in recordings.values()))   # the eyes' ground truths, in order
+    first_of = {eye: next(m for m in methods if recordings[m]["eye"] == eye) for eye in eyes}
     width, height, fov = int(client["width"]), int(client["height"]), float(client["fov_deg"])
     scene = load_scene(scene_spec or info["session"]["scene"]["name"])
     records = {m: read_records(os.path.join(run_dir, f"{m}.records.csv")) for m in methods}
@@ -101,9 +112,16 @@ def evaluate_run(run_dir: str, scene_spec: str | None = None, flip_every: int = 
     streams = {m: _frames(os.path.join(run_dir, f"{m}.lossless.mkv")) for m in methods}
     shown = dict.fromkeys(methods)   # each method's image on screen
     gt = GroundTruth(scene, width, height, fov)
-    transmitted = TransmittedViews(scene, info["session"], (width, height), fov)
+    transmitted = {eye: TransmittedViews(scene, info["session"], (width, height), fov) for eye in eyes}
+    pairs_of = _stereo_pairs(recordings)   # method -> (left recording, right recording)
+    consistency = {m: [] for m in pairs_of}
+    rays = None
+    if pairs_of:
+        from pibr.server.coverage import camera_rays
+
+        rays = camera_rays(width, height, fov)
     uses_extra = {m: bool((info.get("methods") or {}).get(m, {}).get("uses_extra_view", False)) for m in methods}
-    geometric = []   # per tick: {"primary": fraction, "both": fraction}
+    geometric = {eye: [] for eye in eyes}   # per eye, per tick: {"primary": fraction, "both": fraction}
     uniform = 0      # ticks whose ground truth is nearly one colour
     # 'spawn', not fork: FLIP and SSIM use thread pools (OpenMP) that a forked child can find
     # locked forever if the parent used them before.
@@ -129,13 +147,20 @@ def evaluate_run(run_dir: str, scene_spec: str | None = None, flip_every: int = 
             results[m][i] = fut.result() if pool is not None else fut
     try:
         for i in range(n):
-            rec = records[methods[0]][i]
-            pose = Pose.make([rec["px"], rec["py"], rec["pz"]], [rec["qw"], rec["qx"], rec["qy"], rec["qz"]])
-            ref = gt.render(pose, rec["scene_t"])
-            uniform += nearly_uniform(ref)
-            geometric.append(transmitted.holes(pose, rec))
+            truth, truth_pose, truth_distance = {}, {}, {}
+            for eye in eyes:
+                rec = records[first_of[eye]][i]
+                pose = truth_pose[eye] = Pose.make([rec["px"], rec["py"], rec["pz"]],
+                                                   [rec["qw"], rec["qx"], rec["qy"], rec["qz"]])
+                truth[eye] = gt.render(pose, rec["scene_t"])
+                if pairs_of:
+                    truth_distance[eye] = gt.distance()
+                geometric[eye].append(transmitted[eye].holes(pose, rec))
+            uniform += nearly_uniform(truth[eyes[0]])
             rows = []
+            displayed = {}
             for m in methods:
+                ref = truth[recordings[m]["eye"]]
                 if records[m][i]["missed"]:   # the display kept the previous image (blank before any)
                     img = shown[m] if shown[m] is not None else np.zeros_like(ref)
                 else:
@@ -147,6 +172,7 @@ def evaluate_run(run_dir: str, scene_spec: str | None = None, flip_every: int = 
                                           f"ticks displayed afresh (one frame each)") from None
                 if img.shape != ref.shape:
                     raise ConfigError(f"{m}.lossless.mkv frames are {img.shape}, expected {ref.shape}")
+                displayed[m] = img
                 with_flip = flip_every > 0 and i % flip_every == 0
                 if pool is not None:
                     pending.append((m, i, pool.submit(frame_metrics, ref, img, ppd, with_flip)))
@@ -154,6 +180,14 @@ def evaluate_run(run_dir: str, scene_spec: str | None = None, flip_every: int = 
                     pending.append((m, i, frame_metrics(ref, img, ppd, with_flip)))
                 if writer is not None:
                     rows.append([img, ref, error_image(ref, img)])
+            if pairs_of:
+                from .stereo_metrics import binocular_pairs, stereo_consistency
+
+                pairs = binocular_pairs(rays, (width, height), fov, truth_pose["left"], truth_pose["right"],
+                                        truth_distance["left"], truth_distance["right"])
+                for m, (left, right) in pairs_of.items():
+                    consistency[m].append(stereo_consistency(displayed[left], displayed[right], truth["left"],
+                                                             truth["right"], pairs))
             if writer is not None:
                 writer.write(_stack_rows(rows, 2))
             settle(block=False)
@@ -164,7 +198,8 @@ def evaluate_run(run_dir: str, scene_spec: str | None = None, flip_every: int = 
         if bar is not None:
             bar.close()
         gt.close()
-        transmitted.close()
+        for t in transmitted.values():
+            t.close()
         if pool is not None:
             pool.shutdown(cancel_futures=True)
         if writer is not None:
@@ -177,7 +212,7 @@ def evaluate_run(run_dir: str, scene_spec: str | None = None, flip_every: int = 
         recs = records[m][:n]
         flips = [p["flip"] for p in per if not math.isnan(p["flip"])]
         ages = [r["age_ms"] for r in recs if not math.isnan(r["age_ms"])]
-        geo = [g["both" if uses_extra[m] else "primary"] for g in geometric]
+        geo = [g["both" if uses_extra[m] else "primary"] for g in geometric[recordings[m]["eye"]]]
         summary[m] = {
             "geometric_holes_mean": float(np.mean(geo)),
             "psnr_mean": float(np.mean([p["psnr"] for p in per])),
@@ -199,6 +234,15 @@ def evaluate_run(run_dir: str, scene_spec: str | None = None, flip_every: int = 
            "clock": client["clock"], "output": {"width": width, "height": height, "fov_deg": fov,
                                                 "rate_hz": client["rate_hz"], "pixels_per_degree": ppd},
            "flip_every": flip_every, "nearly_uniform_frames": uniform, "methods": summary}
+    if pairs_of:
+        out["stereo"] = {"reference": (info.get("stereo") or {}).get("reference"),
+                         "ipd_mm": (info.get("stereo") or {}).get("ipd_mm"), "methods": {}}
+        for m, values in consistency.items():
+            scored = [c for c in values if c["inconsistent"] is not None]
+            out["stereo"]["methods"][m] = {
+                "inconsistent_mean": float(np.mean([c["inconsistent"] for c in scored])) if scored else None,
+                "excess_mean": float(np.mean([c["excess_mean"] for c in scored])) if scored else None,
+                "pairs_mean": float(np.mean([c["pairs"] for c in values])), "frames": len(values)}
     if uniform:
         log.warning("%s: %d of %d ground-truth frames are nearly one colour (sky or a wall filling the view); "
                     "every method scores well on them", run_dir, uniform, n)
@@ -214,6 +258,14 @@ def evaluate_run(run_dir: str, scene_spec: str | None = None, flip_every: int = 
 
         plot_quality_over_time(rows_out, os.path.join(run_dir, "quality.png"))
     return out
+
+
+def _stereo_pairs(recordings: dict) -> dict:
+    """method -> (its left eye's recording, its right eye's) for every method recorded with both."""
+    eyes = {}
+    for name, r in recordings.items():
+        eyes.setdefault(r.get("method", name), {})[r["eye"]] = name
+    return {m: (e["left"], e["right"]) for m, e in eyes.items() if "left" in e and "right" in e}
 
 
 class TransmittedViews:
@@ -281,4 +333,10 @@ def summary_table(metrics: dict) -> str:
         frames = next(iter(metrics["methods"].values()))["frames"]
         body.append(f"warning: {uniform} of {frames} ground-truth frames are nearly one colour (sky or a wall "
                     "filling the view); every method scores well on them")
+    stereo = metrics.get("stereo")
+    if stereo:
+        for m, c in stereo["methods"].items():
+            share = "-" if c["inconsistent_mean"] is None else f"{100 * c['inconsistent_mean']:.2f} %"
+            body.append(f"stereo {m} ({stereo['reference']}, {stereo['ipd_mm']:g} mm): {share} of the points both "
+                        f"eyes see shown inconsistently")
     return "\n".join([line, "-" * len(line), *body])

@@ -29,6 +29,11 @@ class GroundTruth:
             self.renderer.render_perspective(self.target, pose, t, self.fov_deg)
             return self.target.read_color().copy()
 
+    def distance(self) -> np.ndarray:
+        """(height, width) float32 radial distance of the last view rendered (0 = sky)."""
+        with self.ctx:
+            return self.target.read_distance().copy()
+
     def close(self) -> None:
         with self.ctx:
             self.target.release()

@@ -397,23 +397,10 @@ def alternate_against_cyclops(result: dict) -> list[dict]:
     return rows
 
 
-def anaglyph(left: np.ndarray, right: np.ndarray) -> np.ndarray:
-    """(h, w, 3) uint8 red-cyan anaglyph of a pair: red from the left eye, green and blue from the right."""
-    if left.shape != right.shape or left.ndim != 3 or left.shape[2] != 3:
-        raise ValueError(f"need two (h, w, 3) images of one shape, got {left.shape} and {right.shape}")
-    out = right.copy()
-    out[:, :, 0] = left[:, :, 0]
-    return out
-
-
-def side_by_side(left: np.ndarray, right: np.ndarray, gap: int = 8) -> np.ndarray:
-    """(h, 2 w + gap, 3) uint8: the left eye's image, a black gap, the right eye's."""
-    h = left.shape[0]
-    return np.concatenate([left, np.zeros((h, gap, 3), np.uint8), right], axis=1)
-
-
 def _write_pictures(p: dict, out_dir: str) -> None:
     from PIL import Image
+
+    from pibr.client.recorder import anaglyph, side_by_side
 
     shown = side_by_side(p["left"], p["right"])
     truth = side_by_side(p["truth_left"], p["truth_right"])

@@ -37,8 +37,9 @@ from pibr.common.gl import GLThread
 from pibr.common.quality import OFF, DeadlineController, read_cost_table
 from pibr.protocol.errors import ConfigError, MalformedMessage, UnexpectedMessage
 from pibr.protocol.messages import (FRAMES_DECODED, Clock, Frame, Hello, OutputConfig, PayloadKind, PoseMsg,
-                                    Stats, decode_frame_level)
+                                    Stats, decode_eye, decode_frame_level)
 from pibr.protocol.pose import Pose
+from pibr.protocol.stereo import CENTRE, EYES, eye_pose
 
 from .config import ClientConfig
 from .connection import ClientConnection
@@ -46,7 +47,7 @@ from .deadline import levels_for
 from .depth_decoders import make_depth_decoder
 from .frame_textures import FrameTextures
 from .methods import needs_proxies, quadtree_threshold
-from .recorder import POSE_FIELDS, MethodRecorder
+from .recorder import POSE_FIELDS, MethodRecorder, anaglyph, side_by_side, side_by_side_size
 from .video import H264Decoder
 
 log = logging.getLogger(__name__)
@@ -111,7 +112,14 @@ class Client:
         self.session = None
         self.gl: GLThread | None = None
         self._decode_pool = concurrent.futures.ThreadPoolExecutor(max_workers=1, thread_name_prefix="pibr-decode")
-        self.recorders: dict[str, MethodRecorder] = {}
+        self.recorders: dict[str, MethodRecorder] = {}   # recording name (method, or method.eye) -> recorder
+        self._recorded: dict[str, tuple[str, str]] = {}  # recording name -> (method, eye)
+        self.pair_recorders: dict[str, list] = {}        # method -> videos of both eyes (side by side, anaglyph)
+        #: the eyes shown (the head's centre, or left and right) and the frames' slots (the centre's
+        #: frames serve both eyes, except with alternate and per-eye references: one slot per eye)
+        self._eyes: tuple = EYES if config.stereo else (CENTRE,)
+        self._slots: tuple = EYES if config.stereo in ("alternate", "per-eye") else (CENTRE,)
+        self._shown: dict[str, _Decoded] = {}            # slot -> the newest decoded frame for it
         self.frames_received = 0
         self.missed = 0
         self._newest: _Decoded | None = None
@@ -184,65 +192,90 @@ class Client:
         return self._placement.compose(local)
 
     def _gl_setup(self, ctx):
-        """The frame textures, every method at each of its quality levels (one level each with
-        --deadline off), and the output target."""
+        """Per slot (the head's centre, or each eye: :attr:`_slots`) the frame textures and every
+        method at each of its quality levels (one level each with --deadline off); the output target."""
         from .output_target import OutputTarget
         from .render_scale import make_level
 
         out = OutputConfig(self.cfg.width, self.cfg.height, self.cfg.fov_deg, self.cfg.rate_hz)
-        textures = FrameTextures(ctx, self.session)
+        textures = {slot: FrameTextures(ctx, self.session) for slot in self._slots}
         options = {"tau": self.cfg.tau, "lod_target_px": self.cfg.lod_pixels, "lod_level": self.cfg.lod_level,
                    "poses": self.poses, **self.cfg.options}
-        methods = {name: [make_level(ctx, lv, out, self.session, self.proxies, **options) for lv in self._levels[name]]
-                   for name in self.cfg.methods}
+        methods = {slot: {name: [make_level(ctx, lv, out, self.session, self.proxies, **options)
+                                 for lv in self._levels[name]] for name in self.cfg.methods}
+                   for slot in self._slots}
         target = OutputTarget(ctx, self.cfg.width, self.cfg.height)
         self._gl_state = (textures, methods, target)
-        self._method_info = {name: {"uses_extra_view": bool(ms[0].uses_extra_view)} for name, ms in methods.items()}
+        first = methods[self._slots[0]]
+        self._method_info = {name: {"uses_extra_view": bool(ms[0].uses_extra_view)} for name, ms in first.items()}
 
-    def _gl_render(self, ctx, pose: Pose, decoded: _Decoded | None, scene_t: float, chosen: dict | None = None,
+    def _slot(self, eye: str) -> str:
+        return eye if eye in self._slots else CENTRE
+
+    def _eye_poses(self, head: Pose) -> dict:
+        """eye -> its pose, for every eye shown (the head's own pose for one view)."""
+        return {eye: head if eye == CENTRE else eye_pose(head, eye, self.cfg.ipd_mm) for eye in self._eyes}
+
+    def _gl_render(self, ctx, poses: dict, shown: dict, scene_t: float, chosen: dict | None = None,
                    read: bool = True):
-        """Upload the newest frame if new, render every method at its chosen level (``chosen``:
-        method -> (level, reason); None: the top levels) -> [(rgb or None, hole fraction, ms)],
-        with the wall ms of reading the images back in ``self._record_ms`` (``read``: for the recorders)."""
+        """Upload each slot's newest frame if new, render every method at its chosen level
+        (``chosen``: method -> (level, reason); None: the top levels) for every eye of ``poses``
+        (eye -> Pose) from its slot's frame (``shown``: slot -> _Decoded) -> per method
+        [(rgb or None, hole fraction, ms) per eye], with the wall ms of reading the images back in
+        ``self._record_ms`` (``read``: for the recorders)."""
         textures, methods, target = self._gl_state
-        if decoded is not None and textures.frame_id != decoded.frame.frame_id:
-            textures.upload(decoded.image, decoded.frame, decoded.distances, decoded.flow)
+        for slot, decoded in shown.items():
+            if textures[slot].frame_id != decoded.frame.frame_id:
+                textures[slot].upload(decoded.image, decoded.frame, decoded.distances, decoded.flow)
         out, read_ms = [], 0.0
-        for name, instances in methods.items():
-            m = instances[chosen[name][0] if chosen else 0]
-            target.begin()
-            t0 = time.perf_counter()
-            if decoded is not None:
-                m.render(pose, decoded.frame, textures, scene_t)
-            ctx.finish()
-            t1 = time.perf_counter()
-            rgb, hole = None, float("nan")
-            if read:
-                rgba = target.read()
-                hole = float(np.count_nonzero(rgba[:, :, 3] == 0)) / (rgba.shape[0] * rgba.shape[1])
-                rgb = rgba[:, :, :3]
-                read_ms += (time.perf_counter() - t1) * 1e3
-            out.append((rgb, hole, (t1 - t0) * 1e3))
+        for name in self.cfg.methods:
+            level = chosen[name][0] if chosen else 0
+            per_eye = []
+            for eye, pose in poses.items():
+                slot = self._slot(eye)
+                decoded = shown.get(slot)
+                target.begin()
+                t0 = time.perf_counter()
+                if decoded is not None:
+                    methods[slot][name][level].render(pose, decoded.frame, textures[slot], scene_t)
+                ctx.finish()
+                t1 = time.perf_counter()
+                rgb, hole = None, float("nan")
+                if read:
+                    rgba = target.read()
+                    hole = float(np.count_nonzero(rgba[:, :, 3] == 0)) / (rgba.shape[0] * rgba.shape[1])
+                    rgb = rgba[:, :, :3]
+                    read_ms += (time.perf_counter() - t1) * 1e3
+                per_eye.append((rgb, hole, (t1 - t0) * 1e3))
+            out.append(per_eye)
         if read:
             self._record_ms.append(read_ms)
         return out
 
-    def _gl_calibrate(self, ctx, pose: Pose, decoded: _Decoded, renders: int) -> dict:
-        """Draw every level of every method ``renders`` times, untimed the first (it compiles
-        shader variants) -> method -> [ms per level]: the wall clock's first cost estimates."""
+    def _gl_calibrate(self, ctx, poses: dict, shown: dict, renders: int) -> dict:
+        """Draw every level of every method for every eye ``renders`` times, untimed the first (it
+        compiles shader variants) -> method -> [ms per level, all eyes]: the wall clock's first cost
+        estimates."""
         textures, methods, target = self._gl_state
+        for slot, decoded in shown.items():
+            if textures[slot].frame_id != decoded.frame.frame_id:
+                textures[slot].upload(decoded.image, decoded.frame, decoded.distances, decoded.flow)
         costs = {}
-        for name, instances in methods.items():
+        for name in self.cfg.methods:
             costs[name] = []
-            for m in instances:
+            for level in range(len(self._levels[name])):
                 times = []
                 for k in range(renders + 1):
-                    target.begin()
-                    t0 = time.perf_counter()
-                    m.render(pose, decoded.frame, textures, 0.0)
-                    ctx.finish()
+                    spent = 0.0
+                    for eye, pose in poses.items():
+                        slot = self._slot(eye)
+                        target.begin()
+                        t0 = time.perf_counter()
+                        methods[slot][name][level].render(pose, shown[slot].frame, textures[slot], 0.0)
+                        ctx.finish()
+                        spent += time.perf_counter() - t0
                     if k:
-                        times.append((time.perf_counter() - t0) * 1e3)
+                        times.append(spent * 1e3)
                 costs[name].append(times)
         return costs
 
@@ -250,10 +283,12 @@ class Client:
         if self._gl_state is None:
             return
         textures, methods, target = self._gl_state
-        for instances in methods.values():
-            for m in instances:
-                m.release()
-        textures.release()
+        for per_slot in methods.values():
+            for instances in per_slot.values():
+                for m in instances:
+                    m.release()
+        for t in textures.values():
+            t.release()
         target.release()
         self._gl_state = None
 
@@ -270,12 +305,16 @@ class Client:
                       output=OutputConfig(cfg.width, cfg.height, cfg.fov_deg, cfg.rate_hz),
                       want_proxies=needs_proxies(cfg.methods), depth_codec=cfg.depth_codec,
                       bandwidth_kbps=cfg.bandwidth_kbps,
-                      quadtree_threshold=quadtree_threshold(cfg.methods, cfg.options), token=cfg.token or "")
+                      quadtree_threshold=quadtree_threshold(cfg.methods, cfg.options), token=cfg.token or "",
+                      stereo=cfg.stereo, ipd_mm=cfg.ipd_mm if cfg.stereo else 0.0)
         try:
             # the Welcome is checked against the Hello (clock, atlas layout, proxies) when taken
             self.session = await self.conn.handshake(hello)
             t_welcome = time.monotonic()
             handshake_ms = (t_welcome - t_hello) * 1e3
+            agreed = self.session.options.get("stereo")
+            if cfg.stereo and (not isinstance(agreed, dict) or agreed.get("reference") != cfg.stereo):
+                raise UnexpectedMessage(f"asked for stereo {cfg.stereo}, the server's session has {agreed!r}")
             if hello.want_proxies:
                 await self._receive_proxies(t_welcome)
             self._decoder = H264Decoder(self.session.atlas.width, self.session.atlas.height)
@@ -293,10 +332,7 @@ class Client:
             self.gl = await loop.run_in_executor(None, GLThread, "pibr-client-gl")
             await self.gl.run(self._gl_setup)
             if cfg.record:
-                for m in cfg.methods:   # on the wall clock the videos are encoded after the run
-                    self.recorders[m] = MethodRecorder(cfg.out_dir, m, cfg.width, cfg.height, cfg.rate_hz,
-                                                       lossless=cfg.lossless, video=cfg.video,
-                                                       defer=cfg.clock == "real")
+                self._open_recorders()
             interval_us = int(round(1e6 / cfg.rate_hz))
             n_ticks = max(1, int(math.floor(self._duration * cfg.rate_hz + 1e-9)))
             preroll = int(math.ceil(cfg.preroll_s * cfg.rate_hz))
@@ -318,10 +354,29 @@ class Client:
         finally:
             await self._shutdown()
 
+    def _open_recorders(self) -> None:
+        """A recorder per method and eye shown (on the wall clock the videos are encoded after the
+        run); with two eyes, per method a side-by-side video to watch (and an anaglyph if asked)."""
+        cfg = self.cfg
+        defer = cfg.clock == "real"
+        for m in cfg.methods:
+            for eye in self._eyes:
+                name = m if eye == CENTRE else f"{m}.{eye}"
+                self._recorded[name] = (m, eye)
+                self.recorders[name] = MethodRecorder(cfg.out_dir, name, cfg.width, cfg.height, cfg.rate_hz,
+                                                      lossless=cfg.lossless, video=cfg.video, defer=defer)
+            if cfg.stereo and cfg.video:
+                pair = [MethodRecorder(cfg.out_dir, f"{m}.stereo", *side_by_side_size(cfg.width, cfg.height),
+                                       cfg.rate_hz, lossless=False, defer=defer, records=False)]
+                if cfg.anaglyph:
+                    pair.append(MethodRecorder(cfg.out_dir, f"{m}.anaglyph", cfg.width, cfg.height, cfg.rate_hz,
+                                               lossless=False, defer=defer, records=False))
+                self.pair_recorders[m] = pair
+
     async def _shutdown(self) -> None:
         if self.conn is not None:
             await self.conn.close()
-        for rec in self.recorders.values():
+        for rec in [*self.recorders.values(), *(r for pair in self.pair_recorders.values() for r in pair)]:
             rec.close()
         if self.gl is not None:
             await self.gl.run(self._gl_release)
@@ -382,28 +437,48 @@ class Client:
         for frame, _ in frames:
             if frame.payload(PayloadKind.H264_ATLAS) is None:
                 raise UnexpectedMessage(f"frame {frame.frame_id} carries no H.264 atlas")
+        slots = [self._frame_slot(frame) for frame, _ in frames]
+        last = {slot: i for i, slot in enumerate(slots)}   # each slot's newest frame of the batch
         poses = [(frame, self._object_poses(frame)) for frame, _ in frames]
         loop = asyncio.get_running_loop()
 
         def decode():  # every frame, in order: both decoders keep state from the previous frame
+            out = {}
             for i, (frame, _) in enumerate(frames):
-                newest = i == len(frames) - 1
+                newest = last[slots[i]] == i
                 image = self._decoder.decode(frame.payload(PayloadKind.H264_ATLAS), convert=newest)
                 depth = self._depth_decoder.decode(frame, reconstruct=newest)
-            # the flow (its decoder keeps no state) only for the frame that will be shown
-            return image, depth, self._flow_frame(frames[-1][0], image, depth)
+                if newest:   # the flow (its decoder keeps no state) only for frames that will be shown
+                    out[slots[i]] = (image, depth, self._flow_frame(frame, image, depth))
+            return out
 
-        image, distances, flow = await loop.run_in_executor(self._decode_pool, decode)
+        decoded = await loop.run_in_executor(self._decode_pool, decode)
         if self.poses is not None:   # every frame's transforms: the history sees each frame's time
             for frame, p in poses:
-                if p is not None:
+                if p is not None and (self.poses.newest_time is None
+                                      or frame.scene_t_us / 1e6 > self.poses.newest_time):
                     self.poses.add(frame.scene_t_us / 1e6, p)
-        frame, arrival_us = frames[-1]
-        self._newest = _Decoded(frame, arrival_us, image, distances, flow)
+        for slot, i in sorted(last.items(), key=lambda item: item[1]):
+            frame, arrival_us = frames[i]
+            self._shown[slot] = _Decoded(frame, arrival_us, *decoded[slot])
+        self._newest = self._shown[slots[-1]]
         self.frames_received += len(frames)
         self._arrivals_us.extend(arrival for _, arrival in frames)
         # 0 only for a frame id the server sent twice (the second copy's size was taken with the first)
         self._frame_bytes.extend(self._wire_sizes.pop(f.frame_id, 0) for f, _ in frames)
+
+    def _frame_slot(self, frame: Frame) -> str:
+        """The slot a frame fills: its eye in a session with a slot per eye, else the centre's;
+        a frame whose eye tag does not fit the session is malformed."""
+        payload = frame.payload(PayloadKind.EYE)
+        if self._slots == EYES:
+            if payload is None:
+                raise MalformedMessage(f"frame {frame.frame_id} of a {self.cfg.stereo} stereo session names no eye")
+            return decode_eye(payload)
+        if payload is not None:
+            raise MalformedMessage(f"frame {frame.frame_id} names an eye, but this session's frames are rendered "
+                                   f"from the head's centre")
+        return CENTRE
 
     def _flow_frame(self, frame: Frame, image, distances):
         """The frame's primary view ready for ``flow`` extrapolation (decode pool), or None when no
@@ -419,30 +494,39 @@ class Client:
         return primary_flow_frame(self.session, image, distances, flow, moving, frame.scene_t_us / 1e6)
 
     async def _display(self, tick: int, t_us: int, pose: Pose) -> float:
-        """Render all methods for the tick and record them. Recorded times are in client time;
-        ``scene_t`` is the scene-animation (server) time the ground truth must show."""
+        """Render all methods for the tick (every eye) and record them. Recorded times are in
+        client time; ``scene_t`` is the scene-animation (server) time the ground truth must show."""
         offset = self._server_offset_us
-        decoded = self._newest
+        shown = dict(self._shown)
+        poses = self._eye_poses(pose)
         chosen = self._chosen = self._choose_levels()
         # without a controller the tick's budget is still its interval, and nothing is predicted (0)
         budget = self.deadline.budget_ms if self.deadline is not None else 1e3 / self.cfg.rate_hz
         predicted = {m: (self.deadline.predicted(m, k) if self.deadline is not None else None)
                      for m, (k, _) in chosen.items()}
-        results = await self.gl.run(self._gl_render, pose, decoded, (t_us + offset) / 1e6, chosen,
+        results = await self.gl.run(self._gl_render, poses, shown, (t_us + offset) / 1e6, chosen,
                                     bool(self.recorders))
-        drawn = sum(ms for _, _, ms in results)
-        for name, (rgb, hole, ms) in zip(self.cfg.methods, results):
+        drawn = sum(ms for per_eye in results for _, _, ms in per_eye)
+        for name, per_eye in zip(self.cfg.methods, results):
             level, reason = chosen[name]
-            if self.deadline is not None and decoded is not None:
-                self.deadline.observe(name, level, ms)
-            rec = self.recorders.get(name)
-            if rec is None:
-                continue
-            record = self._record(tick, t_us, pose, decoded, ms, hole, missed=0)
-            record.update(level=level, level_reason=reason, budget_ms=budget,
-                          predicted_ms=0.0 if predicted[name] is None else predicted[name])
-            rec.submit(rgb, record)
-            self._last_shown[name] = record
+            if self.deadline is not None and len(shown) == len(self._slots):   # every eye drew from a frame
+                self.deadline.observe(name, level, sum(ms for _, _, ms in per_eye))
+            for eye, (rgb, hole, ms) in zip(poses, per_eye):
+                recording = name if eye == CENTRE else f"{name}.{eye}"
+                rec = self.recorders.get(recording)
+                if rec is None:
+                    continue
+                record = self._record(tick, t_us, poses[eye], shown.get(self._slot(eye)), ms, hole, missed=0)
+                record.update(level=level, level_reason=reason, budget_ms=budget,
+                              predicted_ms=0.0 if predicted[name] is None else predicted[name])
+                rec.submit(rgb, record)
+                self._last_shown[recording] = record
+            pair = self.pair_recorders.get(name)
+            if pair:
+                left, right = per_eye[0][0], per_eye[1][0]
+                pair[0].submit(side_by_side(left, right), {"tick": tick})
+                if len(pair) > 1:
+                    pair[1].submit(anaglyph(left, right), {"tick": tick})
         return drawn
 
     def _record(self, tick: int, t_us: int, pose: Pose, decoded, client_ms: float, hole: float, missed: int) -> dict:
@@ -538,11 +622,12 @@ class Client:
         pose = self._pose_at(trace, 0.0)
         give_up = loop.time() + self.cfg.warmup_s
         await self._frame_since(0, pose, interval_us, receiver, origin, give_up)
+        poses = self._eye_poses(pose)
         if self.deadline is None:
-            await self.gl.run(self._gl_render, pose, self._newest, 0.0, None, False)
+            await self.gl.run(self._gl_render, poses, dict(self._shown), 0.0, None, False)
         else:
             # every level drawn once to compile it, then timed: the controller's first estimates
-            costs = await self.gl.run(self._gl_calibrate, pose, self._newest, CALIBRATION_RENDERS)
+            costs = await self.gl.run(self._gl_calibrate, poses, dict(self._shown), CALIBRATION_RENDERS)
             self._calibration = {name: [round(float(np.median(t)), 3) for t in per_level]
                                  for name, per_level in costs.items()}
             for name, medians in self._calibration.items():
@@ -554,10 +639,10 @@ class Client:
 
     async def _frame_since(self, since_us: int, pose: Pose, interval_us: int, receiver, origin: float,
                            give_up: float) -> None:
-        """Send warm-up poses until the newest decoded frame was rendered from one sent at or
-        after ``since_us`` (from ``origin``)."""
+        """Send warm-up poses until every slot's newest decoded frame was rendered from one sent at
+        or after ``since_us`` (from ``origin``)."""
         loop = asyncio.get_running_loop()
-        while self._newest is None or self._newest.frame.pose_t_us < since_us:
+        while len(self._shown) < len(self._slots) or min(d.frame.pose_t_us for d in self._shown.values()) < since_us:
             if loop.time() > give_up:
                 raise UnexpectedMessage(f"no frame from the server within {self.cfg.warmup_s:g} s")
             await self.conn.send(PoseMsg(WARMUP_SEQ, int((loop.time() - origin) * 1e6), pose))
@@ -597,8 +682,9 @@ class Client:
 
     def _repeat_last(self, tick: int, t_us: int, trace) -> None:
         """Record a missed tick: the display kept showing the previous image."""
-        pose = self._pose_at(trace, t_us / 1e6)
+        poses = self._eye_poses(self._pose_at(trace, t_us / 1e6))
         for name, rec in self.recorders.items():
+            pose = poses[self._recorded[name][1]]
             if name not in self._last_shown:  # nothing displayed yet: the screen stays blank
                 rec.repeat(self._record(tick, t_us, pose, None, 0.0, 1.0, missed=1))
                 continue
@@ -652,7 +738,13 @@ class Client:
                       "anchor": self.cfg.anchor, "assumptions": trace.assumptions},
             "result": asdict(result),
             "proxies": self.proxy_stats or None,
-            "methods": self._method_info,
+            "methods": {**self._method_info,
+                        **{name: self._method_info[m] for name, (m, eye) in self._recorded.items() if eye != CENTRE}},
+            # what each recording shows: recording name -> method and eye (pibr evaluate scores each
+            # against the ground truth at the pose its records hold)
+            "recordings": {name: {"method": m, "eye": eye} for name, (m, eye) in self._recorded.items()},
+            "stereo": None if not self.cfg.stereo else {"reference": self.cfg.stereo, "ipd_mm": self.cfg.ipd_mm,
+                                                        "slots": list(self._slots)},
             # the quality levels chosen and why (client/deadline.py); None with --deadline off
             "deadline": None if self.deadline is None else {**self.deadline.summary(),
                                                             "calibration_ms": self._calibration},

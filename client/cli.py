@@ -8,6 +8,7 @@ import sys
 from pibr.common import arguments
 from pibr.common.address import parse_host_port
 from pibr.protocol.depth_codecs import DEPTH_CODECS
+from pibr.protocol.stereo import DEFAULT_IPD_MM, STEREO_REFERENCES
 
 from .deadline import DEADLINE_MODES
 
@@ -52,6 +53,15 @@ def register(sub) -> None:
     p.add_argument("--bandwidth-kbps", type=float, default=0.0, metavar="KBPS",
                    help="tell the server the bandwidth this client receives: it fits its streams into it and "
                         "picks the depth codec for it (default 0: not stated)")
+    p.add_argument("--stereo", choices=STEREO_REFERENCES, default="",
+                   help="show two eyes, half --ipd-mm either side of the head, from frames the server renders "
+                        "from the head's centre (cyclops), from each eye on alternate frames (alternate) or from "
+                        "both eyes every frame (per-eye, twice the server's work); recordings per eye "
+                        "(METHOD.left.*, METHOD.right.*) and a side-by-side METHOD.stereo.mp4 (default: one view)")
+    p.add_argument("--ipd-mm", type=arguments.positive, default=DEFAULT_IPD_MM,
+                   help=f"with --stereo: interpupillary distance in mm (default {DEFAULT_IPD_MM:g})")
+    p.add_argument("--anaglyph", action="store_true",
+                   help="with --stereo: also a red-cyan anaglyph video per method (METHOD.anaglyph.mp4)")
     p.add_argument("--no-lossless", action="store_true", help="skip the lossless recording used for metrics")
     p.add_argument("--no-video", action="store_true",
                    help="write the per-tick records only, no video: the least work per tick (timing runs)")

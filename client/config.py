@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 from pibr.common.tls import ClientTLS
 from pibr.protocol.errors import ConfigError
 from pibr.protocol.messages import MAX_BANDWIDTH_KBPS, OutputConfig
+from pibr.protocol.stereo import DEFAULT_IPD_MM, STEREO_REFERENCES, check_ipd_mm
 
 from .deadline import DEADLINE_MODES
 from .methods import method_names
@@ -45,6 +46,9 @@ class ClientConfig:
     options: dict = field(default_factory=dict)  # other methods' knobs (client/cli.py METHOD_KNOBS)
     token: str | None = field(default=None, repr=False)  # the server's (or relay's) access token; never recorded
     tls: ClientTLS | None = None                 # connect with TLS, verifying the server this way
+    stereo: str = ""         # two eyes from frames rendered this way (protocol/stereo.py); "": one view
+    ipd_mm: float = DEFAULT_IPD_MM   # with stereo: the eyes' distance along the head's x axis
+    anaglyph: bool = False   # with stereo: also a red-cyan anaglyph video per method
 
     def __post_init__(self):
         if self.clock not in ("virtual", "real"):
@@ -81,6 +85,11 @@ class ClientConfig:
             raise ConfigError(f"deadline must be one of {', '.join(DEADLINE_MODES)}, got {self.deadline!r}")
         if self.cost_table is not None and not os.path.isfile(self.cost_table):
             raise ConfigError(f"cost table {self.cost_table!r}: no such file")
+        if self.stereo and self.stereo not in STEREO_REFERENCES:
+            raise ConfigError(f"stereo must be one of {', '.join(STEREO_REFERENCES)}, got {self.stereo!r}")
+        check_ipd_mm(self.ipd_mm)
+        if self.anaglyph and not self.stereo:
+            raise ConfigError("an anaglyph needs two eyes: add --stereo cyclops, alternate or per-eye")
         if self.progress not in ("bar", "lines", "none"):
             raise ConfigError(f"progress must be bar, lines or none, got {self.progress!r}")
         OutputConfig(self.width, self.height, self.fov_deg, self.rate_hz)

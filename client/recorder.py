@@ -7,6 +7,11 @@ Files in the output directory, for method M::
     M.lossless.mkv   H.264 4:4:4 RGB at qp 0 (lossless), for metrics against ground truth
     M.records.csv    one row per output tick (columns: RECORD_FIELDS)
 
+A client showing two eyes (``--stereo``) records each eye as a method of its own, ``M.left``
+and ``M.right`` (their records hold that eye's pose), and per method ``M.stereo.mp4`` (both eyes
+side by side, :func:`side_by_side`) and with ``--anaglyph`` ``M.anaglyph.mp4`` (:func:`anaglyph`)
+to watch.
+
 The videos hold one frame per tick displayed afresh, stamped with its tick; a missed tick
 (``missed`` = 1 in its record) kept the previous image and adds none. ``level`` is the quality
 level the tick was drawn at (client/deadline.py; 0 the method's best), ``level_reason`` why
@@ -50,9 +55,11 @@ _INTEGER_FIELDS = ("tick", "frame_id", "missed", "level", "level_reason", "serve
 
 class MethodRecorder:
     def __init__(self, out_dir: str, method: str, width: int, height: int, rate_hz: float,
-                 lossless: bool = True, max_pending: int = 4, video: bool = True, defer: bool = False):
+                 lossless: bool = True, max_pending: int = 4, video: bool = True, defer: bool = False,
+                 records: bool = True):
         """video=False writes the records only: the least work per tick, for timing runs;
-        defer: encode the videos after the run (see the module docstring)."""
+        defer: encode the videos after the run (see the module docstring); records=False: the
+        videos only (a pair's side-by-side video)."""
         import av
 
         self._av = av
@@ -75,9 +82,11 @@ class MethodRecorder:
             s.options = options
             self._containers.append(container)
             self._streams.append(s)
-        self._csv_file = open(os.path.join(out_dir, f"{method}.records.csv"), "w", newline="")
-        self._csv = csv.DictWriter(self._csv_file, fieldnames=RECORD_FIELDS)
-        self._csv.writeheader()
+        self._csv_file = self._csv = None
+        if records:
+            self._csv_file = open(os.path.join(out_dir, f"{method}.records.csv"), "w", newline="")
+            self._csv = csv.DictWriter(self._csv_file, fieldnames=RECORD_FIELDS)
+            self._csv.writeheader()
         self._pool = concurrent.futures.ThreadPoolExecutor(max_workers=1, thread_name_prefix=f"rec-{method}")
         self._pending: deque = deque()
         self.max_pending = max_pending
@@ -90,7 +99,8 @@ class MethodRecorder:
                 self._raw[1].append(pts)
             else:
                 self._encode(rgb, pts)
-        self._csv.writerow(record)
+        if self._csv is not None:
+            self._csv.writerow(record)
 
     def _encode(self, rgb: np.ndarray, pts: int) -> None:
         frame = self._av.VideoFrame.from_ndarray(rgb, format="rgb24")
@@ -143,10 +153,37 @@ class MethodRecorder:
                 for packet in stream.encode():
                     container.mux(packet)
                 container.close()
-            self._csv_file.close()
+            if self._csv_file is not None:
+                self._csv_file.close()
 
         self._pool.submit(finish).result()
         self._pool.shutdown()
+
+
+#: Black columns between the eyes of a side-by-side image.
+PAIR_GAP = 8
+
+
+def side_by_side_size(width: int, height: int) -> tuple[int, int]:
+    """(width, height) of :func:`side_by_side` of two ``width`` x ``height`` images."""
+    return 2 * width + PAIR_GAP, height
+
+
+def side_by_side(left: np.ndarray, right: np.ndarray) -> np.ndarray:
+    """(h, 2 w + PAIR_GAP, 3) uint8: the left eye's image, a black gap, the right eye's."""
+    if left.shape != right.shape or left.ndim != 3 or left.shape[2] != 3:
+        raise ValueError(f"need two (h, w, 3) images of one shape, got {left.shape} and {right.shape}")
+    gap = np.zeros((left.shape[0], PAIR_GAP, 3), np.uint8)
+    return np.concatenate([left, gap, right], axis=1)
+
+
+def anaglyph(left: np.ndarray, right: np.ndarray) -> np.ndarray:
+    """(h, w, 3) uint8 red-cyan anaglyph: red from the left eye, green and blue from the right."""
+    if left.shape != right.shape or left.ndim != 3 or left.shape[2] != 3:
+        raise ValueError(f"need two (h, w, 3) images of one shape, got {left.shape} and {right.shape}")
+    out = right.copy()
+    out[:, :, 0] = left[:, :, 0]
+    return out
 
 
 def read_records(path: str) -> list[dict]:

@@ -19,8 +19,9 @@ from dataclasses import dataclass, field
 from typing import ClassVar
 
 from . import bounded_json
-from .errors import InvalidPose, JSONError, MalformedMessage
+from .errors import ConfigError, InvalidPose, JSONError, MalformedMessage
 from .pose import Pose
+from .stereo import EYES, MAX_IPD_MM, STEREO_REFERENCES, check_ipd_mm
 
 PROTOCOL_VERSION = 1
 CLOCKS = ("virtual", "real")
@@ -140,6 +141,10 @@ class Hello(Message):
     ``bandwidth_kbps`` > 0 is the bandwidth the client can receive (kbit/s); the server fits its
     streams into it and picks the depth codec for it (server/scene_plan.py). 0 (the default, left
     out of the JSON, so older peers read the same bytes): not stated. At most ``MAX_BANDWIDTH_KBPS``.
+
+    ``stereo`` names where a two-eye client wants its frames rendered from (protocol/stereo.py:
+    cyclops, alternate, per-eye) and ``ipd_mm`` its interpupillary distance; "" (the default, and
+    both are then left out of the JSON): one view at the head's centre.
     """
 
     TYPE: ClassVar[int] = 1
@@ -154,6 +159,20 @@ class Hello(Message):
     quadtree_threshold: float = 0.0   # 0 = no quadtree payload
     token: str = field(default="", repr=False)
     bandwidth_kbps: float = 0.0   # 0 = not stated
+    stereo: str = ""              # "" = mono
+    ipd_mm: float = 0.0           # with stereo: the eyes' distance
+
+    def __post_init__(self):
+        if self.stereo:
+            if self.stereo not in STEREO_REFERENCES:
+                raise MalformedMessage(f"Hello: stereo must be one of {', '.join(STEREO_REFERENCES)}, "
+                                       f"got {self.stereo!r}")
+            try:
+                check_ipd_mm(self.ipd_mm)
+            except ConfigError as exc:
+                raise MalformedMessage(f"Hello: {exc}") from None
+        elif self.ipd_mm:
+            raise MalformedMessage("Hello: ipd_mm without stereo")
 
     def serialize(self) -> bytes:
         obj = {"protocol": self.protocol, "client": self.client, "scene": self.scene,
@@ -165,6 +184,8 @@ class Hello(Message):
             obj["token"] = self.token
         if self.bandwidth_kbps:
             obj["bandwidth_kbps"] = float(self.bandwidth_kbps)
+        if self.stereo:
+            obj["stereo"], obj["ipd_mm"] = self.stereo, float(self.ipd_mm)
         return _dump_json(obj)
 
     @classmethod
@@ -183,6 +204,8 @@ class Hello(Message):
                                     hi=MAX_QUADTREE_THRESHOLD),
             token=_token(_get(cls.NAME, o, "token", str, "")),
             bandwidth_kbps=_get(cls.NAME, o, "bandwidth_kbps", float, 0.0, lo=0.0, hi=MAX_BANDWIDTH_KBPS),
+            stereo=_get(cls.NAME, o, "stereo", str, "", choices=("",) + STEREO_REFERENCES),
+            ipd_mm=_get(cls.NAME, o, "ipd_mm", float, 0.0, lo=0.0, hi=MAX_IPD_MM),
         )
 
 
@@ -273,9 +296,12 @@ class PayloadKind:
     MOTION_FLOW = 7       # motion flow of moving objects in the primary view (protocol/motion_flow.py)
     FRAME_LEVEL = 8       # the server's rate-control level the frame was made at (one byte: its index in
                           # SessionConfig.options["server_levels"]); frames without rate control carry none
-    ALL = (H264_ATLAS, EDGE_DEPTH, EDGE_DEPTH_EXTRA, EDGE_MOTION, QUADTREE, OBJECT_POSES, MOTION_FLOW, FRAME_LEVEL)
+    EYE = 9               # the eye a stereo session's frame was rendered for (one byte: 0 left, 1 right;
+                          # protocol/stereo.py); frames from the head's centre carry none
+    ALL = (H264_ATLAS, EDGE_DEPTH, EDGE_DEPTH_EXTRA, EDGE_MOTION, QUADTREE, OBJECT_POSES, MOTION_FLOW, FRAME_LEVEL,
+           EYE)
     NAMES = {1: "h264-atlas", 2: "edge-depth", 3: "edge-depth-extra", 4: "edge-motion", 5: "quadtree",
-             6: "object-poses", 7: "motion-flow", 8: "frame-level"}
+             6: "object-poses", 7: "motion-flow", 8: "frame-level", 9: "eye"}
 
 
 def encode_frame_level(level: int) -> bytes:
@@ -283,6 +309,20 @@ def encode_frame_level(level: int) -> bytes:
     if not 0 <= level <= 255:
         raise ValueError(f"a frame level is an index in 0..255, got {level}")
     return bytes([level])
+
+
+def encode_eye(eye: str) -> bytes:
+    """The EYE payload of ``eye`` (left or right)."""
+    if eye not in EYES:
+        raise ValueError(f"an EYE payload names the left or right eye, got {eye!r}")
+    return bytes([EYES.index(eye)])
+
+
+def decode_eye(payload) -> str:
+    """An EYE payload -> "left" or "right"; MalformedMessage unless it is one byte, 0 or 1."""
+    if len(payload) != 1 or payload[0] >= len(EYES):
+        raise MalformedMessage(f"Frame: an eye payload is one byte, 0 (left) or 1 (right), got {bytes(payload)!r}")
+    return EYES[payload[0]]
 
 
 def decode_frame_level(payload) -> int:

@@ -23,7 +23,7 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass
 
-from pibr.protocol.messages import Frame, PayloadKind, encode_frame_level
+from pibr.protocol.messages import Frame, PayloadKind, encode_eye, encode_frame_level
 from pibr.protocol.pose import Pose
 
 from .depth_encoders import make_depth_encoder
@@ -45,15 +45,17 @@ class EncodedFrame:
     object_poses: bytes | None = None
     motion: bytes | None = None
     level: int | None = None      # the rate control's level the frame was made at (None: no rate control)
+    eye: str | None = None        # a stereo session's eye the frame was rendered for (None: the head's centre)
 
     @property
     def payloads(self) -> tuple:
         """The Frame's payloads, always in this order: atlas, depth, quadtree, object poses, motion
-        flow, the frame's level."""
+        flow, the frame's level, its eye."""
         out = [(PayloadKind.H264_ATLAS, self.video), *self.depth]
         for kind, data in ((PayloadKind.QUADTREE, self.quadtree), (PayloadKind.OBJECT_POSES, self.object_poses),
                            (PayloadKind.MOTION_FLOW, self.motion),
-                           (PayloadKind.FRAME_LEVEL, None if self.level is None else encode_frame_level(self.level))):
+                           (PayloadKind.FRAME_LEVEL, None if self.level is None else encode_frame_level(self.level)),
+                           (PayloadKind.EYE, None if self.eye is None else encode_eye(self.eye))):
             if data is not None:
                 out.append((kind, data))
         return tuple(out)

@@ -25,6 +25,7 @@ from pibr.protocol.connection import Envelope
 from pibr.protocol.errors import ClientClosed, ConfigError, PeerTimeout, ProtocolError, SceneError
 from pibr.protocol.messages import FRAMES_DECODED, Bye, Clock, Error, Hello, PoseMsg, Welcome
 from pibr.protocol.sides import ServerSide
+from pibr.protocol.stereo import CENTRE, eye_pose, frame_eyes
 
 from .pipeline import EncodedFrame
 from .producer import FULL
@@ -46,6 +47,8 @@ class Session:
         self.rate: RateControl | None = None   # its frames' levels on the wall clock (server/rate_control.py)
         self.config = None
         self.frames_sent = 0
+        self.stereo: dict | None = None   # {"reference", "ipd_mm"} of a two-eye client (protocol/stereo.py)
+        self.server_ticks = 0           # ticks that made frames (a stereo session's eyes follow it)
         self.frames_skipped = 0
         self.frames_held = 0            # real clock: ticks not rendered while the client caught up
         self.tick_overruns = 0
@@ -174,6 +177,7 @@ class Session:
         self.idle_timeout_s = cfg.idle_timeout_virtual_s if hello.clock == "virtual" else cfg.idle_timeout_s
         self.pipeline, bundle = await self.server.setup_session(self.id, hello)
         self.config = self.pipeline.session
+        self.stereo = self.config.options.get("stereo")
         if "server_levels" in self.config.options:   # the plan turned the rate control on (session_plan.py)
             self.rate = RateControl(server_levels(self.config.extra is not None), cfg.fps)
         setup_us = int((time.monotonic() - t_hello) * 1e6)
@@ -189,15 +193,25 @@ class Session:
 
     # ------------------------------------------------------------------ frames
 
+    async def _send_tick(self, pose_msg: PoseMsg, t_us: int, vtime_us: int, force_keyframe: bool = False,
+                         level: tuple | None = None) -> None:
+        """The frames of one server tick: one from the head's pose, or a stereo session's eyes for
+        this tick (protocol/stereo.py: one alternating eye, or both, each a frame of its own)."""
+        reference = self.stereo["reference"] if self.stereo else None
+        for i, eye in enumerate(frame_eyes(reference, self.server_ticks)):
+            await self._send_frame(pose_msg, t_us, vtime_us, force_keyframe and i == 0, level, eye)
+        self.server_ticks += 1
+
     async def _send_frame(self, pose_msg: PoseMsg, t_us: int, vtime_us: int, force_keyframe: bool = False,
-                          level: tuple | None = None) -> None:
+                          level: tuple | None = None, eye: str = CENTRE) -> None:
         """The pipeline's stages (server/pipeline.py) where they belong: rendering on the shared GL
         thread, the encoders in the pool, the H.264 encode and the quadtrees side by side.
-        ``level``: (index, FrameLevel) of the rate control (server/rate_control.py), or None."""
+        ``level``: (index, FrameLevel) of the rate control (server/rate_control.py), or None;
+        ``eye``: rendered for that eye of the head at the pose (a stereo session), or its centre."""
         pipeline = self.pipeline
         made, frame_id = FULL if level is None else level[1], self.frames_sent
-        produced = await self.server.render(self.id, lambda ctx: pipeline.produce(pose_msg.pose, t_us * 1e-6, made,
-                                                                                        frame_id))
+        pose = pose_msg.pose if eye == CENTRE else eye_pose(pose_msg.pose, eye, self.stereo["ipd_mm"])
+        produced = await self.server.render(self.id, lambda ctx: pipeline.produce(pose, t_us * 1e-6, made, frame_id))
         t0 = time.perf_counter()
         jobs = [self.server.encode(self.id, pipeline.encode_video, produced, force_keyframe)]
         if pipeline.quadtree_threshold > 0:
@@ -209,7 +223,7 @@ class Session:
         if produced.motion is not None:   # a scene that moves: its flow, whatever the depth codec
             motion = await self.server.encode(self.id, pipeline.encode_motion, produced)
         encoded = EncodedFrame(video, key, depth, quadtree[0] if quadtree else None, produced.object_poses, motion,
-                               None if level is None else level[0])
+                               None if level is None else level[0], None if eye == CENTRE else eye)
         encode_ms = (time.perf_counter() - t0) * 1e3   # H.264 and, with the edge codec, depth (and quadtrees)
         frame = pipeline.frame(frame_id, t_us, pose_msg.t_us, pose_msg.seq, produced, encoded,
                                (produced.render_ms, produced.readback_ms, produced.pack_ms, encode_ms))
@@ -263,7 +277,7 @@ class Session:
                 await receive()
             while poses and poses[0][0] <= t_k:
                 current = poses.popleft()[1]
-            await self._send_frame(current, t_k, t_k + delay)
+            await self._send_tick(current, t_k, t_k + delay)
             promised = t_k + delay
             await self._flush()
             k += 1
@@ -322,7 +336,7 @@ class Session:
                             level = (index, made)
                         t0 = loop.time()
                         t_us = int(round((t0 - start) * 1e6))
-                        await self._send_frame(newest[0], t_us, t_us, need_keyframe, level)
+                        await self._send_tick(newest[0], t_us, t_us, need_keyframe, level)
                         if self.rate is not None:
                             self.rate.observe(level[0], (loop.time() - t0) * 1e3, level[1].extra)
                         need_keyframe = False

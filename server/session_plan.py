@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from pibr.protocol.atlas import ALIGN, build_layout
 from pibr.protocol.depth_codecs import depth_codec
+from pibr.protocol.errors import ConfigError
 from pibr.protocol.messages import Hello
 from pibr.protocol.session import SessionConfig, ViewConfig
 
@@ -75,6 +76,12 @@ def plan_session(cfg: ServerConfig, scene, hello: Hello, proxies: dict | None = 
         options["server_levels"] = [lv.name for lv in server_levels(use_extra)]
     if use_extra:   # whether the extra view's sky (distance 0) is sky, not also peeled pixels
         options["peel_marker"] = bool(cfg.peel_marker)
+    if hello.stereo:   # the eyes the frames are rendered for (protocol/stereo.py)
+        if hello.stereo != "cyclops" and cfg.colour_scale != 1.0:
+            raise ConfigError(f"stereo {hello.stereo} interleaves the eyes' views in one stream; colour at scale "
+                              f"{cfg.colour_scale:g} rebuilds each frame from the one before of the same view "
+                              f"(serve with --colour-scale 1, or ask for cyclops)")
+        options["stereo"] = {"reference": hello.stereo, "ipd_mm": hello.ipd_mm}
     quadtree = hello.quadtree_threshold > 0   # a quadtree payload in every frame, built from the float distances
     if quadtree:
         options["quadtree"] = {"threshold": hello.quadtree_threshold, "tile": QUADTREE_ROOT_TILE}

@@ -5,7 +5,8 @@ import os
 import numpy as np
 import pytest
 
-from pibr.bench.stereo_bench import RESTING_M_S, WALKING_M_S, anaglyph, rest_window, run_stereo_bench
+from pibr.bench.stereo_bench import RESTING_M_S, WALKING_M_S, rest_window, run_stereo_bench
+from pibr.client.recorder import anaglyph
 from pibr.bench.windows import Window
 from pibr.common.traces.loading import load_trace
 from pibr.protocol.errors import ConfigError

@@ -207,3 +207,29 @@ def test_hello_states_a_bandwidth_and_old_bytes_stay_the_same():
     for bad, message in (("-1", "outside"), (str(MAX_BANDWIDTH_KBPS * 2), "outside"), ('"fast"', "must be float")):
         with pytest.raises(MalformedMessage, match=f"Hello: field 'bandwidth_kbps'.*{message}"):
             Hello.parse(b'{"protocol": 1, "bandwidth_kbps": ' + bad.encode() + b"}")
+
+
+def test_hello_asks_for_two_eyes_and_old_bytes_stay_the_same():
+    hello = Hello(client="t", stereo="alternate", ipd_mm=63.5)
+    assert b'"stereo":"alternate"' in hello.serialize() and b'"ipd_mm":63.5' in hello.serialize()
+    assert Hello.parse(hello.serialize()) == hello
+    assert b"stereo" not in Hello(client="t").serialize() and b"stereo" not in golden_bytes("hello")
+    assert Hello.parse(golden_bytes("hello")[HEADER_SIZE:]).stereo == ""
+    for payload, message in ((b'{"protocol": 1, "stereo": "both", "ipd_mm": 64}', "field 'stereo'"),
+                             (b'{"protocol": 1, "stereo": "cyclops"}', "interpupillary distance"),
+                             (b'{"protocol": 1, "stereo": "cyclops", "ipd_mm": 500}', "field 'ipd_mm'.*outside"),
+                             (b'{"protocol": 1, "ipd_mm": 64}', "ipd_mm without stereo")):
+        with pytest.raises(MalformedMessage, match=f"Hello: .*{message}"):
+            Hello.parse(payload)
+
+
+def test_a_frames_eye_is_one_byte():
+    from pibr.protocol.messages import PayloadKind, decode_eye, encode_eye
+
+    assert [decode_eye(encode_eye(e)) for e in ("left", "right")] == ["left", "right"]
+    assert PayloadKind.NAMES[PayloadKind.EYE] == "eye"
+    for bad in (b"", b"\x02", b"\x00\x01"):
+        with pytest.raises(MalformedMessage, match="eye payload"):
+            decode_eye(bad)
+    with pytest.raises(ValueError, match="left or right"):
+        encode_eye("centre")
