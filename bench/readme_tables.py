@@ -259,10 +259,32 @@ def lod_target(r: dict) -> list[str]:
     return _table(["scene, output", *(t.replace("proxy lod ", "") for t in targets)], rows)
 
 
+def stereo(r: dict) -> list[str]:
+    """``pibr bench stereo``: per scene, method and server reference, the per-eye quality against
+    the mono view's, the binocular consistency and the client's CPU ms per pair against one view."""
+    rows = []
+    for scene, s in r["scenes"].items():
+        for v in s["variants"].values():
+            rows.append([scene, v["method"], v["mode"], f"{v['dssim_mean']:.4f}", _num(v.get("dssim_vs_mono"), ".2f"),
+                         f"{v['psnr_mean']:.2f}", _pct(v["geometric_holes_mean"]), _pct(v["inconsistent_mean"], 1),
+                         f"{v['cpu_ms_median']:.1f}", _num(v.get("cpu_ms_vs_mono"), ".2f")])
+    return _table(["scene", "method", "reference", "DSSIM per eye", "× mono", "PSNR", "geo holes %",
+                   "inconsistent %", "CPU ms", "× mono"], rows)
+
+
+def stereo_server(r: dict) -> list[str]:
+    """``pibr bench stereo``: per scene and reference stream, bits per second and server CPU ms."""
+    rows = [[scene, ", ".join(srv["modes"]), f"{srv['frames_per_tick']:.0f}", f"{srv['bits_per_second'] / 1e6:.2f}",
+             f"{srv['server_cpu_ms_per_frame']:.0f}"]
+            for scene, s in r["scenes"].items() for srv in s["server"].values()]
+    return _table(["scene", "references", "frames a tick", "Mbit/s", "server CPU ms a frame"], rows)
+
+
 RENDERERS = {"realtime": realtime, "levels": levels, "upsampling": upsampling, "pareto": pareto,
              "pareto-windows": pareto_windows, "coverage": coverage, "dynamic": dynamic, "ibr": ibr,
              "split": split, "server-projection": server_projection, "server-edges": server_edges,
-             "codec-matched": codec_matched, "codec-end-to-end": codec_end_to_end, "lod-target": lod_target}
+             "codec-matched": codec_matched, "codec-end-to-end": codec_end_to_end, "lod-target": lod_target,
+             "stereo": stereo, "stereo-server": stereo_server}
 
 
 # -- the README ---------------------------------------------------------------------------------------------------
