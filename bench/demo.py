@@ -87,7 +87,12 @@ def real_clock_summary(out_dir: str, metrics: dict, duration_s: float) -> dict:
     received = sum(1 for a in arrivals if 0.0 <= a <= duration_s)
     deadline = session.get("deadline") or {}
     methods = {}
-    for name, m in metrics["methods"].items():
+    recordings = session.get("recordings") or {name: {"method": name} for name in metrics["methods"]}
+    first = {}   # method -> its first recording (two eyes: the left eye's; both eyes share each tick)
+    for recording, r in recordings.items():
+        first.setdefault(r["method"], recording)
+    for name, recording in first.items():
+        m = metrics["methods"][recording]
         ticks, missed = m["frames"], m.get("missed_deadlines") or 0
         methods[name] = {"output_hz": (ticks - missed) / duration_s, "missed_fraction": missed / ticks if ticks else None}
         chosen = (deadline.get("methods") or {}).get(name)
@@ -119,8 +124,9 @@ def print_report(metrics: dict, out_dir: str) -> None:
         print(f"\nReal clock: the server delivered {real['server_fps']:.1f} frames/s; the client showed "
               f"{m['output_hz']:.1f} fresh images/s of {metrics['output']['rate_hz']:g} "
               f"({100 * m['missed_fraction']:.0f} % of ticks missed" + (
-                  f": the {len(real['methods'])} methods render on every tick, so their costs add up; time one "
-                  "at a time with --method proxy)." if several else ")."))
+                  f": the {len(real['methods'])} methods render on every tick"
+                  + (", each for both eyes" if metrics.get("stereo") else "")
+                  + ", so their costs add up; time one at a time with --method proxy)." if several else ")."))
         if real.get("server_levels"):
             shares = ", ".join(f"{k} {100 * v:.0f} %" for k, v in real["server_levels"].items())
             print(f"The server's rate control made the frames shown at: {shares} (the best level predicted "

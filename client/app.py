@@ -524,9 +524,8 @@ class Client:
             pair = self.pair_recorders.get(name)
             if pair:
                 left, right = per_eye[0][0], per_eye[1][0]
-                pair[0].submit(side_by_side(left, right), {"tick": tick})
-                if len(pair) > 1:
-                    pair[1].submit(anaglyph(left, right), {"tick": tick})
+                for rec, compose in zip(pair, (side_by_side, anaglyph)):   # composed off the tick
+                    rec.submit_pair(left, right, {"tick": tick}, compose)
         return drawn
 
     def _record(self, tick: int, t_us: int, pose: Pose, decoded, client_ms: float, hole: float, missed: int) -> dict:

@@ -130,6 +130,15 @@ class MethodRecorder:
             raise ValueError(f"expected a ({self.height}, {self.width}, 3) image, got {rgb.shape}")
         self._queue(np.ascontiguousarray(rgb), record)
 
+    def submit_pair(self, left: np.ndarray, right: np.ndarray, record: dict, compose) -> None:
+        """Queue the image ``compose(left, right)`` (e.g. :func:`side_by_side`), composed on the
+        recorder's thread rather than the client's tick."""
+        while len(self._pending) >= self.max_pending:
+            self._pending.popleft().result()
+        pts = int(record.get("tick", self.frames))
+        self._pending.append(self._pool.submit(lambda: self._write(compose(left, right), pts, record)))
+        self.frames += 1
+
     def repeat(self, record: dict) -> None:
         """A tick whose display kept the previous image (a missed deadline): its record only. The
         videos hold the previous frame (blank before the first); nothing is encoded, so a client
