@@ -166,6 +166,8 @@ class Client:
         with a cost table (its choices then depend on the table alone, not on this machine)."""
         cfg = self.cfg
         costs = read_cost_table(cfg.cost_table) if cfg.cost_table else None
+        if costs is not None and len(self._eyes) > 1:   # a table's costs are one view's; a tick draws each eye
+            costs = _scale_costs(costs, len(self._eyes))
         on = cfg.deadline == "on" or (cfg.deadline == "auto" and (cfg.clock == "real" or costs is not None))
         if on and cfg.clock == "virtual" and costs is None:
             raise ConfigError("--deadline on with the virtual clock needs --cost-table: its choices must not "
@@ -728,6 +730,15 @@ class Client:
             await self.conn.send(Stats({FRAMES_DECODED: taken}))
             await self._decode(frames)
 
+    def _deadline_summary(self) -> dict:
+        """The controller's summary for session.json, its cost table per view whatever the eyes (so a
+        later run, with one eye or two, reads it as ``--cost-table``; the calibration is per tick)."""
+        out = {**self.deadline.summary(), "calibration_ms": self._calibration}
+        if len(self._eyes) > 1:
+            out["costs_ms"] = _scale_costs(out["costs_ms"], 1.0 / len(self._eyes))
+            out["eyes_per_tick"] = len(self._eyes)
+        return out
+
     def _write_session(self, result: ClientResult, trace) -> None:
         os.makedirs(self.cfg.out_dir, exist_ok=True)
         info = {
@@ -745,14 +756,22 @@ class Client:
             "stereo": None if not self.cfg.stereo else {"reference": self.cfg.stereo, "ipd_mm": self.cfg.ipd_mm,
                                                         "slots": list(self._slots)},
             # the quality levels chosen and why (client/deadline.py); None with --deadline off
-            "deadline": None if self.deadline is None else {**self.deadline.summary(),
-                                                            "calibration_ms": self._calibration},
+            "deadline": None if self.deadline is None else self._deadline_summary(),
             # what recording cost each tick on the client's clock (reading the images back and
             # handing them over; on the wall clock the videos are encoded after the run)
             "record_ms": _percentiles(self._record_ms),
         }
         with open(os.path.join(self.cfg.out_dir, "session.json"), "w") as f:
             json.dump(info, f, indent=2, default=str)
+
+
+def _scale_costs(costs: dict, factor: float) -> dict:
+    """A cost table (method -> level name -> ms) with every number times ``factor``; anything else
+    is left for the controller to refuse by name."""
+    def scale(v):
+        return v * factor if isinstance(v, (int, float)) and not isinstance(v, bool) else v
+
+    return {m: ({k: scale(v) for k, v in t.items()} if isinstance(t, dict) else t) for m, t in costs.items()}
 
 
 def _percentiles(values) -> dict | None:

@@ -76,3 +76,25 @@ def test_colour_at_a_quarter_cannot_interleave_the_eyes():
         plan_session(cfg, load_scene("sphere"), Hello(scene="sphere", stereo="alternate", ipd_mm=64.0))
     config, _ = plan_session(cfg, load_scene("sphere"), Hello(scene="sphere", stereo="cyclops", ipd_mm=64.0))
     assert config.options["stereo"] == {"reference": "cyclops", "ipd_mm": 64.0}
+
+
+def test_a_cost_table_is_one_views_and_a_pair_costs_both_eyes(tmp_path):
+    """The virtual clock's controller, from a table of one view's costs: two eyes cost twice, so
+    the pair steps down where one view would not; session.json gives the table back per view."""
+    import json
+
+    from pibr.client.deadline import levels_for
+
+    names = [lv.name for lv in levels_for("proxy")]
+    table = {"proxy": {name: 30.0 - 3 * k for k, name in enumerate(names)}}   # full 30 ms ... cheapest 9 ms
+    path = tmp_path / "costs.json"
+    path.write_text(json.dumps(table))
+    chosen = {}
+    for stereo in ("", "cyclops"):
+        client = Client(ClientConfig(methods=("proxy",), rate_hz=30.0, cost_table=str(path), stereo=stereo))
+        client._set_up_deadline()
+        chosen[stereo] = client._choose_levels()["proxy"][0]
+        client._calibration = {}
+        assert client._deadline_summary()["costs_ms"]["proxy"]["full"] == pytest.approx(30.0, abs=0.01)
+    # one view: the full level (30 ms) fits a 33 ms tick; a pair of them (60 ms) does not
+    assert chosen[""] == 0 and chosen["cyclops"] > 0
