@@ -243,6 +243,10 @@ def evaluate_run(run_dir: str, scene_spec: str | None = None, flip_every: int = 
                 "inconsistent_mean": float(np.mean([c["inconsistent"] for c in scored])) if scored else None,
                 "excess_mean": float(np.mean([c["excess_mean"] for c in scored])) if scored else None,
                 "pairs_mean": float(np.mean([c["pairs"] for c in values])), "frames": len(values)}
+    out["complete"] = info.get("complete", True) is not False
+    if not out["complete"]:
+        log.warning("%s: the client's run ended early (%s): scored the %d ticks it recorded", run_dir,
+                    info.get("stopped") or "unknown", n)
     if uniform:
         log.warning("%s: %d of %d ground-truth frames are nearly one colour (sky or a wall filling the view); "
                     "every method scores well on them", run_dir, uniform, n)

@@ -148,6 +148,8 @@ class Client:
         self._chosen: dict = {}          # method -> (level, reason) of the tick being drawn
         self._record_ms: list[float] = []   # per tick: reading the images back for the recorders
         self._calibration: dict = {}        # method -> median ms of each level before the clock started
+        self._stopped: str | None = None    # why the run ended before its last tick (interrupted, failed)
+        self.ticks_shown = 0                # ticks displayed (afresh or repeated) so far
 
     # ------------------------------------------------------------------ set-up
 
@@ -335,6 +337,9 @@ class Client:
             await self.gl.run(self._gl_setup)
             if cfg.record:
                 self._open_recorders()
+                # written first (what evaluate needs is known now) and again when the run ends, so an
+                # interrupted recording is still evaluable up to its last tick
+                self._write_session(None, trace)
             interval_us = int(round(1e6 / cfg.rate_hz))
             n_ticks = max(1, int(math.floor(self._duration * cfg.rate_hz + 1e-9)))
             preroll = int(math.ceil(cfg.preroll_s * cfg.rate_hz))
@@ -353,8 +358,13 @@ class Client:
                                   [(a - self._time_base_us) / 1e6 for a in self._arrivals_us], self._frame_bytes)
             self._write_session(result, trace)
             return result
+        except BaseException as exc:   # interrupted (Ctrl-C, SIGTERM) or failed: keep what was recorded
+            self._stopped = f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__
+            raise
         finally:
             await self._shutdown()
+            if self._stopped is not None and self.recorders:
+                self._write_session(None, trace)   # the recorders are closed: everything up to the last tick
 
     def _open_recorders(self) -> None:
         """A recorder per method and eye shown (on the wall clock the videos are encoded after the
@@ -528,6 +538,7 @@ class Client:
                 left, right = per_eye[0][0], per_eye[1][0]
                 for rec, compose in zip(pair, (side_by_side, anaglyph)):   # composed off the tick
                     rec.submit_pair(left, right, {"tick": tick}, compose)
+        self.ticks_shown += 1
         return drawn
 
     def _record(self, tick: int, t_us: int, pose: Pose, decoded, client_ms: float, hole: float, missed: int) -> dict:
@@ -683,6 +694,7 @@ class Client:
 
     def _repeat_last(self, tick: int, t_us: int, trace) -> None:
         """Record a missed tick: the display kept showing the previous image."""
+        self.ticks_shown += 1
         poses = self._eye_poses(self._pose_at(trace, t_us / 1e6))
         for name, rec in self.recorders.items():
             pose = poses[self._recorded[name][1]]
@@ -739,14 +751,19 @@ class Client:
             out["eyes_per_tick"] = len(self._eyes)
         return out
 
-    def _write_session(self, result: ClientResult, trace) -> None:
+    def _write_session(self, result: ClientResult | None, trace) -> None:
+        """session.json: the client's settings, the negotiated session and what each recording shows;
+        ``result`` None while the run goes on (``complete`` false, ``stopped`` why it ended early)."""
         os.makedirs(self.cfg.out_dir, exist_ok=True)
         info = {
             "client": asdict(self.cfg) | {"methods": list(self.cfg.methods), "token": self.cfg.token and "(given)"},
             "session": self.session.to_json(),
             "trace": {"name": trace.name, "start_s": self.cfg.start_s, "duration_s": self._duration,
                       "anchor": self.cfg.anchor, "assumptions": trace.assumptions},
-            "result": asdict(result),
+            "result": None if result is None else asdict(result),
+            "complete": result is not None,
+            "stopped": self._stopped,
+            "ticks_recorded": self.ticks_shown,
             "proxies": self.proxy_stats or None,
             "methods": {**self._method_info,
                         **{name: self._method_info[m] for name, (m, eye) in self._recorded.items() if eye != CENTRE}},
@@ -761,8 +778,10 @@ class Client:
             # handing them over; on the wall clock the videos are encoded after the run)
             "record_ms": _percentiles(self._record_ms),
         }
-        with open(os.path.join(self.cfg.out_dir, "session.json"), "w") as f:
+        path = os.path.join(self.cfg.out_dir, "session.json")
+        with open(path + ".tmp", "w") as f:   # replaced whole: never a half-written file
             json.dump(info, f, indent=2, default=str)
+        os.replace(path + ".tmp", path)
 
 
 def _scale_costs(costs: dict, factor: float) -> dict:

@@ -162,6 +162,26 @@ def method_knobs(args) -> dict:
     return {k[len("knob_"):]: v for k, v in vars(args).items() if k.startswith("knob_") and v is not None}
 
 
+async def _until_signalled(run):
+    """Run the coroutine ``run``; SIGTERM stops it as Ctrl-C does (the task is cancelled, so the
+    recordings are closed and session.json says how far it got)."""
+    import signal
+
+    loop = asyncio.get_running_loop()
+    task = asyncio.current_task()
+    try:
+        loop.add_signal_handler(signal.SIGTERM, task.cancel)
+    except (NotImplementedError, RuntimeError):   # no signal handlers here (not the main thread, Windows)
+        pass
+    try:
+        return await run
+    finally:
+        try:
+            loop.remove_signal_handler(signal.SIGTERM)
+        except (NotImplementedError, RuntimeError):
+            pass
+
+
 def cmd_client(args) -> int:
     from pibr.protocol.access import resolve_token
 
@@ -181,10 +201,14 @@ def cmd_client(args) -> int:
     from .connection import ServerClosed
 
     try:
-        result = asyncio.run(run_client(cfg))
+        result = asyncio.run(_until_signalled(run_client(cfg)))
     except (ConnectionError, ServerClosed) as exc:
         print(f"pibr client: error: {exc}", file=sys.stderr)
         return 2
+    except (KeyboardInterrupt, asyncio.CancelledError):
+        print(f"pibr client: interrupted; what was displayed up to then is recorded in {args.out_dir}/ "
+              f"(session.json says how far; 'pibr evaluate' scores it)", file=sys.stderr)
+        return 130
     print(f"pibr client: {result.ticks} ticks, {result.frames_received} frames received, "
           f"{result.missed_deadlines} missed deadlines; recordings in {args.out_dir}/")
     if result.summary.get("proxies"):

@@ -109,3 +109,41 @@ def test_two_eyes_over_real_processes(tmp_path):
     for eye in ("left", "right"):
         assert metrics["methods"][f"proxy.{eye}"]["dssim_mean"] < metrics["methods"][f"rotation.{eye}"]["dssim_mean"]
     assert stereo["proxy"]["excess_mean"] < stereo["rotation"]["excess_mean"]
+
+
+@pytest.mark.parametrize("clock, sig", [("virtual", "SIGTERM"), ("real", "SIGINT")])
+def test_an_interrupted_client_leaves_an_evaluable_recording(tmp_path, clock, sig):
+    """SIGTERM (or Ctrl-C) half-way: the videos are finalised, session.json says how far the run got
+    and ``pibr evaluate`` scores every tick recorded (before, session.json was only written at the end)."""
+    import signal
+    import threading
+
+    from pibr.bench.processes import PibrProcess
+
+    out = str(tmp_path / "cut")
+    server = PibrProcess("server", ["serve", "--port", "0", "--scene", "room", "--view-size", "256x256"],
+                         str(tmp_path / "server.log"))
+    try:
+        host, port = server.wait_listening()
+        ticks = threading.Event()
+        client = PibrProcess("client", ["client", "--connect", f"{host}:{port}", "--out", out, "--progress", "lines",
+                                        "--trace", "pred6dof-1", "--start", "10", "--duration", "20", "--rate", "30",
+                                        "--size", "160x96", "--method", "rotation", "--clock", clock],
+                             str(tmp_path / "client.log"), on_progress=lambda done, total: done >= 30 and ticks.set())
+        assert ticks.wait(300), client.tail()
+        client.proc.send_signal(getattr(signal, sig))
+        code = client.wait(120)
+        assert code == 130, client.tail()
+        assert "interrupted" in client.tail()
+    finally:
+        server.stop()
+    with open(os.path.join(out, "session.json")) as f:
+        session = json.load(f)
+    assert session["complete"] is False and "Cancelled" in session["stopped"]
+    shown = session["ticks_recorded"]
+    assert 30 <= shown < 600
+    rows = read_records(os.path.join(out, "rotation.records.csv"))
+    assert len(rows) == shown
+    metrics = evaluate_run(out, flip_every=0, workers=1, progress=False, side_by_side=False, plot=False)
+    assert metrics["methods"]["rotation"]["frames"] == shown
+    assert metrics["complete"] is False
