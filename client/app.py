@@ -303,7 +303,8 @@ class Client:
         trace, self._duration = self._trace_poses()
         loop = asyncio.get_running_loop()
         self.conn = await ClientConnection.open(cfg.host, cfg.port, tls=cfg.tls,
-                                                receive_timeout_s=cfg.receive_timeout_s)
+                                                receive_timeout_s=cfg.receive_timeout_s,
+                                                session_timeout_s=cfg.session_limit_s(self._duration))
         t_hello = time.monotonic()
         hello = Hello(client="pibr-client/0.1", scene=cfg.scene, clock=cfg.clock,
                       output=OutputConfig(cfg.width, cfg.height, cfg.fov_deg, cfg.rate_hz),

@@ -83,8 +83,12 @@ def register(sub) -> None:
                         "then chosen from it alone, the same on every machine")
     p.add_argument("--progress", choices=("bar", "lines", "none"), default="bar")
     p.add_argument("--receive-timeout-s", type=arguments.positive, default=30.0, metavar="S",
-                   help="give up when the server sends nothing for S seconds while the client waits for it "
-                        "(default 30; the Welcome may take longer: up to 120 s while the server loads a scene)")
+                   help="give up when no whole message from the server arrives within S seconds while the "
+                        "client waits for one, however it trickles in (default 30; the Welcome may take 4x as "
+                        "long, while the server loads a scene)")
+    p.add_argument("--session-timeout-s", type=arguments.non_negative, default=0.0, metavar="S",
+                   help="give up when the whole session runs past S seconds (default 0: 10 minutes plus 30 s per "
+                        "second of trace)")
     g = p.add_argument_group("access (a server or relay with a token or TLS)")
     g.add_argument("--token-file", metavar="FILE",
                    help="send the access token on the first line of FILE (default: $PIBR_TOKEN, if set)")

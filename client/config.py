@@ -13,6 +13,11 @@ from .deadline import DEADLINE_MODES
 from .methods import method_names
 
 
+#: The session's time limit when not given: this much, plus this much per second of trace (a
+#: 1024^2 virtual-clock session here takes about 3 s per second of trace; a wall-clock one 1 s).
+SESSION_BASE_S, SESSION_PER_TRACE_S = 600.0, 30.0
+
+
 @dataclass
 class ClientConfig:
     host: str = "127.0.0.1"
@@ -36,7 +41,8 @@ class ClientConfig:
     lossless: bool = True
     video: bool = True       # False: records only (no MP4 / lossless copy), the least work per tick
     warmup_s: float = 60.0   # real clock: longest wait for the first frame before the clock starts
-    receive_timeout_s: float = 30.0  # longest silence from the server while waiting for it
+    receive_timeout_s: float = 30.0  # longest wait for one whole message from the server (the Welcome: 4x)
+    session_timeout_s: float = 0.0   # the whole connection's limit (0: SESSION_BASE_S + SESSION_PER_TRACE_S per trace second)
     progress: str = "bar"    # bar, lines (machine-readable on stdout), none
     tau: float = 0.1         # proxy IBR: relative depth error accepted as the same surface
     lod_pixels: float = 6.0  # proxy IBR: edge length, in pixels of a 960-wide 90-degree output, that selects the LoD
@@ -73,6 +79,9 @@ class ClientConfig:
             raise ConfigError(f"anchor must be one of {', '.join(ANCHORS)}, got {self.anchor!r}")
         if not (0 < self.receive_timeout_s <= 86400):
             raise ConfigError(f"receive timeout must be in (0, 86400] s, got {self.receive_timeout_s}")
+        if not (0 <= self.session_timeout_s <= 30 * 86400):
+            raise ConfigError(f"session timeout must be in [0, {30 * 86400}] s (0: from the trace's length), "
+                              f"got {self.session_timeout_s}")
         if self.preroll_s < 0:
             raise ConfigError("preroll must be >= 0")
         if not (0 < self.tau < 10):
@@ -99,3 +108,7 @@ class ClientConfig:
             check_token_text(self.token)
         if not (16 <= self.width <= 8192 and 16 <= self.height <= 8192 and 1 <= self.fov_deg <= 170):
             raise ConfigError(f"output {self.width}x{self.height} at {self.fov_deg} degrees is out of range")
+
+    def session_limit_s(self, trace_seconds: float) -> float:
+        """The session's time limit for a run of ``trace_seconds`` of trace."""
+        return self.session_timeout_s or SESSION_BASE_S + SESSION_PER_TRACE_S * trace_seconds

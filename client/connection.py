@@ -21,13 +21,20 @@ from pibr.protocol.sides import ClientSide
 
 log = logging.getLogger(__name__)
 
+#: The first answer (the Welcome) may take this many receive timeouts: the server may load and
+#: prepare the scene first (30 s -> 120 s by default).
+WELCOME_WAIT_FACTOR = 4.0
+
 
 class ClientConnection:
-    """``receive_timeout_s``: longest silence (no byte from the server) a :meth:`recv` waits
-    through before raising :class:`PeerTimeout`; None waits for ever."""
+    """``receive_timeout_s``: longest a :meth:`recv` waits for one *whole* message before raising
+    :class:`PeerTimeout` (a server that drips a byte now and then does not stretch it); None waits
+    for ever. ``session_timeout_s``: the connection's whole life, from its opening, is bounded too
+    (a server sending small messages slowly for ever is cut off); None: unbounded."""
 
     def __init__(self, reader, writer, max_message_size: int = DEFAULT_MAX_MESSAGE_SIZE,
-                 receive_timeout_s: float | None = None, peer: str = "the server"):
+                 receive_timeout_s: float | None = None, peer: str = "the server",
+                 session_timeout_s: float | None = None):
         self.reader, self.writer = reader, writer
         #: the session's message order (sans-I/O); ``conn``, its connection, carries our messages
         self.side = ClientSide(max_message_size)
@@ -36,6 +43,9 @@ class ClientConnection:
         self.tls: ClientTLS | None = None
         self.receive_timeout_s = receive_timeout_s
         self.peer = peer
+        self.session_timeout_s = session_timeout_s
+        self._session_deadline = (None if session_timeout_s is None
+                                  else asyncio.get_running_loop().time() + session_timeout_s)
 
     @property
     def welcome(self) -> Welcome | None:
@@ -66,8 +76,11 @@ class ClientConnection:
     async def recv(self, timeout: float | None = None) -> Envelope:
         """Next message, as the side allows it now; raises RemoteError on the server's Error,
         ServerClosed at its end, ProtocolError on bad input or a message out of order, and
-        PeerTimeout when the server sends nothing for ``timeout`` (default: the receive timeout)."""
+        PeerTimeout when no whole message arrives within ``timeout`` (default: the receive
+        timeout) or the session's time is up."""
         timeout = self.receive_timeout_s if timeout is None else timeout
+        loop = asyncio.get_running_loop()
+        deadline = loop.time() + timeout if timeout else None
         while True:
             try:
                 env = self.side.next_event()
@@ -77,27 +90,42 @@ class ClientConnection:
                 raise
             if env is not None:
                 return env
+            ends = [d for d in (deadline, self._session_deadline) if d is not None]
+            remaining = min(ends) - loop.time() if ends else None
+            if remaining is not None and remaining <= 0:
+                raise self._timed_out(deadline, timeout)
             read = self.reader.read(1 << 16)
             try:
-                data = await (asyncio.wait_for(read, timeout) if timeout else read)
+                data = await (asyncio.wait_for(read, remaining) if remaining is not None else read)
             except ssl.SSLError as exc:
                 raise TLSError(f"the TLS connection to the server broke: {exc.reason or exc}") from None
             except asyncio.TimeoutError:
-                raise PeerTimeout(f"{self.peer} sent nothing for {timeout:g} s") from None
+                raise self._timed_out(deadline, timeout) from None
             if not data:
                 self.side.receive_eof()
                 continue
             self.bytes_received += len(data)
             self.side.receive_data(data)
 
-    async def handshake(self, hello: Hello, timeout: float = 120.0) -> SessionConfig:
-        """Send Hello, wait for Welcome (the server may first load and prepare the scene). The side
-        checks the Welcome against the Hello (protocol, clock, atlas, proxies announced when asked for)."""
+    def _timed_out(self, deadline, timeout) -> PeerTimeout:
+        if self._session_deadline is not None and (deadline is None or self._session_deadline <= deadline):
+            return PeerTimeout(f"the session with {self.peer} ran past its {self.session_timeout_s:g} s limit")
+        if self.side.buffered_bytes:
+            return PeerTimeout(f"{self.peer} sent {self.side.buffered_bytes} bytes of a message but not all of it "
+                               f"within {timeout:g} s")
+        return PeerTimeout(f"{self.peer} sent nothing for {timeout:g} s")
+
+    async def handshake(self, hello: Hello, timeout: float | None = None) -> SessionConfig:
+        """Send Hello, wait for Welcome (the server may first load and prepare the scene: by default
+        :data:`WELCOME_WAIT_FACTOR` receive timeouts, 120 s without one). The side checks the Welcome
+        against the Hello (protocol, clock, atlas, proxies announced when asked for)."""
+        if timeout is None:
+            timeout = WELCOME_WAIT_FACTOR * self.receive_timeout_s if self.receive_timeout_s else 120.0
         self.side.send_hello(hello)
         self.writer.write(self.conn.data_to_send())
         await self.writer.drain()
         try:
-            await self.recv(max(timeout, self.receive_timeout_s or 0))
+            await self.recv(timeout)
         except PeerTimeout as exc:
             raise PeerTimeout(f"{exc} after our Hello: no Welcome") from None
         except RemoteError as exc:

@@ -51,6 +51,11 @@ class Connection:
     def max_message_size(self) -> int:
         return self._reader.max_message_size
 
+    @property
+    def buffered_bytes(self) -> int:
+        """Bytes received of a message not yet complete."""
+        return self._reader.buffered
+
     def receive_data(self, data: bytes) -> None:
         if self.failed or self.eof:
             return

@@ -84,6 +84,11 @@ class FrameReader:
         """The protocol error the stream failed with (None while it is sound)."""
         return self._failed
 
+    @property
+    def buffered(self) -> int:
+        """Bytes received of a frame not yet complete."""
+        return len(self._buf) - self._pos
+
     def feed(self, data: bytes) -> list[RawFrame]:
         """Add received bytes; return the frames they complete (possibly none).
 

@@ -77,6 +77,11 @@ class _Side:
         self._pending: deque[Envelope] = deque()
         self._ended: BaseException | None = None
 
+    @property
+    def buffered_bytes(self) -> int:
+        """Bytes received of a message not yet complete."""
+        return self.conn.buffered_bytes
+
     def receive_data(self, data: bytes) -> None:
         self.conn.receive_data(data)
 

@@ -69,6 +69,69 @@ async def test_a_silent_server_before_the_welcome_ends_the_handshake(tmp_path):
                 await conn.close()
 
 
+async def _drip(peer, data: bytes, every_s: float) -> None:
+    """Send ``data`` a byte at a time, ``every_s`` apart, until it is all sent or the client goes."""
+    try:
+        for i in range(len(data)):
+            peer.writer.write(data[i:i + 1])
+            await peer.writer.drain()
+            await asyncio.sleep(every_s)
+    except ConnectionError:
+        pass
+
+
+async def test_a_welcome_dripped_a_byte_at_a_time_does_not_hold_the_client(tmp_path):
+    """Issue 28: a server that drips one byte every so often held the client for ever (each byte
+    restarted the silence timer) and the first answer waited a fixed 120 s: now the whole Welcome
+    must arrive within 4 receive timeouts."""
+    from pibr.client.connection import WELCOME_WAIT_FACTOR
+
+    async def drip_welcome(peer):
+        await peer.recv()
+        peer.conn.send(Welcome(server="drip", session=1, config=_session_config("virtual")))
+        await _drip(peer, peer.conn.data_to_send(), 0.1)
+
+    async with scripted_server(drip_welcome) as (host, port):
+        loop = asyncio.get_running_loop()
+        t0 = loop.time()
+        with pytest.raises(PeerTimeout, match=r"sent \d+ bytes of a message but not all of it within 1 s"):
+            await asyncio.wait_for(run_client(_client(host, port, tmp_path, receive_timeout_s=0.25)), 30)
+        assert loop.time() - t0 < WELCOME_WAIT_FACTOR * 0.25 + 2
+
+
+@pytest.mark.gl
+async def test_a_frame_dripped_after_the_welcome_and_a_session_that_never_ends(tmp_path):
+    """After the Welcome: a message dripped byte by byte times out as a whole; and tiny messages
+    that each arrive in time cannot stretch the session past its limit."""
+    from pibr.protocol.messages import Clock
+
+    async def welcome_then_drip(peer):
+        await peer.recv()
+        await peer.send(Welcome(server="drip", session=1, config=_session_config("virtual")))
+        peer.conn.send(Clock(), vtime_us=1)
+        await _drip(peer, peer.conn.data_to_send(), 0.2)
+
+    async with scripted_server(welcome_then_drip) as (host, port):
+        with pytest.raises(PeerTimeout, match="bytes of a message but not all of it within 0.5 s"):
+            await asyncio.wait_for(run_client(_client(host, port, tmp_path)), 30)
+
+    async def clocks_for_ever(peer):
+        await peer.recv()
+        await peer.send(Welcome(server="slow", session=1, config=_session_config("virtual")))
+        try:
+            while True:   # a valid message in time, but the clock never reaches the client's tick
+                await peer.send(Clock(), vtime_us=0)
+                await asyncio.sleep(0.1)
+        except ConnectionError:
+            pass
+
+    async with scripted_server(clocks_for_ever) as (host, port):
+        t0 = asyncio.get_running_loop().time()
+        with pytest.raises(PeerTimeout, match="ran past its 2 s limit"):
+            await asyncio.wait_for(run_client(_client(host, port, tmp_path, session_timeout_s=2.0)), 30)
+        assert asyncio.get_running_loop().time() - t0 < 10
+
+
 def _zero_bomb(size: int) -> bytes:
     """A zstd frame of ``size`` zeros, its size in the header, built a megabyte at a time."""
     import zstandard
