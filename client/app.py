@@ -408,15 +408,22 @@ class Client:
         while not assembler.complete:
             await self.conn.recv()
         t_received = time.monotonic()
-        data = assembler.data()
+        chunks = assembler.chunks()
+        assembler.release()
+        compressed = sum(len(c) for c in chunks)
         loop = asyncio.get_running_loop()
-        self.proxies = await loop.run_in_executor(
-            None, lambda: decode_bundle(decompress_bundle(data, info.raw_bytes, info.objects)))
-        self.proxy_stats = {"bytes": len(data), "chunks": assembler.count, "objects": len(self.proxies),
+
+        def decode(chunks):   # the chunks go once decompressed; the meshes are views of the raw bundle
+            raw = decompress_bundle(chunks, info.raw_bytes, info.objects)
+            chunks.clear()
+            return decode_bundle(raw)
+
+        self.proxies = await loop.run_in_executor(None, decode, chunks)
+        self.proxy_stats = {"bytes": compressed, "chunks": assembler.count, "objects": len(self.proxies),
                             "transfer_ms": (t_received - t_welcome) * 1e3,
                             "decode_ms": (time.monotonic() - t_received) * 1e3}
         log.info("proxies: %d objects, %.2f MB in %d chunks, received in %.0f ms, decoded in %.0f ms",
-                 len(self.proxies), len(data) / 1e6, assembler.count, self.proxy_stats["transfer_ms"],
+                 len(self.proxies), compressed / 1e6, assembler.count, self.proxy_stats["transfer_ms"],
                  self.proxy_stats["decode_ms"])
 
     def _pose_history(self):

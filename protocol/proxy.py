@@ -43,6 +43,8 @@ MAX_CHUNKS = 1 << 16
 HEADER_BYTES = 8
 #: Most bytes decompressed in one step.
 DECOMPRESS_STEP = 1 << 20
+#: The longest zstd frame header (magic, descriptor, window, dictionary id, content size).
+ZSTD_FRAME_HEADER_MAX = 18
 LEVELS = ("original", "proxy", "box")
 
 
@@ -166,10 +168,12 @@ def encode_bundle(objects: list[ProxyObject]) -> bytes:
 
 
 class _Reader:
-    def __init__(self, data: bytes):
-        self.data, self.pos = data, 0
+    """Reads a bundle without copying it: ``take`` hands out views of ``data``."""
 
-    def take(self, n: int, what: str) -> bytes:
+    def __init__(self, data):
+        self.data, self.pos = memoryview(data).cast("B"), 0
+
+    def take(self, n: int, what: str) -> memoryview:
         if n < 0 or n > len(self.data) - self.pos:
             raise MalformedMessage(f"proxy bundle: {what} needs {n} bytes, {len(self.data) - self.pos} left")
         out = self.data[self.pos:self.pos + n]
@@ -190,12 +194,19 @@ def _read_mesh(r: _Reader, where: str) -> tuple:
         raise MalformedMessage(f"proxy bundle: {where} has non-finite vertices")
     if nf and int(f.max()) >= nv:
         raise MalformedMessage(f"proxy bundle: {where} face index {int(f.max())} >= vertex count {nv}")
-    return v.astype(np.float32), f.astype(np.uint32)
+    # Views of a writable bundle (decompress_bundle's bytearray): the meshes are the bundle, no
+    # second copy of it; an immutable bundle's are copied, so every mesh can be written to.
+    v, f = v.astype(np.float32, copy=False), f.astype(np.uint32, copy=False)
+    if not v.flags.writeable:
+        v, f = v.copy(), f.copy()
+    return v, f
 
 
-def decode_bundle(data: bytes) -> list[ProxyObject]:
+def decode_bundle(data) -> list[ProxyObject]:
+    """A raw bundle (bytes, or the bytearray :func:`decompress_bundle` returns: then its meshes are
+    views of it, no copy) -> its objects."""
     r = _Reader(data)
-    if r.take(4, "magic") != MAGIC:
+    if bytes(r.take(4, "magic")) != MAGIC:
         raise MalformedMessage("proxy bundle: bad magic")
     (count,) = r.unpack("<I", "object count")
     if count > MAX_OBJECTS:
@@ -204,7 +215,7 @@ def decode_bundle(data: bytes) -> list[ProxyObject]:
     for i in range(count):
         (n,) = r.unpack("<H", f"object {i} name length")
         try:
-            name = r.take(n, f"object {i} name").decode("utf-8")
+            name = bytes(r.take(n, f"object {i} name")).decode("utf-8")
         except UnicodeDecodeError:
             raise MalformedMessage(f"proxy bundle: object {i} name is not UTF-8") from None
         transform = np.frombuffer(r.take(128, f"object {i} transform"), "<f8").reshape(4, 4).copy()
@@ -239,14 +250,41 @@ def _check_header(head: bytes, objects: int | None) -> None:
         raise MalformedMessage(f"proxy bundle: holds {count} objects, the Welcome announced {objects}")
 
 
-def decompress_bundle(data: bytes, raw_size: int, objects: int | None = None) -> bytes:
-    """zstd frame -> raw bundle of exactly ``raw_size`` bytes (what the Welcome announced).
+class _ChunkStream:
+    """A file-like reader over chunks of bytes, in order (the compressed bundle as received,
+    never joined into one copy)."""
+
+    def __init__(self, chunks):
+        self._chunks, self._i, self._pos = list(chunks), 0, 0
+
+    def read(self, n: int = -1) -> bytes:
+        out = []
+        while self._i < len(self._chunks) and (n < 0 or n > 0):
+            chunk = self._chunks[self._i]
+            take = len(chunk) - self._pos if n < 0 else min(n, len(chunk) - self._pos)
+            out.append(bytes(chunk[self._pos:self._pos + take]))
+            self._pos += take
+            n -= take if n >= 0 else 0
+            if self._pos == len(chunk):
+                self._i, self._pos = self._i + 1, 0
+        return b"".join(out)
+
+
+def decompress_bundle(data, raw_size: int, objects: int | None = None) -> bytearray:
+    """zstd frame (bytes, or a list of its chunks in order) -> raw bundle of exactly ``raw_size``
+    bytes (what the Welcome announced), as a bytearray that :func:`decode_bundle` decodes in place.
 
     Streaming, with ``raw_size`` as the ceiling: the zstd header's content size and window
     must fit it, the magic and object count are checked in the first 8 decompressed bytes,
     and decompression stops as soon as the output would pass ``raw_size``, so a small frame
-    that inflates to gigabytes costs no more than the announced size."""
+    that inflates to gigabytes costs no more than the announced size. The output is the only
+    allocation of that size (peak: the announced size plus the compressed chunks)."""
     import zstandard
+
+    chunks = [data] if isinstance(data, (bytes, bytearray, memoryview)) else list(data)
+    if not chunks or not any(len(c) for c in chunks):
+        raise MalformedMessage("proxy bundle: no compressed data")
+    data = _ChunkStream(chunks).read(ZSTD_FRAME_HEADER_MAX)   # what get_frame_parameters reads
 
     if not HEADER_BYTES <= raw_size <= MAX_BUNDLE_BYTES:
         raise MalformedMessage(f"proxy bundle: announced size {raw_size} is outside [{HEADER_BYTES}, "
@@ -261,7 +299,7 @@ def decompress_bundle(data: bytes, raw_size: int, objects: int | None = None) ->
         if params.window_size > window:
             raise MalformedMessage(f"proxy bundle: the zstd frame asks for a {params.window_size}-byte window, "
                                    f"more than the {raw_size} bytes the Welcome announced need")
-        reader = zstandard.ZstdDecompressor(max_window_size=window).stream_reader(data)
+        reader = zstandard.ZstdDecompressor(max_window_size=window).stream_reader(_ChunkStream(chunks))
         head = reader.read(HEADER_BYTES)
         if len(head) != HEADER_BYTES:
             raise MalformedMessage(f"proxy bundle: decompresses to fewer than {HEADER_BYTES} bytes")
@@ -281,7 +319,7 @@ def decompress_bundle(data: bytes, raw_size: int, objects: int | None = None) ->
                                    f"announced")
     except zstandard.ZstdError as exc:
         raise MalformedMessage(f"proxy bundle: zstd: {exc}") from None
-    return bytes(out)
+    return out
 
 
 def split_chunks(data: bytes, chunk_bytes: int = CHUNK_BYTES) -> list[bytes]:
@@ -401,6 +439,15 @@ class BundleAssembler:
         return self.received == self.info.chunks
 
     def data(self) -> bytes:
+        """The compressed bundle in one piece (a copy: :meth:`chunks` avoids it)."""
+        return b"".join(self.chunks())
+
+    def chunks(self) -> list:
+        """The compressed bundle's chunks, in order."""
         if not self.complete:
             raise MalformedMessage(f"proxy bundle: {self.received} of {self.info.chunks} chunks received")
-        return b"".join(self._parts)
+        return list(self._parts)
+
+    def release(self) -> None:
+        """Forget the chunks (once decompressed)."""
+        self._parts = [None] * len(self._parts)

@@ -233,3 +233,42 @@ def test_the_bundle_carries_no_motion_model():
     with pytest.raises(MalformedMessage, match="object 0 moving flag is 2"):
         decode_bundle(bytes(bad))
     assert not any(hasattr(o, "motion") or hasattr(o, "world_matrix") for o in decode_bundle(raw))
+
+
+def test_a_large_bundle_is_held_once_while_decompressed_and_decoded():
+    """Issue 28: a bundle near the size cap made the client hold it two to three times (the raw
+    buffer copied to bytes, each mesh sliced and copied again). Now the decompressed bytearray is
+    the only allocation of its size and the meshes are views of it: peak at most the raw size plus
+    a quarter (one mesh's finiteness check)."""
+    import struct
+    import tracemalloc
+
+    import zstandard
+
+    from pibr.protocol.proxy import MAGIC, decode_bundle, decompress_bundle, split_chunks
+
+    n = 8_000_000                      # vertices and faces of one mesh: 192 MB of zeros
+    head = (MAGIC + struct.pack("<I", 1) + struct.pack("<H", 3) + b"big" + bytes(128) + b"\0" + bytes(48)
+            + struct.pack("<II", n, n))
+    tail = struct.pack("<II", 3, 1) + bytes(36) + bytes(12)      # the proxy: one degenerate triangle
+    raw_size = len(head) + 24 * n + len(tail)
+    cobj = zstandard.ZstdCompressor(level=1).compressobj(size=raw_size)
+    zeros = bytes(1 << 20)
+    parts = [cobj.compress(head)]
+    left = 24 * n
+    while left:
+        parts.append(cobj.compress(zeros[:min(left, len(zeros))]))
+        left -= min(left, len(zeros))
+    parts += [cobj.compress(tail), cobj.flush()]
+    chunks = split_chunks(b"".join(parts), 16 << 10)
+    del parts, zeros
+    tracemalloc.start()
+    try:
+        objects = decode_bundle(decompress_bundle(chunks, raw_size, 1))
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    v, f = objects[0].original
+    assert v.shape == (n, 3) and f.shape == (n, 3) and not v.any()
+    assert objects[0].proxy[0].shape == (3, 3)
+    assert peak < raw_size * 1.25, (peak, raw_size)
