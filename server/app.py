@@ -27,6 +27,9 @@ from .session import Session
 
 log = logging.getLogger(__name__)
 
+#: How often a Hello waiting for a slot looks again for a silent session to reclaim (s).
+RECLAIM_CHECK_S = 0.25
+
 
 class Server(TrackedListener):
     name = "pibr-server/0.1"
@@ -106,13 +109,19 @@ class Server(TrackedListener):
         reads or writes, which can be a render later), so a client that reconnects at once
         would otherwise be told the server is full."""
         self.pending.pop(session.id, None)
+        if len(self.sessions) >= self.config.max_sessions:
+            self._reclaim_silent_slot()
         if len(self.sessions) >= self.config.max_sessions or self._slot_waiters:
             loop = asyncio.get_running_loop()
             self._slot_waiters[session.id] = loop.create_future()
             try:
                 async with asyncio.timeout(self.config.admit_wait_s):
                     while True:
-                        await self._slot_waiters[session.id]
+                        # a silent session may become reclaimable while this one waits
+                        done, _ = await asyncio.wait({self._slot_waiters[session.id]}, timeout=RECLAIM_CHECK_S)
+                        if not done:
+                            self._reclaim_silent_slot()
+                            continue
                         if len(self.sessions) < self.config.max_sessions:
                             break
                         self._slot_waiters[session.id] = loop.create_future()   # keeps its place
@@ -123,6 +132,19 @@ class Server(TrackedListener):
                 del self._slot_waiters[session.id]
                 self._wake_next()   # runs once this one is counted below: no await in between
         self.sessions[session.id] = session
+
+    def _reclaim_silent_slot(self) -> None:
+        """A client waits for a slot: the session that has sent no pose for the longest since its
+        Welcome, if longer than ``silent_slot_s``, gives its slot up. A client that said Hello and
+        then nothing (say, re-sent every idle timeout) can thus keep nobody out, while every client
+        that runs (it sends a pose each tick) keeps its slot."""
+        now = asyncio.get_running_loop().time()
+        silent = [(since, s) for s in self.sessions.values()
+                  if (since := s.silent_since()) is not None and now - since > self.config.silent_slot_s]
+        if silent:
+            since, session = min(silent, key=lambda item: item[0])
+            session.yield_slot(f"no pose {now - since:.1f} s after the Welcome while another client waited for a "
+                               f"slot (--silent-slot-s {self.config.silent_slot_s:g})")
 
     def _wake_next(self) -> None:
         """A slot is free: wake the longest-waiting Hello (it checks again when it runs)."""

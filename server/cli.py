@@ -126,6 +126,9 @@ def register(sub) -> None:
                         "first come first served, before 'server full' (default 5; 0: refuse at once)")
     p.add_argument("--max-pending", type=int, default=64, metavar="N",
                    help="connections still to send their Hello; beyond N the oldest is dropped (default 64)")
+    p.add_argument("--silent-slot-s", type=float, default=2.0, metavar="S",
+                   help="a session that has sent no pose S seconds after its Welcome gives its slot to a Hello "
+                        "waiting for one (default 2; a running client sends a pose every tick)")
     p.add_argument("--hello-timeout-s", type=float, default=10.0, metavar="S",
                    help="a connection must send its whole Hello within S seconds (default 10)")
     p.add_argument("--idle-timeout-s", type=float, default=15.0, metavar="S",
@@ -155,7 +158,10 @@ def register(sub) -> None:
                    help="jitter seed; each session's jitter follows from it and the client's Hello, so a replay "
                         "through any relay with the same seed is identical (default 0)")
     r.add_argument("--max-connections", type=int, default=DEFAULT_MAX_CONNECTIONS, metavar="N",
-                   help=f"clients relayed at once; one more gets an error (default {DEFAULT_MAX_CONNECTIONS})")
+                   help=f"clients relayed at once, counted from their Hello; one more gets an error (default "
+                        f"{DEFAULT_MAX_CONNECTIONS})")
+    r.add_argument("--max-pending", type=int, default=64, metavar="N",
+                   help="connections still to send their Hello; beyond N the oldest is dropped (default 64)")
     r.add_argument("--buffer-mib", type=int, default=DEFAULT_BUFFER_BYTES >> 20, metavar="MIB",
                    help=f"most bytes held per direction of each connection, in MiB: when full, the relay stops "
                         f"reading that direction's sender (default {DEFAULT_BUFFER_BYTES >> 20}, at least one "
@@ -208,6 +214,7 @@ def cmd_relay(args) -> int:
         raise ConfigError(f"--buffer-mib must be in 1..{1 << 20}, got {args.buffer_mib}")
     config = RelayConfig(parse_host_port(args.listen), parse_host_port(args.upstream), up, down, args.seed,
                          buffer_bytes=args.buffer_mib << 20, max_connections=args.max_connections,
+                         max_pending=args.max_pending,
                          token=_token(args), tls_cert=args.tls_cert, tls_key=args.tls_key,
                          upstream_tls=upstream_tls)
     _print_fingerprint("relay", config.tls_cert)

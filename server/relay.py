@@ -21,7 +21,10 @@ yet handed to the kernel; when full, the relay stops reading that direction's se
 client that does not read stalls its own server stream (TCP back-pressure) and nothing else.
 Besides that budget a direction holds only what its last read brought and is not queued yet
 (at most one message and 64 KiB, the frame being re-stamped twice) and asyncio's read buffer.
-At most ``max_connections`` pairs run at once; one more client gets an ``Error`` ("relay full").
+At most ``max_connections`` pairs run at once, counted from a client's Hello; one more client
+gets an ``Error`` ("relay full"). Connections that have not sent their Hello wait outside those
+slots, at most ``max_pending`` of them: past that the oldest is dropped, so idle connections
+cannot keep a client out.
 
 **Access.** The relay forwards the Hello unchanged, token included, so a server with a token
 checks it. A relay given a token (``--token-file``, ``PIBR_TOKEN``; required when it listens
@@ -72,6 +75,7 @@ class RelayConfig:
     max_message_size: int = DEFAULT_MAX_MESSAGE_SIZE
     buffer_bytes: int = DEFAULT_BUFFER_BYTES     # per direction of each pair
     max_connections: int = DEFAULT_MAX_CONNECTIONS
+    max_pending: int = 64                        # connections yet to send a Hello; beyond, the oldest is dropped
     hello_timeout_s: float = 10.0                # from accepting (TLS handshake included) to the Hello
     token: str | None = None                     # clients must send it; required to listen off loopback
     tls_cert: str | None = None                  # TLS towards clients (with tls_key)
@@ -87,6 +91,8 @@ class RelayConfig:
                               f"{-(-(self.max_message_size + HEADER_SIZE) // (1 << 20))} MiB")
         if not 1 <= self.max_connections <= 100_000:
             raise ConfigError(f"relay connection limit must be in 1..100000, got {self.max_connections}")
+        if not 1 <= self.max_pending <= 100_000:
+            raise ConfigError(f"relay pending-connection limit must be in 1..100000, got {self.max_pending}")
         if not 0 < self.hello_timeout_s <= 3600:
             raise ConfigError(f"relay Hello timeout must be in (0, 3600] s, got {self.hello_timeout_s}")
         check_listen_access("relay", self.listen[0], self.token)
@@ -114,6 +120,14 @@ class _Pair:
         self.down_model: LinkModel | None = None
         #: direction ("up", "down") -> its buffer, once the pumps run
         self.queues: dict[str, ByteBudgetQueue] = {}
+        self._hello_deadline: asyncio.Timeout | None = None
+        self._evicted_among = 0    # > 0: dropped as the oldest of this many connections without a Hello
+
+    def evict(self, waiting: int) -> None:
+        """Drop this connection, the oldest of ``waiting`` still to send a Hello."""
+        self._evicted_among = waiting
+        if self._hello_deadline is not None:
+            self._hello_deadline.reschedule(asyncio.get_running_loop().time())
 
     async def run(self) -> None:
         cfg = self.relay.config
@@ -121,9 +135,17 @@ class _Pair:
         try:
             # asyncio.timeout, not wait_for: in Python 3.11 wait_for can swallow a cancellation
             # (the relay closing) that comes as the Hello does, and the pair would run on.
-            async with asyncio.timeout(cfg.hello_timeout_s):
+            async with asyncio.timeout(cfg.hello_timeout_s) as self._hello_deadline:
+                if self._evicted_among:
+                    raise TimeoutError
                 first = await self._read_hello(client_frames)
         except TimeoutError:
+            if self._evicted_among:
+                log.info("relay %d: dropped %s, the oldest of %d connections without a Hello", self.number,
+                         self.peer, self._evicted_among)
+                await self._refuse(Error(ConfigError.code, f"relay busy: {self._evicted_among} connections are "
+                                                           f"waiting to send a Hello; this one, the oldest, is dropped"))
+                return
             log.info("relay %d: no Hello from %s within %g s", self.number, self.peer, cfg.hello_timeout_s)
             await self._refuse(Error(UnexpectedMessage.code, f"relay: no Hello within {cfg.hello_timeout_s:g} s"))
             return
@@ -135,10 +157,20 @@ class _Pair:
             log.info("relay %d: client %s left before its Hello (%s)", self.number, self.peer, exc or "closed")
             await _close(self.c_writer)
             return
+        finally:
+            self._hello_deadline = None
+            self.relay.pending.pop(self.number, None)
         if cfg.token is not None and not token_matches(cfg.token, self.hello.token):
             log.warning("relay %d: bad or missing token from %s", self.number, self.peer)
             await self._refuse(Error(AccessDenied.code, "relay: bad or missing token"))
             return
+        pairs = self.relay.pairs
+        if len(pairs) >= cfg.max_connections:
+            log.warning("relay %d: refused %s: %d connections already", self.number, self.peer, len(pairs))
+            await self._refuse(Error(ConfigError.code, f"relay full: {len(pairs)} connections already "
+                                                       f"(--max-connections {cfg.max_connections})"))
+            return
+        pairs.add(self)
         self.clock = self.hello.clock
         up_seed, down_seed = link_seeds(cfg.seed, self.hello)
         self.up_model, self.down_model = LinkModel(cfg.up, seed=up_seed), LinkModel(cfg.down, seed=down_seed)
@@ -276,7 +308,8 @@ class Relay(TrackedListener):
         super().__init__()
         self.config = config
         self._numbers = itertools.count(1)
-        self.pairs: set[_Pair] = set()
+        self.pairs: set[_Pair] = set()           # connections past their Hello
+        self.pending: dict[int, _Pair] = {}      # connections still to send it, oldest first
 
     async def start(self) -> tuple[str, int]:
         c = self.config
@@ -296,17 +329,17 @@ class Relay(TrackedListener):
     async def handle(self, reader, writer) -> None:
         number = next(self._numbers)
         pair = _Pair(self, number, reader, writer)
-        if len(self.pairs) >= self.config.max_connections:
-            log.warning("relay %d: refused %s: %d connections already", number, pair.peer, len(self.pairs))
-            await pair._refuse(Error(ConfigError.code, f"relay full: {len(self.pairs)} connections already "
-                                                       f"(--max-connections {self.config.max_connections})"))
-            return
-        self.pairs.add(pair)
+        self.pending[number] = pair
+        while len(self.pending) > self.config.max_pending:
+            oldest = next(iter(self.pending.values()))
+            del self.pending[oldest.number]
+            oldest.evict(len(self.pending) + 1)
         try:
             await pair.run()
         except Exception:  # one pair's bug must not stop the relay; log it loudly
             log.exception("relay: connection pair failed")
         finally:
+            self.pending.pop(number, None)
             self.pairs.discard(pair)
 
 

@@ -58,6 +58,11 @@ class Session:
         self._evicted_among = 0                     # > 0: dropped as the oldest of this many pending
         self._unsent_since: float | None = None     # real clock: since when a frame waits to leave
         self._unsent_bytes = 0
+        #: when the Welcome (and the proxies) had been sent, and when the first pose came (loop time)
+        self.welcomed_at: float | None = None
+        self.first_pose_at: float | None = None
+        self._task: asyncio.Task | None = None
+        self._yielded: str | None = None            # why this session gave its slot to a waiting client
 
     # ------------------------------------------------------------------ I/O
 
@@ -77,7 +82,10 @@ class Session:
         (``Stats`` do not count: they are taken in passing)."""
         try:
             async with asyncio.timeout(self.idle_timeout_s):
-                return await self._next_message()
+                env = await self._next_message()
+                if self.first_pose_at is None and isinstance(env.message, PoseMsg):
+                    self.first_pose_at = asyncio.get_running_loop().time()
+                return env
         except TimeoutError as exc:
             if isinstance(exc, PeerTimeout):
                 raise
@@ -97,6 +105,7 @@ class Session:
 
     async def run(self) -> None:
         log.info("session %d: connection from %s", self.id, self.peer)
+        self._task = asyncio.current_task()
         try:
             hello = await self._receive_hello()
             self.server.check_scene(hello.scene)   # a Hello the server cannot serve takes no slot
@@ -117,14 +126,28 @@ class Session:
         except (ConnectionError, ssl.SSLError, asyncio.IncompleteReadError) as exc:
             log.info("session %d: connection lost: %s", self.id, exc)
         except asyncio.CancelledError:
-            # The server is shutting down: say so, close, and end this handler normally.
-            self.conn.send(Bye("server shutting down"))
+            if self._yielded is not None:   # its slot went to a client waiting for one
+                log.warning("session %d: %s", self.id, self._yielded)
+                self.conn.send(Error(ConfigError.code, self._yielded))
+            else:   # the server is shutting down: say so, close, and end this handler normally
+                self.conn.send(Bye("server shutting down"))
         except Exception as exc:  # a bug must not take the server down: report it, end this session only
             log.exception("session %d: internal error", self.id)
             self.conn.send(Error(1, f"internal server error: {type(exc).__name__}: {exc}"))
         finally:
             self.server.release(self)   # the slot is free as soon as the peer learns why it ends
             await self._close()
+
+    def silent_since(self) -> float | None:
+        """Loop time since when this session holds a slot without having sent a pose after its
+        Welcome (None: it has sent one, or is still being set up)."""
+        return self.welcomed_at if self.first_pose_at is None else None
+
+    def yield_slot(self, reason: str) -> None:
+        """End this session (silent since its Welcome) so that a waiting client gets its slot."""
+        self._yielded = reason
+        if self._task is not None:
+            self._task.cancel()
 
     def evict(self, waiting: int) -> None:
         """Drop this connection, the oldest of ``waiting`` still to send a Hello."""
@@ -188,6 +211,7 @@ class Session:
             for chunk in bundle.chunks(self.server.proxy_chunk_bytes):
                 self.conn.send(chunk)
                 await self._flush()
+        self.welcomed_at = asyncio.get_running_loop().time()
         log.info("session %d: scene %s, %s clock, %dx%d output at %g Hz", self.id, self.config.scene["name"],
                  hello.clock, hello.output.width, hello.output.height, hello.output.rate_hz)
 

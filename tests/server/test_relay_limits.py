@@ -252,3 +252,21 @@ async def test_closing_a_tls_connection_while_the_peer_still_sends_is_quiet(tls_
     finally:
         stop.set()
         server.close()
+
+
+async def test_idle_connections_before_their_hello_keep_no_client_out():
+    """Issue 28: as many idle TCP connections as the relay has slots kept every client out until
+    its Hello timeout. Connections without a Hello now wait outside the slots, at most
+    max_pending of them, the oldest dropped past that."""
+    async with _Running(FakeUpstream(frames=2), max_connections=2, max_pending=3, hello_timeout_s=30.0) as r:
+        idle = [await asyncio.open_connection(r.host, r.port) for _ in range(3)]
+        await _wait_for(lambda: len(r.relay.pending) == 3, "the idle connections to be accepted")
+        # a client still gets in (the oldest idle connection is dropped to make room for it)
+        reader, writer = await asyncio.open_connection(r.host, r.port)
+        writer.write(_hello("legit"))
+        assert [t for t, _, _ in await read_frames(reader, limit=3)] == [Welcome.TYPE] + [Frame.TYPE] * 2
+        dropped = await asyncio.wait_for(idle[0][0].read(), 30)    # its Error, then the end
+        assert b"relay busy: 4 connections are waiting to send a Hello; this one, the oldest" in dropped
+        assert len(r.relay.pending) == 2 and len(r.relay.pairs) == 1
+        for _, w in [*idle, (reader, writer)]:
+            w.close()

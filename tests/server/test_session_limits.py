@@ -249,3 +249,26 @@ async def test_a_slow_scene_load_does_not_block_other_handshakes(monkeypatch, sl
     finally:
         release.set()
         await _stop(srv, task)
+
+
+async def test_silent_hellos_cannot_keep_a_running_client_out():
+    """Issue 28: sessions that say Hello and then nothing (re-sent every idle timeout) held every
+    slot of a server without a token. A Hello that waits for a slot now takes the slot of the
+    session silent longest since its Welcome (past silent_slot_s); sessions that send poses keep theirs."""
+    srv, host, port, task = await _serving(max_sessions=2, admit_wait_s=5.0, silent_slot_s=0.5)
+    try:
+        silent = await _welcomed(host, port)
+        running = await _welcomed(host, port)
+        await running.send(PoseMsg(0, 0, Pose.identity()), vtime_us=0)
+        await asyncio.sleep(0.2)
+        # a third client finds both slots taken; the silent one gives its slot up, the running one keeps it
+        third = await _welcomed(host, port, timeout=10.0)
+        with pytest.raises(RemoteError, match="no pose .* after the Welcome while another client waited"):
+            while True:
+                await silent.recv(timeout=5.0)
+        assert set(srv.sessions) == {running.welcome.session, third.welcome.session}
+        await third.close()
+        await running.close()
+        await silent.close()
+    finally:
+        await _stop(srv, task)
