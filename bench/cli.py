@@ -375,6 +375,21 @@ def register(sub) -> None:
     _out(st)
     st.set_defaults(func=commands.cmd_bench_stereo)
 
+    pr = bs.add_parser("predict", help="head-pose predictors (none, velocity, accel, kalman): error against look-ahead",
+                       description="Feeds every predictor of server/pose_prediction.py the trace's poses at the "
+                                   "client's rate and compares its pose a look-ahead later with the trace's: mean and "
+                                   "95th-percentile position (mm) and angular (degrees) error per predictor and "
+                                   "look-ahead. --fit searches the Kalman filter's noise levels on the tuning windows. "
+                                   "Writes predict.json (predict-tuning.json with --fit) and a plot. Seconds.")
+    pr.add_argument("--windows", type=_windows, default=None,
+                    help="head-trace windows (default: evaluation; tuning with --fit; " + _WINDOWS_HELP + ")")
+    _rate(pr)
+    pr.add_argument("--look-ahead-ms", type=arguments.positives, default=(20.0, 50.0, 100.0, 128.0, 200.0, 256.0),
+                    metavar="MS,...", help="look-aheads (default 20,50,100,128,200,256)")
+    pr.add_argument("--fit", action="store_true", help="fit the Kalman filter's noise levels on the tuning windows")
+    _out(pr)
+    pr.set_defaults(func=commands.cmd_bench_predict)
+
     sp = bs.add_parser("split", help="a one-mesh level, whole against cut into pieces: LoD, client ms, DSSIM",
                        description="Generates a one-mesh atrium (167k triangles) and serves it whole and cut into "
                                    "pieces (scenes/split.py): LoD build time, proxy's client ms and quality on "

@@ -86,6 +86,17 @@ def cmd_bench_stereo(args) -> int:
     return 0
 
 
+def cmd_bench_predict(args) -> int:
+    from .predict_bench import print_predict, run_predict_bench
+
+    r = run_predict_bench(windows=args.windows, rate_hz=args.rate, look_aheads_ms=args.look_ahead_ms, fit=args.fit,
+                          out_dir=args.out)
+    print_predict(r)
+    name = "predict-tuning" if args.fit else "predict"
+    print(f"written: {args.out}/{name}.json, {args.out}/{name}.png")
+    return 0
+
+
 def cmd_bench_split(args) -> int:
     from .split_bench import print_split_table, run_split_bench
 

@@ -316,3 +316,22 @@ def plot_stereo(result: dict, path: str) -> None:
     fig.tight_layout()
     fig.savefig(path, dpi=100)
     plt.close(fig)
+
+
+def plot_predict(result: dict, path: str) -> None:
+    """``pibr bench predict``: mean angular and position error against look-ahead, per predictor."""
+    plt = _pyplot()
+    look = result["look_aheads_ms"]
+    fig, axes = plt.subplots(1, 2, figsize=(10, 4))
+    for name, p in result["predictors"].items():
+        axes[0].plot(look, [p["overall"][f"{a:g}"]["angle_deg_mean"] for a in look], marker="o", label=name)
+        axes[1].plot(look, [p["overall"][f"{a:g}"]["position_mm_mean"] for a in look], marker="o", label=name)
+    for ax, unit in zip(axes, ("mean angular error, degrees", "mean position error, mm")):
+        ax.set_xlabel("look-ahead, ms")
+        ax.set_ylabel(unit)
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=8)
+    axes[0].set_title(f"{result['windows']['purpose']} windows", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)

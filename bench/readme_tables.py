@@ -280,11 +280,19 @@ def stereo_server(r: dict) -> list[str]:
     return _table(["scene", "references", "frames a tick", "Mbit/s", "server CPU ms a frame"], rows)
 
 
+def predict(r: dict) -> list[str]:
+    """``pibr bench predict``: mean angular error (degrees) / position error (mm) per predictor and look-ahead."""
+    look = [f"{a:g}" for a in r["look_aheads_ms"]]
+    rows = [[name, *(f"{p['overall'][a]['angle_deg_mean']:.2f} / {p['overall'][a]['position_mm_mean']:.1f}"
+                     for a in look)] for name, p in r["predictors"].items()]
+    return _table(["predictor", *(f"{a} ms" for a in look)], rows)
+
+
 RENDERERS = {"realtime": realtime, "levels": levels, "upsampling": upsampling, "pareto": pareto,
              "pareto-windows": pareto_windows, "coverage": coverage, "dynamic": dynamic, "ibr": ibr,
              "split": split, "server-projection": server_projection, "server-edges": server_edges,
              "codec-matched": codec_matched, "codec-end-to-end": codec_end_to_end, "lod-target": lod_target,
-             "stereo": stereo, "stereo-server": stereo_server}
+             "stereo": stereo, "stereo-server": stereo_server, "predict": predict}
 
 
 # -- the README ---------------------------------------------------------------------------------------------------
