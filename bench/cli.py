@@ -379,14 +379,20 @@ def register(sub) -> None:
                        description="Feeds every predictor of server/pose_prediction.py the trace's poses at the "
                                    "client's rate and compares its pose a look-ahead later with the trace's: mean and "
                                    "95th-percentile position (mm) and angular (degrees) error per predictor and "
-                                   "look-ahead. --fit searches the Kalman filter's noise levels on the tuning windows. "
-                                   "Writes predict.json (predict-tuning.json with --fit) and a plot. Seconds.")
+                                   "look-ahead; then rotation's and proxy's DSSIM when the server renders every frame "
+                                   "for the pose each predictor expects at its display. --fit searches the Kalman "
+                                   "filter's noise levels on the tuning windows. Writes predict.json (predict-tuning.json "
+                                   "with --fit) and a plot.")
     pr.add_argument("--windows", type=_windows, default=None,
                     help="head-trace windows (default: evaluation; tuning with --fit; " + _WINDOWS_HELP + ")")
     _rate(pr)
     pr.add_argument("--look-ahead-ms", type=arguments.positives, default=(20.0, 50.0, 100.0, 128.0, 200.0, 256.0),
                     metavar="MS,...", help="look-aheads (default 20,50,100,128,200,256)")
     pr.add_argument("--fit", action="store_true", help="fit the Kalman filter's noise levels on the tuning windows")
+    pr.add_argument("--no-quality", action="store_true",
+                    help="skip the DSSIM of rotation and proxy with the server rendering for each predictor's pose "
+                         "at 64, 128 and 256 ms (parts of four evaluation windows at 512^2 / 480x270; minutes)")
+    pr.add_argument("--stride", type=arguments.positive_int, default=4, help="quality: score every Nth tick (default 4)")
     _out(pr)
     pr.set_defaults(func=commands.cmd_bench_predict)
 

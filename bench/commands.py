@@ -90,7 +90,7 @@ def cmd_bench_predict(args) -> int:
     from .predict_bench import print_predict, run_predict_bench
 
     r = run_predict_bench(windows=args.windows, rate_hz=args.rate, look_aheads_ms=args.look_ahead_ms, fit=args.fit,
-                          out_dir=args.out)
+                          out_dir=args.out, quality=not args.no_quality, stride=args.stride)
     print_predict(r)
     name = "predict-tuning" if args.fit else "predict"
     print(f"written: {args.out}/{name}.json, {args.out}/{name}.png")

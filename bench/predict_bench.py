@@ -51,6 +51,80 @@ def prediction_errors(trace, start_s: float, duration_s: float, rate_hz: float, 
     return {a: (np.asarray(positions[a]), np.asarray(angles[a])) for a in look_aheads_s}
 
 
+#: The image-quality part: round trips, methods, windows (parts of evaluation windows), stride.
+QUALITY_LATENCIES_MS = (64.0, 128.0, 256.0)
+QUALITY_METHODS = ("rotation", "proxy")
+QUALITY_SECONDS = 3.0
+#: Its windows: the first QUALITY_SECONDS of these evaluation windows (real, walking, turning).
+QUALITY_WINDOWS = (("pred6dof-1", 30.0), ("pred6dof-2", 50.0), ("synth-walk", 5.0), ("synth-turns", 5.0))
+#: Its view and output sizes (as pibr bench dynamic: a few minutes on 2 cores).
+QUALITY_VIEW_SIZE, QUALITY_OUT_SIZE = (512, 512), (480, 270)
+
+
+def prediction_quality(windows, latencies_ms=QUALITY_LATENCIES_MS, methods=QUALITY_METHODS, rate_hz: float = 30.0,
+                       stride: int = 4, view_size=None, out_size=(960, 540), scene_name: str = "room",
+                       bar=None) -> dict:
+    """The DSSIM of each method when the server renders every frame for the pose a predictor
+    expects at the frame's display (server/pose_prediction.py display_look_ahead_s, the downlink
+    taken as long as the uplink), on the virtual clock's ideal-link schedule. -> latency ms ->
+    predictor -> method -> {dssim_mean, psnr_mean, frames}."""
+    from pibr.common.link import SessionSchedule
+    from pibr.common.replay import trace_ticks
+    from pibr.common.traces.loading import load_trace
+    from pibr.scenes.registry import load_scene
+    from pibr.server.pose_prediction import PREDICTORS, display_look_ahead_s, make_predictor
+
+    from .metrics import dssim, psnr, ssim
+    from .simulation import BENCH_VIEW_SIZE, Simulation, bench_server_config, load_proxies
+
+    scene = load_scene(scene_name)
+    proxies, _ = load_proxies(scene) if "proxy" in methods else (None, None)
+    out = {}
+    for latency in latencies_ms:
+        schedule = SessionSchedule.round_trip(rate_hz, latency)
+        up_us = schedule.up._delay_us
+        per = out[f"{latency:g}"] = {}
+        for name in PREDICTORS:
+            scores = {m: {"dssim": [], "psnr": []} for m in methods}
+            for w in windows:
+                trace = load_trace(w.trace)
+                ticks, pose_at = trace_ticks(scene, trace, w.start_s, w.duration_s, rate_hz)
+                sim = Simulation(scene, bench_server_config(tuple(view_size or BENCH_VIEW_SIZE)), out_size,
+                                 proxies=proxies)
+                try:
+                    instances = {m: sim.make_method(m) for m in methods}
+                    predictor, fed_us, frames = make_predictor(name), None, {}
+                    for t_us in ticks[::stride]:
+                        render_us, pose_us = schedule.frame_for(t_us)
+                        if render_us not in frames:
+                            # the client's poses up to the one this frame uses, as the server got them
+                            k = (fed_us // schedule.tick_us + 1) if fed_us is not None else \
+                                (pose_us // schedule.tick_us) - 3
+                            for kk in range(k, pose_us // schedule.tick_us + 1):
+                                predictor.update(kk * schedule.tick_us / 1e6, pose_at(kk * schedule.tick_us))
+                            fed_us = pose_us
+                            ahead = display_look_ahead_s(render_us, pose_us, schedule.delay_us, up_us,
+                                                         schedule.interval_us)
+                            frames[render_us] = predictor.predict(ahead)
+                        frame = sim.frame_at(render_us / 1e6, frames[render_us])
+                        display = pose_at(t_us)
+                        truth = sim.ground_truth(display, t_us / 1e6)
+                        for m, inst in instances.items():
+                            rgb, _, _ = sim.display(inst, display, frame, t_us / 1e6)
+                            scores[m]["dssim"].append(dssim(ssim(truth, rgb)))
+                            scores[m]["psnr"].append(psnr(truth, rgb))
+                        if bar is not None:
+                            bar.update(1)
+                    for inst in instances.values():
+                        inst.release()
+                finally:
+                    sim.close()
+                    sim.ctx.release()
+            per[name] = {m: {"dssim_mean": float(np.mean(v["dssim"])), "psnr_mean": float(np.mean(v["psnr"])),
+                             "frames": len(v["dssim"])} for m, v in scores.items()}
+    return out
+
+
 def _summary(errors: list) -> dict:
     pos = np.concatenate([e[0] for e in errors]) if errors else np.zeros(0)
     ang = np.concatenate([e[1] for e in errors]) if errors else np.zeros(0)
@@ -62,8 +136,12 @@ def _summary(errors: list) -> dict:
 
 
 def run_predict_bench(windows=None, rate_hz: float = 30.0, look_aheads_ms=DEFAULT_LOOK_AHEADS_MS, fit: bool = False,
-                      out_dir: str = "out/bench", plot: bool = True) -> dict:
-    """Every predictor at every look-ahead on ``windows`` (default: evaluation; tuning with ``fit``)."""
+                      out_dir: str = "out/bench", plot: bool = True, quality: bool = False, quality_windows=None,
+                      quality_latencies_ms=QUALITY_LATENCIES_MS, stride: int = 4, out_size=QUALITY_OUT_SIZE,
+                      view_size=QUALITY_VIEW_SIZE, progress: bool = True) -> dict:
+    """Every predictor at every look-ahead on ``windows`` (default: evaluation; tuning with ``fit``);
+    with ``quality`` also :func:`prediction_quality` on ``quality_windows`` (default: the first
+    :data:`QUALITY_SECONDS` of :data:`QUALITY_WINDOWS`, parts of evaluation windows)."""
     from pibr.common.traces.loading import load_trace
     from pibr.server.pose_prediction import PREDICTORS, KalmanPredictor, make_predictor
 
@@ -107,6 +185,28 @@ def run_predict_bench(windows=None, rate_hz: float = 30.0, look_aheads_ms=DEFAUL
         for a in result["predictors"]["none"]["overall"]}
     result["kalman_beats_none_at_every_look_ahead"] = all(v["angle_deg_less"] > 0
                                                           for v in result["kalman_vs_none"].values())
+    if quality and not fit:
+        from .windows import Window
+
+        qw = tuple(quality_windows or (Window(trace, start, QUALITY_SECONDS) for trace, start in QUALITY_WINDOWS))
+        bar = None
+        if progress:
+            import sys
+
+            from tqdm import tqdm
+
+            per = sum(len(range(0, int(w.duration_s * rate_hz), stride)) for w in qw)
+            bar = tqdm(total=per * len(quality_latencies_ms) * len(PREDICTORS), unit="tick", desc="bench predict",
+                       file=sys.stderr, leave=False, disable=None)
+        try:
+            result["quality"] = {"windows": windows_json(qw, "reporting"), "stride": stride, "output": list(out_size),
+                                 "view_size": list(view_size),
+                                 "by_latency_ms": prediction_quality(qw, quality_latencies_ms, rate_hz=rate_hz,
+                                                                     stride=stride, view_size=view_size,
+                                                                     out_size=out_size, bar=bar)}
+        finally:
+            if bar is not None:
+                bar.close()
     name = "predict-tuning.json" if fit else "predict.json"
     write_result(out_dir, name, result)
     if plot:
@@ -128,3 +228,10 @@ def print_predict(result: dict) -> None:
         print(f"fitted Kalman noise: position q={result['fit']['position']['q']:g} r={result['fit']['position']['r']:g}, "
               f"orientation q={result['fit']['orientation']['q']:g} r={result['fit']['orientation']['r']:g}")
     print("kalman below no prediction in angle at every look-ahead:", result["kalman_beats_none_at_every_look_ahead"])
+    q = result.get("quality")
+    if q:
+        print("DSSIM of what the client shows when the server renders for the predicted pose (" +
+              ", ".join(w["trace"] + "@" + f"{w['start_s']:g}" for w in q["windows"]["used"]) + "):")
+        for latency, per in q["by_latency_ms"].items():
+            for name, methods in per.items():
+                print(f"  {latency:>4} ms {name:<9} " + "  ".join(f"{m} {v['dssim_mean']:.4f}" for m, v in methods.items()))

@@ -196,3 +196,12 @@ def make_predictor(name: str, **settings) -> Predictor:
     if name not in classes:
         raise ConfigError(f"unknown pose predictor {name!r}; choose from {', '.join(PREDICTORS)}")
     return classes[name](**settings)
+
+
+def display_look_ahead_s(render_us: int, pose_t_us: int, server_delay_us: int, uplink_us: int,
+                         frame_interval_us: int) -> float:
+    """How far ahead of its pose a frame is seen, on average: from the pose's client time to the
+    middle of the frame's time on screen. The frame leaves ``server_delay_us`` after its render,
+    crosses a downlink taken to be as long as the uplink the pose took (the server measures that
+    one), and is the newest frame for about one frame interval."""
+    return (render_us - pose_t_us + server_delay_us + uplink_us + frame_interval_us / 2) / 1e6
