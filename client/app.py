@@ -36,8 +36,8 @@ import numpy as np
 from pibr.common.gl import GLThread
 from pibr.common.quality import OFF, DeadlineController, read_cost_table
 from pibr.protocol.errors import ConfigError, MalformedMessage, UnexpectedMessage
-from pibr.protocol.messages import (FRAMES_DECODED, Clock, Frame, Hello, OutputConfig, PayloadKind, PoseMsg,
-                                    Stats, decode_eye, decode_frame_level)
+from pibr.protocol.messages import (DISPLAY_AGE_MS, FRAMES_DECODED, Clock, Frame, Hello, OutputConfig, PayloadKind,
+                                    PoseMsg, Stats, decode_eye, decode_frame_level)
 from pibr.protocol.pose import Pose
 from pibr.protocol.stereo import CENTRE, EYES, eye_pose
 
@@ -56,6 +56,9 @@ log = logging.getLogger(__name__)
 WARMUP_SEQ = (1 << 32) - 1
 #: Timed renders of every quality level before the wall clock starts (after one that compiles it).
 CALIBRATION_RENDERS = 3
+#: A server that predicts the head's pose hears the median age of the frames shown over this many
+#: ticks, every this many ticks (Stats DISPLAY_AGE_MS).
+AGE_REPORT_TICKS = 15
 #: The interpreter's thread switch interval on the wall clock (see _run_real).
 SWITCH_INTERVAL_S = 0.001
 
@@ -150,6 +153,7 @@ class Client:
         self._calibration: dict = {}        # method -> median ms of each level before the clock started
         self._stopped: str | None = None    # why the run ended before its last tick (interrupted, failed)
         self.ticks_shown = 0                # ticks displayed (afresh or repeated) so far
+        self._ages: deque = deque(maxlen=AGE_REPORT_TICKS)   # ms, of the frames the last ticks showed
 
     # ------------------------------------------------------------------ set-up
 
@@ -547,7 +551,19 @@ class Client:
                 for rec, compose in zip(pair, (side_by_side, anaglyph)):   # composed off the tick
                     rec.submit_pair(left, right, {"tick": tick}, compose)
         self.ticks_shown += 1
+        if shown:   # the age of what the head-centre (or left eye) slot showed: pose sent -> now
+            f = shown[self._slot(self._eyes[0])].frame if self._slot(self._eyes[0]) in shown else None
+            if f is not None:
+                pose_t_us = f.pose_t_us - (self._time_base_us if f.pose_seq == WARMUP_SEQ else 0)
+                self._ages.append((t_us - pose_t_us) / 1e3)
         return drawn
+
+    async def _report_age(self, tick: int, vtime_us: int) -> None:
+        """Tell a server that predicts the head's pose how old the frames shown are (every
+        AGE_REPORT_TICKS ticks, the median of the last ones)."""
+        if self.session.options.get("predict") and self._ages and tick % AGE_REPORT_TICKS == AGE_REPORT_TICKS - 1:
+            await self.conn.send(Stats({DISPLAY_AGE_MS: float(np.median(self._ages))}), vtime_us=vtime_us,
+                                 flush=False)
 
     def _record(self, tick: int, t_us: int, pose: Pose, decoded, client_ms: float, hole: float, missed: int) -> dict:
         """One row of ``<method>.records.csv``: the tick, its pose, and the frame shown (if any)."""
@@ -604,6 +620,7 @@ class Client:
                 await self._decode(usable)
             if tick >= 0:
                 await self._display(tick, t_us, pose)
+                await self._report_age(tick, t_us)
                 progress.step()
 
     async def _run_real(self, trace, interval_us, n_ticks, preroll, progress, t_hello, t_welcome) -> None:
@@ -688,6 +705,7 @@ class Client:
             await self.conn.send(PoseMsg(tick + preroll, int((loop.time() - zero) * 1e6), pose), vtime_us=t_us)
             if tick >= 0:
                 drawn = await self._display(tick, t_us, pose)
+                await self._report_age(tick, t_us)
                 progress.step()
                 if self.deadline is not None:   # the tick's work besides drawing: the controller's margin
                     self.deadline.observe_overhead((loop.time() - started) * 1e3 - drawn)

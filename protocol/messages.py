@@ -486,6 +486,10 @@ class ProxyChunk(Message):
 #: (all, showing the newest): how many it has taken. The server keeps at most a few frames ahead
 #: of it, so a slow client gets fresh frames, not a queue of stale ones.
 FRAMES_DECODED = "frames_decoded"
+#: ``Stats`` key: the median age (ms) of the frames a client showed over its last ticks (from the
+#: pose a frame was rendered for to its display): a server predicting the head's pose
+#: (SessionConfig.options["predict"]) predicts that far ahead.
+DISPLAY_AGE_MS = "display_age_ms"
 
 
 @dataclass(frozen=True)

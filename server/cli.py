@@ -126,6 +126,10 @@ def register(sub) -> None:
                         "first come first served, before 'server full' (default 5; 0: refuse at once)")
     p.add_argument("--max-pending", type=int, default=64, metavar="N",
                    help="connections still to send their Hello; beyond N the oldest is dropped (default 64)")
+    p.add_argument("--predict", choices=("none", "velocity", "accel", "kalman"), default="none",
+                   help="render each frame for the head pose predicted as far ahead as the client reports its "
+                        "frames are seen (server/pose_prediction.py; 'pibr bench predict' measures each; default "
+                        "none)")
     p.add_argument("--silent-slot-s", type=float, default=2.0, metavar="S",
                    help="a session that has sent no pose S seconds after its Welcome gives its slot to a Hello "
                         "waiting for one (default 2; a running client sends a pose every tick)")

@@ -65,6 +65,7 @@ class ServerConfig:
     max_sessions: int = 8               # sessions past their Hello
     admit_wait_s: float = 5.0           # a Hello at a full server waits this long for a slot
     max_pending: int = 64               # connections yet to send a Hello; beyond, the oldest is dropped
+    predict: str = "none"               # render for the head pose predicted at display (server/pose_prediction.py)
     silent_slot_s: float = 2.0          # a session without a pose this long after its Welcome yields its slot to a waiting client
     hello_timeout_s: float = 10.0       # from connecting to a whole Hello
     idle_timeout_s: float = 15.0        # real clock: longest wait for the client's next pose or clock
@@ -120,6 +121,10 @@ class ServerConfig:
             raise ConfigError("max sessions must be at least 1")
         if self.max_pending < 1:
             raise ConfigError("max pending connections must be at least 1")
+        from .pose_prediction import PREDICTORS
+
+        if self.predict not in PREDICTORS:
+            raise ConfigError(f"unknown pose predictor {self.predict!r}; choose from {', '.join(PREDICTORS)}")
         if not (0 < self.silent_slot_s <= 3600):
             raise ConfigError(f"--silent-slot-s must be in (0, 3600] s, got {self.silent_slot_s}")
         if not (0 <= self.admit_wait_s <= 3600):

@@ -69,12 +69,17 @@ class Predictor:
         self.poses: list[Pose] = []
 
     def update(self, t: float, pose: Pose) -> None:
-        if self.times and t <= self.times[-1]:
-            return   # a repeated or late pose adds nothing
+        if self.times and t == self.times[-1]:
+            return   # a repeated pose adds nothing
+        if self.times and t < self.times[-1]:
+            self.reset()   # an earlier time: a new timeline (a client's clock starting after its warm-up)
         self.times.append(float(t))
         self.poses.append(pose)
         if len(self.times) > self.history:
             del self.times[0], self.poses[0]
+
+    def reset(self) -> None:
+        self.times, self.poses = [], []
 
     def predict(self, look_ahead_s: float) -> Pose:
         if not self.poses:
@@ -177,8 +182,13 @@ class KalmanPredictor(Predictor):
         self.position = _ConstantVelocityKF(3, position_q, position_r)
         self.orientation = _ConstantVelocityKF(4, orientation_q, orientation_r)
 
+    def reset(self) -> None:
+        super().reset()
+        self.position = _ConstantVelocityKF(3, self.position.q, self.position.r)
+        self.orientation = _ConstantVelocityKF(4, self.orientation.q, self.orientation.r)
+
     def update(self, t: float, pose: Pose) -> None:
-        if self.times and t <= self.times[-1]:
+        if self.times and t == self.times[-1]:
             return
         super().update(t, pose)
         q = np.asarray(pose.q, np.float64)

@@ -23,7 +23,7 @@ from collections import deque
 
 from pibr.protocol.connection import Envelope
 from pibr.protocol.errors import ClientClosed, ConfigError, PeerTimeout, ProtocolError, SceneError
-from pibr.protocol.messages import FRAMES_DECODED, Bye, Clock, Error, Hello, PoseMsg, Welcome
+from pibr.protocol.messages import DISPLAY_AGE_MS, FRAMES_DECODED, Bye, Clock, Error, Hello, PoseMsg, Welcome
 from pibr.protocol.sides import ServerSide
 from pibr.protocol.stereo import CENTRE, eye_pose, frame_eyes
 
@@ -48,6 +48,7 @@ class Session:
         self.config = None
         self.frames_sent = 0
         self.stereo: dict | None = None   # {"reference", "ipd_mm"} of a two-eye client (protocol/stereo.py)
+        self.predictor = None           # the head-pose predictor (server/pose_prediction.py), if on
         self.server_ticks = 0           # ticks that made frames (a stereo session's eyes follow it)
         self.frames_skipped = 0
         self.frames_held = 0            # real clock: ticks not rendered while the client caught up
@@ -201,6 +202,10 @@ class Session:
         self.pipeline, bundle = await self.server.setup_session(self.id, hello)
         self.config = self.pipeline.session
         self.stereo = self.config.options.get("stereo")
+        if self.config.options.get("predict"):
+            from .pose_prediction import make_predictor
+
+            self.predictor = make_predictor(self.config.options["predict"])
         if "server_levels" in self.config.options:   # the plan turned the rate control on (session_plan.py)
             self.rate = RateControl(server_levels(self.config.extra is not None), cfg.fps)
         setup_us = int((time.monotonic() - t_hello) * 1e6)
@@ -222,9 +227,25 @@ class Session:
         """The frames of one server tick: one from the head's pose, or a stereo session's eyes for
         this tick (protocol/stereo.py: one alternating eye, or both, each a frame of its own)."""
         reference = self.stereo["reference"] if self.stereo else None
+        pose_msg = self._predicted(pose_msg)
         for i, eye in enumerate(frame_eyes(reference, self.server_ticks)):
             await self._send_frame(pose_msg, t_us, vtime_us, force_keyframe and i == 0, level, eye)
         self.server_ticks += 1
+
+    def _take_pose(self, msg: PoseMsg) -> None:
+        """A pose the session will render from: the predictor sees every one, in order."""
+        if self.predictor is not None:
+            self.predictor.update(msg.t_us / 1e6, msg.pose)
+
+    def _predicted(self, pose_msg: PoseMsg) -> PoseMsg:
+        """``pose_msg`` with the head pose predicted as far ahead as the client reports its frames
+        are seen (DISPLAY_AGE_MS); unchanged without a predictor or before the first report. Its
+        time stays the pose's, so the client's ages stay measured from what it sent."""
+        age_ms = self.side.client_stats.get(DISPLAY_AGE_MS)
+        if self.predictor is None or not isinstance(age_ms, (int, float)) or not self.predictor.poses:
+            return pose_msg
+        ahead = max(0.0, age_ms / 1e3 - (self.predictor.times[-1] - pose_msg.t_us / 1e6))
+        return PoseMsg(pose_msg.seq, pose_msg.t_us, self.predictor.predict(ahead))
 
     async def _send_frame(self, pose_msg: PoseMsg, t_us: int, vtime_us: int, force_keyframe: bool = False,
                           level: tuple | None = None, eye: str = CENTRE) -> None:
@@ -301,6 +322,7 @@ class Session:
                 await receive()
             while poses and poses[0][0] <= t_k:
                 current = poses.popleft()[1]
+                self._take_pose(current)
             await self._send_tick(current, t_k, t_k + delay)
             promised = t_k + delay
             await self._flush()
@@ -380,6 +402,7 @@ class Session:
             env = await self._recv()    # a pose or a clock (the side refuses anything else)
             if isinstance(env.message, PoseMsg):
                 newest[0] = env.message
+                self._take_pose(env.message)
 
     async def _calibrate(self, pose) -> None:
         """The rate control's first cost estimates: every level made on the GL thread, in this

@@ -76,6 +76,8 @@ def plan_session(cfg: ServerConfig, scene, hello: Hello, proxies: dict | None = 
         options["server_levels"] = [lv.name for lv in server_levels(use_extra)]
     if use_extra:   # whether the extra view's sky (distance 0) is sky, not also peeled pixels
         options["peel_marker"] = bool(cfg.peel_marker)
+    if cfg.predict != "none":   # frames rendered for the predicted pose; the client reports display ages
+        options["predict"] = cfg.predict
     if hello.stereo:   # the eyes the frames are rendered for (protocol/stereo.py)
         if hello.stereo != "cyclops" and cfg.colour_scale != 1.0:
             raise ConfigError(f"stereo {hello.stereo} interleaves the eyes' views in one stream; colour at scale "

@@ -147,3 +147,29 @@ def test_an_interrupted_client_leaves_an_evaluable_recording(tmp_path, clock, si
     metrics = evaluate_run(out, flip_every=0, workers=1, progress=False, side_by_side=False, plot=False)
     assert metrics["methods"]["rotation"]["frames"] == shown
     assert metrics["complete"] is False
+
+
+def test_a_server_predicting_the_head_pose(tmp_path):
+    """``pibr serve --predict velocity``: frames rendered for where the head will be when they are
+    seen (as far ahead as the client reports its frames' age) leave rotation and proxy less to
+    warp (measured on this window: rotation DSSIM 0.116 against 0.152, proxy 0.054 against 0.077),
+    and the virtual clock stays deterministic (the ages travel as Stats in the stream's order)."""
+    runs = {}
+    for name, predict in (("none", "none"), ("velocity", "velocity"), ("again", "velocity")):
+        out = str(tmp_path / name)
+        run_pipeline(out, server_args=["--scene", "room", "--view-size", "256x256", "--bitrate-kbps", "3000",
+                                       "--predict", predict],
+                     relay_args=["--up-ms", "64", "--down-ms", "64"],
+                     client_args=["--trace", "pred6dof-1", "--start", "30", "--duration", "2", "--rate", "30",
+                                  "--size", "240x136", "--method", "rotation,proxy"], timeout=600)
+        runs[name] = out
+    frame_poses = {name: [(r["frame_px"], r["frame_qw"]) for r in read_records(os.path.join(out, "proxy.records.csv"))]
+                   for name, out in runs.items()}
+    assert frame_poses["velocity"] == frame_poses["again"]
+    assert frame_poses["velocity"] != frame_poses["none"]
+    with open(os.path.join(runs["velocity"], "session.json")) as f:
+        assert json.load(f)["session"]["options"]["predict"] == "velocity"
+    plain = evaluate_run(runs["none"], flip_every=0, workers=1, progress=False, side_by_side=False, plot=False)
+    ahead = evaluate_run(runs["velocity"], flip_every=0, workers=1, progress=False, side_by_side=False, plot=False)
+    for m in ("rotation", "proxy"):
+        assert ahead["methods"][m]["dssim_mean"] < 0.9 * plain["methods"][m]["dssim_mean"], m

@@ -61,3 +61,15 @@ def test_limits_and_names():
         make_predictor("kalman").predict(0.1)
     with pytest.raises(ConfigError, match="unknown pose predictor 'psychic'"):
         make_predictor("psychic")
+
+
+@pytest.mark.parametrize("name", ["velocity", "kalman"])
+def test_an_earlier_time_starts_a_new_timeline(name):
+    """A real-clock client's warm-up poses and its ticks' poses count time from different zeros:
+    a pose earlier than the last starts the history over instead of being dropped for good."""
+    p = _feed(name, np.arange(10, 12, 1 / 30))
+    later = np.arange(0, 1, 1 / 30)
+    for t in later:
+        p.update(t, _pose(t))
+    pos, ang = _error(p.predict(0.1), _pose(later[-1] + 0.1))
+    assert pos < 1e-3 and ang < math.radians(0.1)
