@@ -288,11 +288,24 @@ def predict(r: dict) -> list[str]:
     return _table(["predictor", *(f"{a} ms" for a in look)], rows)
 
 
+def predict_quality(r: dict) -> list[str]:
+    """``pibr bench predict``: DSSIM of rotation / proxy per predictor and round trip, the server
+    rendering for the predicted pose."""
+    q = r["quality"]["by_latency_ms"]
+    latencies = list(q)
+    names = list(next(iter(q.values())))
+    rows = [[name, *(" / ".join(f"{v['dssim_mean']:.4f}" for v in q[lat][name].values()) for lat in latencies)]
+            for name in names]
+    methods = " / ".join(next(iter(next(iter(q.values())).values())))
+    return _table(["predictor", *(f"{lat} ms ({methods})" for lat in latencies)], rows)
+
+
 RENDERERS = {"realtime": realtime, "levels": levels, "upsampling": upsampling, "pareto": pareto,
              "pareto-windows": pareto_windows, "coverage": coverage, "dynamic": dynamic, "ibr": ibr,
              "split": split, "server-projection": server_projection, "server-edges": server_edges,
              "codec-matched": codec_matched, "codec-end-to-end": codec_end_to_end, "lod-target": lod_target,
-             "stereo": stereo, "stereo-server": stereo_server, "predict": predict}
+             "stereo": stereo, "stereo-server": stereo_server, "predict": predict,
+             "predict-quality": predict_quality}
 
 
 # -- the README ---------------------------------------------------------------------------------------------------
