@@ -26,6 +26,15 @@ class ProcessFailed(PibrError):
     pass
 
 
+def _child_setup(cpus) -> None:
+    """In the child before it runs: Ctrl-C (SIGINT) stops it as from a terminal, even where this
+    process was started ignoring it (a background job of a script ignores SIGINT, and children
+    inherit that), since :meth:`PibrProcess.stop` asks with SIGINT first; and its CPUs."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+    if cpus is not None:
+        os.sched_setaffinity(0, cpus)
+
+
 class PibrProcess:
     """One ``python -m pibr ARGS`` child with its output pumped to ``log_path``."""
 
@@ -46,7 +55,7 @@ class PibrProcess:
         self.cpus = cpus
         self.proc = subprocess.Popen([sys.executable, "-m", "pibr", *args], stdout=subprocess.PIPE,
                                      stderr=subprocess.STDOUT, text=True, bufsize=1, env=full_env,
-                                     preexec_fn=None if cpus is None else lambda: os.sched_setaffinity(0, cpus))
+                                     preexec_fn=lambda: _child_setup(cpus))
         self._pump = threading.Thread(target=self._read, name=f"{name}-output", daemon=True)
         self._pump.start()
 
