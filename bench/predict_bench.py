@@ -74,8 +74,7 @@ def prediction_quality(windows, latencies_ms=QUALITY_LATENCIES_MS, methods=QUALI
     from pibr.scenes.registry import load_scene
     from pibr.server.pose_prediction import PREDICTORS, display_look_ahead_s, make_predictor
 
-    from .metrics import dssim, psnr, ssim
-    from .simulation import BENCH_VIEW_SIZE, Simulation, bench_server_config, load_proxies
+    from .simulation import BENCH_VIEW_SIZE, Simulation, bench_server_config, evaluate_methods, load_proxies
 
     scene = load_scene(scene_name)
     proxies, _ = load_proxies(scene) if "proxy" in methods else (None, None)
@@ -89,37 +88,30 @@ def prediction_quality(windows, latencies_ms=QUALITY_LATENCIES_MS, methods=QUALI
             for w in windows:
                 trace = load_trace(w.trace)
                 ticks, pose_at = trace_ticks(scene, trace, w.start_s, w.duration_s, rate_hz)
+                predictor, fed_us, frames, samples = make_predictor(name), None, {}, []
+                for t_us in ticks[::stride]:
+                    render_us, pose_us = schedule.frame_for(t_us)
+                    if render_us not in frames:
+                        # the client's poses up to the one this frame uses, as the server got them
+                        k = (fed_us // schedule.tick_us + 1) if fed_us is not None else \
+                            (pose_us // schedule.tick_us) - 3
+                        for kk in range(k, pose_us // schedule.tick_us + 1):
+                            predictor.update(kk * schedule.tick_us / 1e6, pose_at(kk * schedule.tick_us))
+                        fed_us = pose_us
+                        ahead = display_look_ahead_s(render_us, pose_us, schedule.delay_us, up_us,
+                                                     schedule.interval_us)
+                        frames[render_us] = predictor.predict(ahead)
+                    samples.append((t_us / 1e6, pose_at(t_us), render_us / 1e6, frames[render_us]))
                 sim = Simulation(scene, bench_server_config(tuple(view_size or BENCH_VIEW_SIZE)), out_size,
                                  proxies=proxies)
                 try:
-                    instances = {m: sim.make_method(m) for m in methods}
-                    predictor, fed_us, frames = make_predictor(name), None, {}
-                    for t_us in ticks[::stride]:
-                        render_us, pose_us = schedule.frame_for(t_us)
-                        if render_us not in frames:
-                            # the client's poses up to the one this frame uses, as the server got them
-                            k = (fed_us // schedule.tick_us + 1) if fed_us is not None else \
-                                (pose_us // schedule.tick_us) - 3
-                            for kk in range(k, pose_us // schedule.tick_us + 1):
-                                predictor.update(kk * schedule.tick_us / 1e6, pose_at(kk * schedule.tick_us))
-                            fed_us = pose_us
-                            ahead = display_look_ahead_s(render_us, pose_us, schedule.delay_us, up_us,
-                                                         schedule.interval_us)
-                            frames[render_us] = predictor.predict(ahead)
-                        frame = sim.frame_at(render_us / 1e6, frames[render_us])
-                        display = pose_at(t_us)
-                        truth = sim.ground_truth(display, t_us / 1e6)
-                        for m, inst in instances.items():
-                            rgb, _, _ = sim.display(inst, display, frame, t_us / 1e6)
-                            scores[m]["dssim"].append(dssim(ssim(truth, rgb)))
-                            scores[m]["psnr"].append(psnr(truth, rgb))
-                        if bar is not None:
-                            bar.update(1)
-                    for inst in instances.values():
-                        inst.release()
+                    series = evaluate_methods(sim, samples, {m: (m, {}) for m in methods}, bar=bar)
                 finally:
                     sim.close()
                     sim.ctx.release()
+                for m in methods:
+                    scores[m]["dssim"] += series[m]["dssim"]
+                    scores[m]["psnr"] += series[m]["psnr"]
             per[name] = {m: {"dssim_mean": float(np.mean(v["dssim"])), "psnr_mean": float(np.mean(v["psnr"])),
                              "frames": len(v["dssim"])} for m, v in scores.items()}
     return out
