@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import asyncio
 import logging
-import math
 import ssl
 import time
 from collections import deque
@@ -52,7 +51,7 @@ class Session:
         self.server_ticks = 0           # ticks that made frames (a stereo session's eyes follow it)
         self.frames_skipped = 0
         self.frames_held = 0            # real clock: ticks not rendered while the client caught up
-        self.tick_overruns = 0
+        self.tick_overruns = 0          # real clock: frames that overran their interval (the next began at once)
         self.idle_timeout_s: float | None = None   # set by the Hello's clock
         self._accepted = asyncio.get_running_loop().time()
         self._hello_deadline: asyncio.Timeout | None = None
@@ -357,11 +356,11 @@ class Session:
         receiver = asyncio.create_task(self._receive_poses(newest), name=f"session-{self.id}-receiver")
         loop = asyncio.get_running_loop()
         start = loop.time()
-        k = 0
+        due = start   # when the next frame is due
         need_keyframe = False
         try:
             while True:
-                wait = start + k * interval - loop.time()
+                wait = due - loop.time()
                 if wait > 0:
                     done, _ = await asyncio.wait({receiver}, timeout=wait)
                 if receiver.done():
@@ -375,7 +374,7 @@ class Session:
                     else:
                         if self.rate is not None and not self.rate.calibration_ms:
                             await self._calibrate(newest[0].pose)
-                            start = loop.time() - k * interval   # the clock goes on from here
+                            due = loop.time()   # the frames' rate counts from here
                         level = None
                         if self.rate is not None:
                             index, _, made = self.rate.choose()
@@ -387,9 +386,14 @@ class Session:
                             self.rate.observe(level[0], (loop.time() - t0) * 1e3, level[1].extra)
                         need_keyframe = False
                         self.writer.write(self.conn.data_to_send())  # no drain: never wait on one client
-                next_k = max(k + 1, math.floor((loop.time() - start) / interval) + 1)
-                self.tick_overruns += next_k - k - 1
-                k = next_k
+                due += interval
+                now = loop.time()
+                if now > due:
+                    # This frame overran its interval: the next starts at once, not at the next
+                    # slot of a fixed grid (which would skip a whole interval for a frame a few ms
+                    # late and halve the rate of a server whose frames cost about an interval).
+                    self.tick_overruns += 1
+                    due = now
         finally:
             receiver.cancel()
             try:

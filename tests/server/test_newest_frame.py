@@ -94,3 +94,41 @@ async def test_a_real_clock_client_that_sends_poses_but_reads_nothing_loses_its_
         task.cancel()
         await asyncio.gather(task, return_exceptions=True)
         await srv.close()
+
+
+@pytest.mark.parametrize("frame_ms, expected_fps", [(30.0, 20.0), (65.0, 1e3 / 65.0)])
+async def test_a_frame_over_its_interval_delays_the_next_without_skipping_a_slot(frame_ms, expected_fps):
+    """The wall clock's frames keep --fps when they fit, and when each costs a little more than an
+    interval the next starts at once: the rate is one per frame's cost, not one per two intervals
+    (a fixed grid skipped the slot a frame ran into, 10 fps for 65 ms frames asked at 20)."""
+    srv = Server(ServerConfig(port=0, scene="sphere", view_size=(64, 64), fps=20.0, bitrate_kbps=2000,
+                              extra_view="off", rate_control="off"))
+    host, port = await srv.start()
+    task = asyncio.create_task(srv.serve_forever())
+    try:
+        reader, writer = await asyncio.open_connection(host, port)
+        conn = Connection()
+        conn.send(Hello(client="paced", scene="sphere", clock="real", output=OutputConfig(64, 48, 90.0, 30.0)))
+        writer.write(conn.data_to_send())
+        while not srv.sessions:
+            await asyncio.sleep(0.01)
+        session = next(iter(srv.sessions.values()))
+        starts = []
+
+        async def costly_tick(*args, **kwargs):   # a frame that takes frame_ms and sends nothing
+            starts.append(asyncio.get_running_loop().time())
+            await asyncio.sleep(frame_ms / 1e3)
+        session._send_tick = costly_tick
+        conn.send(PoseMsg(0, 0, Pose.make((0, 1.6, 0))))
+        writer.write(conn.data_to_send())
+        while len(starts) < 16:
+            await asyncio.sleep(0.01)
+        fps = (len(starts) - 1) / (starts[-1] - starts[0])
+        assert expected_fps * 0.85 <= fps <= expected_fps * 1.05
+        overran = frame_ms > 50.0
+        assert (session.tick_overruns >= 14) if overran else (session.tick_overruns <= 2)
+        writer.close()
+    finally:
+        task.cancel()
+        await asyncio.gather(task, return_exceptions=True)
+        await srv.close()
