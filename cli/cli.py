@@ -16,6 +16,7 @@ COMMAND_MODULES = (
     "pibr.client.cli",      # client
     "pibr.scenes_cli",      # scenes (pibr.scenes.cli, and --plan from pibr.server.scene_plan)
     "pibr.trace_cli",       # trace convert|show|synth
+    "pibr.link_cli",        # link list|show
     "pibr.bench.cli",       # demo, evaluate, bench ...
 )
 

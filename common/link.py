@@ -8,7 +8,8 @@ integer microseconds so the virtual clock stays bit-exact. For a message sent at
 ``n`` bytes::
 
     tx_start = max(t, link_free)                 # the link sends one message at a time
-    tx       = n * 8 / kbps                      # serialisation at the bandwidth cap (0: none)
+    tx       = n * 8 / kbps                      # serialisation at the bandwidth cap (0: none),
+                                                 # or until a bandwidth trace has carried n bytes
     arrive   = tx_start + tx + max(0, delay + U(-jitter, +jitter))
     arrive   = max(arrive, previous arrive)      # TCP delivers in order
 
@@ -23,27 +24,40 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .bandwidth import BandwidthTrace
+
 
 @dataclass(frozen=True)
 class LinkParams:
-    """One direction: ``delay_ms`` one-way, ``jitter_ms`` (uniform +-), ``kbps`` cap (0 = none)."""
+    """One direction: ``delay_ms`` one-way, ``jitter_ms`` (uniform +-), ``kbps`` cap (0 = none)
+    or a ``trace`` of changing bandwidth (common/bandwidth.py; its time 0 is the link's origin)."""
 
     delay_ms: float = 64.0
     jitter_ms: float = 0.0
     kbps: float = 0.0
+    trace: BandwidthTrace | None = None
 
     def __post_init__(self):
         for name in ("delay_ms", "jitter_ms", "kbps"):
             v = getattr(self, name)
             if not (v >= 0 and v < 1e9):
                 raise ValueError(f"link {name} must be a finite number >= 0, got {v}")
+        if self.trace is not None and self.kbps > 0:
+            raise ValueError("a link has a fixed bandwidth cap or a bandwidth trace, not both")
+
+    @property
+    def capped(self) -> bool:
+        """The link's bandwidth is limited (a cap or a trace)."""
+        return self.kbps > 0 or self.trace is not None
 
 
 class LinkModel:
     """Stateful FIFO link (one direction). ``seed`` makes the jitter sequence reproducible."""
 
-    def __init__(self, params: LinkParams, seed: int = 0):
+    def __init__(self, params: LinkParams, seed: int = 0, origin_us: int = 0):
+        """origin_us: the time on the caller's clock at which a bandwidth trace starts."""
         self.params = params
+        self.origin_us = int(origin_us)
         self._rng = np.random.default_rng(seed)
         self._delay_us = int(round(params.delay_ms * 1000))
         self._jitter_us = int(round(params.jitter_ms * 1000))
@@ -62,7 +76,11 @@ class LinkModel:
         if is_clock:
             arrive = start + self.min_delay_us
         else:
-            tx = 0 if self.params.kbps <= 0 else int(math.ceil(nbytes * 8000.0 / self.params.kbps))
+            if self.params.trace is not None:
+                origin = self.origin_us
+                tx = self.params.trace.finish_us(start - origin, nbytes) + origin - start
+            else:
+                tx = 0 if self.params.kbps <= 0 else int(math.ceil(nbytes * 8000.0 / self.params.kbps))
             self._link_free_us = start + tx
             delay = self._delay_us
             if self._jitter_us:
@@ -127,7 +145,7 @@ class SessionSchedule:
     def ideal(self) -> bool:
         """No jitter, no bandwidth cap, no skipped frames: :meth:`frame_for` applies."""
         return (self.max_in_flight is None and not any(
-            (p.jitter_ms, p.kbps) != (0, 0) for p in (self.up_params, self.down_params)))
+            p.jitter_ms != 0 or p.capped for p in (self.up_params, self.down_params)))
 
     def frame_for(self, t_us: int) -> tuple[int, int]:
         """-> (render time, client time of the pose used) of the frame shown at display time

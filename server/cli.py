@@ -151,13 +151,19 @@ def register(sub) -> None:
     p.set_defaults(func=cmd_serve)
 
     r = sub.add_parser("relay", help="inject latency between clients and a server",
-                       description="Relay pibr connections, adding delay, jitter and a bandwidth cap per direction.")
+                       description="Relay pibr connections, adding delay, jitter and a bandwidth cap or a bandwidth trace "
+                                   "per direction.")
     r.add_argument("--listen", default="127.0.0.1:7451", help="HOST:PORT to accept clients on (port 0: any)")
     r.add_argument("--upstream", default=f"127.0.0.1:{DEFAULT_PORT}", help="HOST:PORT of the server")
     r.add_argument("--up-ms", type=float, default=64.0, help="client -> server one-way delay (default 64)")
     r.add_argument("--down-ms", type=float, default=64.0, help="server -> client one-way delay (default 64)")
     r.add_argument("--jitter-ms", type=float, default=0.0, help="uniform +- jitter on each direction (default 0)")
     r.add_argument("--kbps", type=float, default=0.0, help="bandwidth cap per direction, 0 = none (default 0)")
+    r.add_argument("--down-trace", metavar="TRACE",
+                   help="server -> client bandwidth replayed from a trace, looping from each session's start: a "
+                        "built-in (pibr link list) or a file of Mahimahi delivery opportunities or t,kbps rows "
+                        "(instead of --kbps on that direction)")
+    r.add_argument("--up-trace", metavar="TRACE", help="client -> server bandwidth from a trace (as --down-trace)")
     r.add_argument("--seed", type=int, default=0,
                    help="jitter seed; each session's jitter follows from it and the client's Hello, so a replay "
                         "through any relay with the same seed is identical (default 0)")
@@ -204,9 +210,13 @@ def cmd_relay(args) -> int:
 
     from .relay import RelayConfig, run_relay
 
+    from pibr.common.bandwidth import load_bandwidth_trace
+
+    up_trace = load_bandwidth_trace(args.up_trace) if args.up_trace else None
+    down_trace = load_bandwidth_trace(args.down_trace) if args.down_trace else None
     try:
-        up = LinkParams(args.up_ms, args.jitter_ms, args.kbps)
-        down = LinkParams(args.down_ms, args.jitter_ms, args.kbps)
+        up = LinkParams(args.up_ms, args.jitter_ms, 0.0 if up_trace else args.kbps, up_trace)
+        down = LinkParams(args.down_ms, args.jitter_ms, 0.0 if down_trace else args.kbps, down_trace)
     except ValueError as exc:
         raise ConfigError(str(exc)) from None
     upstream_tls = None

@@ -11,6 +11,11 @@ clock:
   timeline and passes unchanged;
 * **real**: frames are held until their modelled arrival on the wall clock, unchanged.
 
+**Bandwidth.** Each direction has a fixed cap (``--kbps``) or replays a bandwidth trace
+(``--up-trace``, ``--down-trace``: Mahimahi delivery opportunities, a ``t,kbps`` CSV or a
+built-in, common/bandwidth.py), looping, from the session's start (virtual time 0, or its Hello
+on the wall clock).
+
 **Jitter seeds.** A session's link models are seeded from ``--seed`` and the client's Hello
 (all of it but the token), never from how many connections came before: the same client
 run through a relay with the same seed sees the same jitter, first run or tenth, alone or
@@ -99,6 +104,12 @@ class RelayConfig:
         check_server_files(self.tls_cert, self.tls_key, "relay")
 
 
+def _bandwidth(link: LinkParams) -> str:
+    if link.trace is not None:
+        return f"trace {link.trace.name} (mean {link.trace.mean_kbps:.0f} kbit/s, {link.trace.period_us / 1e6:g} s loop)"
+    return f"{link.kbps:g} kbit/s" if link.kbps > 0 else "no cap"
+
+
 def link_seeds(seed: int, hello: Hello) -> tuple[int, int]:
     """(uplink, downlink) jitter seeds of a session: ``seed`` and the client's Hello without its
     token, so the same session replays the same jitter however many connections came before."""
@@ -173,7 +184,10 @@ class _Pair:
         pairs.add(self)
         self.clock = self.hello.clock
         up_seed, down_seed = link_seeds(cfg.seed, self.hello)
-        self.up_model, self.down_model = LinkModel(cfg.up, seed=up_seed), LinkModel(cfg.down, seed=down_seed)
+        # A bandwidth trace starts with the session: at virtual time 0, or now on the wall clock.
+        origin = 0 if self.clock == "virtual" else int(asyncio.get_running_loop().time() * 1e6)
+        self.up_model = LinkModel(cfg.up, seed=up_seed, origin_us=origin)
+        self.down_model = LinkModel(cfg.down, seed=down_seed, origin_us=origin)
         from pibr.common.tls import open_connection
 
         try:
@@ -319,10 +333,10 @@ class Relay(TrackedListener):
 
             tls = server_context(c.tls_cert, c.tls_key)
         host, port = await self.listen(*c.listen, ssl=tls, ssl_handshake_timeout=c.hello_timeout_s)
-        log.info("pibr relay on %s:%d%s -> %s:%d%s (up %g ms, down %g ms, jitter %g/%g ms, cap %g/%g kbit/s, "
+        log.info("pibr relay on %s:%d%s -> %s:%d%s (up %g ms, down %g ms, jitter %g/%g ms, bandwidth %s/%s, "
                  "%d MiB per direction, at most %d connections, %s)", host, port, " (TLS)" if tls else "",
                  *c.upstream, " (TLS)" if c.upstream_tls else "", c.up.delay_ms, c.down.delay_ms, c.up.jitter_ms,
-                 c.down.jitter_ms, c.up.kbps, c.down.kbps, c.buffer_bytes >> 20, c.max_connections,
+                 c.down.jitter_ms, _bandwidth(c.up), _bandwidth(c.down), c.buffer_bytes >> 20, c.max_connections,
                  "token required" if c.token is not None else "no token")
         return host, port
 

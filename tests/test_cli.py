@@ -52,7 +52,8 @@ def test_docker_image_installs_the_whole_project():
     ["relay", "--listen", ":0", "--upstream", "host:7450", "--jitter-ms", "5", "--kbps", "20000"],
     ["client", "--connect", "[::1]:7451", "--method", "none,rotation", "--clock", "real", "--size", "1280x720"],
     ["demo", "--duration", "2"], ["evaluate", "out"], ["bench", "server", "--projection", "vertex"],
-    ["bench", "client"], ["scenes"], ["trace", "list"],
+    ["bench", "client"], ["scenes"], ["trace", "list"], ["link", "list"],
+    ["relay", "--down-trace", "cellular", "--up-trace", "steps.csv"],
 ])
 def test_documented_invocations_parse(argv):
     build_parser().parse_args(argv)
@@ -95,6 +96,19 @@ def test_bench_schedules_outside_the_trace_are_refused(capsys):
     assert "edge codec bitrate" in capsys.readouterr().err
     assert main(["serve", "--port", "0", "--max-edge-deg", "0.5"]) == 2
     assert "max edge angle must be in 1..30 degrees" in capsys.readouterr().err
+
+
+def test_bandwidth_traces_are_shown_converted_and_refused_by_name(capsys, tmp_path):
+    assert main(["link", "show", "steps", "--json", "--write", str(tmp_path / "s.mm"), "--format", "mahimahi"]) == 0
+    out = capsys.readouterr().out
+    assert '"mean_kbps": 11800.0' in out and '"min_kbps": 3000.0' in out
+    assert main(["link", "show", str(tmp_path / "s.mm")]) == 0
+    assert "50 s, looping; mean 11800 kbit/s" in capsys.readouterr().out
+    (tmp_path / "bad.csv").write_text("t,kbps\n0,100\n0,200\n")
+    assert main(["relay", "--down-trace", str(tmp_path / "bad.csv")]) == 2
+    assert "bad.csv, line 3: times must increase" in capsys.readouterr().err
+    assert main(["relay", "--down-trace", "no-such-trace"]) == 2
+    assert "neither a file nor a built-in (steps, oscillation, outage, cellular)" in capsys.readouterr().err
 
 
 def test_scenes_lists_builtins(capsys):

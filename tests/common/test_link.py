@@ -110,3 +110,19 @@ def test_the_closed_form_refuses_a_link_that_is_not_ideal():
             schedule.frame_for(0)
     assert SessionSchedule.round_trip(30.0, 100.0).ideal
     assert SessionSchedule.round_trip(30.0, 100.0).frame_for(400_000) == (300_000, 233_331)
+
+
+def test_the_schedule_follows_a_bandwidth_trace_as_the_relay_does():
+    """The virtual clock's schedule (the benches' Simulation) uses the same link model: frames on
+    a trace that drops from 8 to 0.4 Mbit/s at 1 s queue up and age, and recover after 2 s."""
+    from pibr.common.bandwidth import parse_rate_csv
+
+    trace = parse_rate_csv("0,8000\n1,400\n2,8000\n4,8000\n")
+    ticks = [i * 33333 for i in range(120)]
+    s = SessionSchedule(30.0, 10.0, LinkParams(32.0), LinkParams(32.0, trace=trace), max_in_flight=None)
+    assert not s.ideal
+    shown = _shown(s, ticks, lambda k: 10000)          # 80 kbit frames: 10 ms at 8 Mbit/s, 200 ms at 0.4
+    age = {t: t - f[0] for t, f in zip(ticks, shown) if f is not None}
+    assert max(a for t, a in age.items() if t < 900_000) < 200_000
+    assert max(a for t, a in age.items() if 1_500_000 <= t < 2_100_000) > 500_000
+    assert max(a for t, a in age.items() if t >= 3_500_000) < 200_000

@@ -11,7 +11,7 @@ from pibr.protocol.messages import Error, Hello, OutputConfig
 from pibr.server.config import ServerConfig
 from pibr.server.relay import Relay, RelayConfig
 
-from ..loopback import exchange_virtual, server_behind_relay
+from ..loopback import exchange_virtual, running_server, server_behind_relay
 
 pytestmark = pytest.mark.gl
 
@@ -101,3 +101,36 @@ async def test_jittered_replays_through_one_relay_are_identical():
     assert len(first) > 5 and first == second
     assert len({vt - render for vt, _, _, render in first}) > 3          # the jitter is there
     assert [vt for vt, *_ in other] != [vt for vt, *_ in first]
+
+
+async def test_a_bandwidth_trace_holds_frames_through_an_outage_on_the_virtual_clock(tmp_path):
+    """pibr relay --down-trace: the downlink replays the trace from virtual time 0, so frames sent
+    while it carries nothing (0.2 to 0.6 s) arrive only after it, one after the other."""
+    from pibr.common.bandwidth import load_bandwidth_trace
+
+    (tmp_path / "outage.csv").write_text("t,kbps\n0,20000\n0.2,0\n0.6,20000\n1.2,20000\n")
+    trace = load_bandwidth_trace(str(tmp_path / "outage.csv"))
+    config = ServerConfig(port=0, scene="sphere", view_size=(128, 128), server_delay_ms=20.0, bitrate_kbps=2000)
+    async with running_server(config) as (_, host, port):
+        relay = Relay(RelayConfig(("127.0.0.1", 0), (host, port), LinkParams(64.0), LinkParams(64.0, trace=trace)))
+        rhost, rport = await relay.start()
+        rtask = asyncio.create_task(relay.serve_forever())
+        try:
+            c = await ClientConnection.open(rhost, rport)
+            cfg = await c.handshake(Hello(clock="virtual", output=OutputConfig(160, 96, 90.0, 30.0)))
+            interval = 33_333
+            frames = await exchange_virtual(c, cfg.viewer_origin, [k * interval for k in range(0, 30)], interval)
+            await c.close()
+        finally:
+            rtask.cancel()
+            await asyncio.gather(rtask, return_exceptions=True)
+            await relay.close()
+    in_outage = [(vt, f) for vt, f in frames if 200_000 <= f.render_t_us + 20_000 < 600_000]
+    before = [(vt, f) for vt, f in frames if f.render_t_us + 20_000 < 150_000]
+    assert len(in_outage) >= 3 and before
+    for vt, f in before:       # 20 Mbit/s: a small frame leaves at once
+        assert vt - f.render_t_us < 20_000 + 64_000 + 5_000
+    for vt, f in in_outage:    # sent in the outage: leaves after it, then the downlink's delay
+        assert vt >= 600_000 + 64_000
+    arrivals = [vt for vt, _ in frames]
+    assert arrivals == sorted(arrivals)
