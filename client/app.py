@@ -36,8 +36,9 @@ import numpy as np
 from pibr.common.gl import GLThread
 from pibr.common.quality import OFF, DeadlineController, read_cost_table
 from pibr.protocol.errors import ConfigError, MalformedMessage, UnexpectedMessage
-from pibr.protocol.messages import (DISPLAY_AGE_MS, FRAMES_DECODED, Clock, Frame, Hello, OutputConfig, PayloadKind,
-                                    PoseMsg, Stats, decode_eye, decode_frame_level)
+from pibr.protocol.messages import (ARRIVAL_AGE_MS, DELIVERED_KBPS, DISPLAY_AGE_MS, FRAMES_DECODED, STREAM_REPORT_MS,
+                                    Clock, Frame, Hello, OutputConfig, PayloadKind, PoseMsg, Stats, decode_eye,
+                                    decode_frame_level, decode_stream_rate)
 from pibr.protocol.pose import Pose
 from pibr.protocol.stereo import CENTRE, EYES, eye_pose
 
@@ -141,6 +142,12 @@ class Client:
         #: real clock: client time 0 (tick 0) in microseconds after the receiver started; arrivals
         #: and warm-up poses are stamped from that start, ticks' poses in client time
         self._time_base_us = 0
+        #: a server adapting its stream (options["adapt"]): frames arrived since the last report
+        #: as (arrival less render us, wire bytes), the newest render time, when the last report went
+        self._adapting = False
+        self._stream_arrived: list = []
+        self._newest_render_us: int | None = None
+        self._stream_reported_us: int | None = None
         self._arrivals_us: list[int] = []
         self._frame_bytes: list[int] = []
         #: frame id -> wire size of the frames received and not decoded yet
@@ -320,6 +327,7 @@ class Client:
             # the Welcome is checked against the Hello (clock, atlas layout, proxies) when taken
             self.session = await self.conn.handshake(hello)
             t_welcome = time.monotonic()
+            self._adapting = bool(self.session.options.get("adapt"))
             handshake_ms = (t_welcome - t_hello) * 1e3
             agreed = self.session.options.get("stereo")
             if cfg.stereo and (not isinstance(agreed, dict) or agreed.get("reference") != cfg.stereo):
@@ -489,7 +497,11 @@ class Client:
         self.frames_received += len(frames)
         self._arrivals_us.extend(arrival for _, arrival in frames)
         # 0 only for a frame id the server sent twice (the second copy's size was taken with the first)
-        self._frame_bytes.extend(self._wire_sizes.pop(f.frame_id, 0) for f, _ in frames)
+        sizes = [self._wire_sizes.pop(f.frame_id, 0) for f, _ in frames]
+        self._frame_bytes.extend(sizes)
+        if self._adapting:   # what the next stream report tells the server (_report_stream)
+            self._stream_arrived.extend((arrival - f.render_t_us, size) for (f, arrival), size in zip(frames, sizes))
+            self._newest_render_us = max(f.render_t_us for f, _ in frames)
 
     def _frame_slot(self, frame: Frame) -> str:
         """The slot a frame fills: its eye in a session with a slot per eye, else the centre's;
@@ -558,6 +570,26 @@ class Client:
                 self._ages.append((t_us - pose_t_us) / 1e3)
         return drawn
 
+    async def _report_stream(self, t_us: int, vtime_us: int) -> None:
+        """Tell a server whose stream adapts to the link (options["adapt"]) what arrived, every
+        STREAM_REPORT_MS of the client's clock: the frames' median age at arrival (none arrived:
+        the newest one's age now) and their bits over the interval (protocol/messages.py)."""
+        if not self._adapting or self._newest_render_us is None:
+            return
+        last = self._stream_reported_us
+        if last is not None and t_us - last < STREAM_REPORT_MS * 1e3:
+            return
+        now = self._time_base_us + t_us     # the arrival times' clock
+        arrived, self._stream_arrived = self._stream_arrived, []
+        if arrived:
+            age_ms = float(np.median([a for a, _ in arrived])) / 1e3
+        else:
+            age_ms = (now - self._newest_render_us) / 1e3
+        span_ms = STREAM_REPORT_MS if last is None else (t_us - last) / 1e3
+        kbps = 8.0 * sum(n for _, n in arrived) / span_ms
+        self._stream_reported_us = t_us
+        await self.conn.send(Stats({ARRIVAL_AGE_MS: age_ms, DELIVERED_KBPS: kbps}), vtime_us=vtime_us, flush=False)
+
     async def _report_age(self, tick: int, vtime_us: int) -> None:
         """Tell a server that predicts the head's pose how old the frames shown are (every
         AGE_REPORT_TICKS ticks, the median of the last ones)."""
@@ -583,10 +615,17 @@ class Client:
             "client_ms": client_ms, "hole_fraction": hole, "missed": missed,
             "level": 0, "level_reason": OFF, "budget_ms": 1e3 / self.cfg.rate_hz, "predicted_ms": 0.0,
             "server_level": self._server_level(f),
+            "stream_kbps": self._stream_kbps(f),
             "frame_scene_t": float("nan") if f is None else f.scene_t_us / 1e6,
             **dict(zip((f"frame_{k}" for k in POSE_FIELDS),
                        [float("nan")] * 7 if f is None else f.primary_pose.as_array())),
         }
+
+    @staticmethod
+    def _stream_kbps(frame) -> int:
+        """The colour's target the stream adaptation chose for ``frame`` (kbit/s), -1 for none."""
+        payload = None if frame is None else frame.payload(PayloadKind.STREAM_RATE)
+        return -1 if payload is None else decode_stream_rate(payload)[0]
 
     def _server_level(self, frame) -> int:
         """The server's rate-control level ``frame`` was made at (an index in the session's
@@ -605,6 +644,8 @@ class Client:
         for tick in range(-preroll, n_ticks):
             t_us = tick * interval_us
             pose = self._pose_at(trace, t_us / 1e6)
+            # before the clock's promise, so the server sees it by the frames after t_us whatever the timing
+            await self._report_stream(t_us, t_us)
             await self.conn.send(PoseMsg(tick + preroll, t_us, pose), vtime_us=t_us, flush=False)
             await self.conn.send(Clock(), vtime_us=t_us + interval_us)
             while side.horizon_us is None or side.horizon_us <= t_us:
@@ -702,6 +743,7 @@ class Client:
             t_us = tick * interval_us
             pose = self._pose_at(trace, t_us / 1e6)
             started = loop.time()
+            await self._report_stream(t_us, t_us)
             await self.conn.send(PoseMsg(tick + preroll, int((loop.time() - zero) * 1e6), pose), vtime_us=t_us)
             if tick >= 0:
                 drawn = await self._display(tick, t_us, pose)

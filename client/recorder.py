@@ -18,7 +18,8 @@ level the tick was drawn at (client/deadline.py; 0 the method's best), ``level_r
 (:data:`pibr.common.quality.REASONS`), with the tick's budget (its interval without a
 controller) and the level's predicted cost (0: no prediction); ``server_level`` the level the
 shown frame was made at by the server's rate control (an index in ``server_levels`` of the
-session's options; -1: none).
+session's options; -1: none); ``stream_kbps`` the colour's bitrate the server's stream
+adaptation chose for the shown frame (-1: no adaptation).
 
 Writing runs on a worker thread per method; at most ``max_pending`` frames wait, so a slow
 disk slows the client (and, on the real clock, shows up as missed deadlines) rather than
@@ -45,12 +46,13 @@ RECORD_FIELDS = (
     "tick", "t", "scene_t", *POSE_FIELDS,
     "frame_id", "frame_render_t", "frame_pose_t", "frame_arrival_t", "age_ms",
     "client_ms", "hole_fraction", "missed", "frame_scene_t", *(f"frame_{k}" for k in POSE_FIELDS),
-    "level", "level_reason", "budget_ms", "predicted_ms", "server_level",
+    "level", "level_reason", "budget_ms", "predicted_ms", "server_level", "stream_kbps",
 )
-#: The quality level's columns of a recording made before they existed: the top level, no controller.
-_LEVEL_DEFAULTS = {"level": 0, "level_reason": OFF, "budget_ms": 0.0, "predicted_ms": 0.0, "server_level": -1}
+#: The columns of a recording made before they existed: the top level, no controller, no adaptation.
+_LEVEL_DEFAULTS = {"level": 0, "level_reason": OFF, "budget_ms": 0.0, "predicted_ms": 0.0, "server_level": -1,
+                   "stream_kbps": -1}
 #: Columns read as integers (the rest are numbers).
-_INTEGER_FIELDS = ("tick", "frame_id", "missed", "level", "level_reason", "server_level")
+_INTEGER_FIELDS = ("tick", "frame_id", "missed", "level", "level_reason", "server_level", "stream_kbps")
 
 
 class MethodRecorder:

@@ -298,10 +298,34 @@ class PayloadKind:
                           # SessionConfig.options["server_levels"]); frames without rate control carry none
     EYE = 9               # the eye a stereo session's frame was rendered for (one byte: 0 left, 1 right;
                           # protocol/stereo.py); frames from the head's centre carry none
+    STREAM_RATE = 10      # what the server's stream adaptation chose for the frame (encode_stream_rate);
+                          # frames of a session without adaptation carry none
     ALL = (H264_ATLAS, EDGE_DEPTH, EDGE_DEPTH_EXTRA, EDGE_MOTION, QUADTREE, OBJECT_POSES, MOTION_FLOW, FRAME_LEVEL,
-           EYE)
+           EYE, STREAM_RATE)
     NAMES = {1: "h264-atlas", 2: "edge-depth", 3: "edge-depth-extra", 4: "edge-motion", 5: "quadtree",
-             6: "object-poses", 7: "motion-flow", 8: "frame-level", 9: "eye"}
+             6: "object-poses", 7: "motion-flow", 8: "frame-level", 9: "eye", 10: "stream-rate"}
+
+
+_STREAM_RATE = struct.Struct("<IBB")
+
+
+def encode_stream_rate(video_kbps: float, every: int, reason: int) -> bytes:
+    """The STREAM_RATE payload: the colour's target (whole kbit/s), the frames made (one every
+    ``every`` ticks, 1..255) and the reason code of the choice (server/stream_adaptation.py)."""
+    if not (0 <= video_kbps < 2 ** 32 and 1 <= every <= 255 and 0 <= reason <= 255):
+        raise ValueError(f"a stream rate is kbps in 0..2^32, every in 1..255, a reason in 0..255; got "
+                         f"{video_kbps}, {every}, {reason}")
+    return _STREAM_RATE.pack(int(round(video_kbps)), every, reason)
+
+
+def decode_stream_rate(payload) -> tuple[int, int, int]:
+    """A STREAM_RATE payload -> (video kbps, every, reason); MalformedMessage unless 6 bytes, every >= 1."""
+    if len(payload) != _STREAM_RATE.size:
+        raise MalformedMessage(f"Frame: a stream-rate payload is {_STREAM_RATE.size} bytes, got {len(payload)}")
+    kbps, every, reason = _STREAM_RATE.unpack(bytes(payload))
+    if every < 1:
+        raise MalformedMessage("Frame: a stream-rate payload says a frame every 0 ticks")
+    return kbps, every, reason
 
 
 def encode_frame_level(level: int) -> bytes:
@@ -490,6 +514,15 @@ FRAMES_DECODED = "frames_decoded"
 #: pose a frame was rendered for to its display): a server predicting the head's pose
 #: (SessionConfig.options["predict"]) predicts that far ahead.
 DISPLAY_AGE_MS = "display_age_ms"
+#: ``Stats`` keys of a session whose stream adapts to the link (SessionConfig.options["adapt"]),
+#: sent every STREAM_REPORT_MS of the client's clock: the median age (ms) at arrival of the frames
+#: that arrived since the last report (arrival less render time; if none arrived, the newest
+#: frame's age now: how old the next one will be at least), and the bits of those frames over the
+#: report's interval (kbit/s). The server compares ages with their least over the last seconds,
+#: so an offset between the two clocks cancels.
+ARRIVAL_AGE_MS = "arrival_age_ms"
+DELIVERED_KBPS = "delivered_kbps"
+STREAM_REPORT_MS = 200.0
 
 
 @dataclass(frozen=True)

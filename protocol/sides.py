@@ -64,6 +64,8 @@ from .messages import (PROTOCOL_VERSION, Bye, Clock, Error, Frame, Hello, Messag
 from .proxy import BundleAssembler, BundleInfo
 from .session import SessionConfig, check_atlas_layout
 
+#: The client's ``Stats`` a server side keeps in order (ServerSide.stats_log).
+STATS_KEPT = 256
 
 class _Side:
     """What both sides share: the connection, the messages parsed and not taken yet, the end."""
@@ -144,6 +146,9 @@ class ServerSide(_Side):
         self.hello: Hello | None = None
         #: What the client's ``Stats`` said, newest value per key.
         self.client_stats: dict = {}
+        #: The client's last ``Stats`` in order, each (virtual time, values): a consumer that must
+        #: see them as of a virtual time (the stream adaptation) takes them from here.
+        self.stats_log: deque = deque(maxlen=STATS_KEPT)
         #: Virtual clock: every later message from the client has a virtual time >= this (None: none yet).
         self.horizon_us: int | None = None
         self._next_frame_us: int | None = None
@@ -168,6 +173,7 @@ class ServerSide(_Side):
             raise ClientClosed(f"client said bye ({msg.reason or 'no reason'})")
         if isinstance(msg, Stats):
             self.client_stats.update(msg.values)
+            self.stats_log.append((env.vtime_us, dict(msg.values)))
             return None
         if self.hello is None:
             self._accept_hello(msg)

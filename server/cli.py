@@ -130,6 +130,10 @@ def register(sub) -> None:
                    help="render each frame for the head pose predicted as far ahead as the client reports its "
                         "frames are seen (server/pose_prediction.py; 'pibr bench predict' measures each; default "
                         "none)")
+    p.add_argument("--adapt", choices=("on", "off"), default="off",
+                   help="adapt the stream to the link the client reports: the colour's bitrate, the edge codec's "
+                        "rate and the frame rate, for frames that stay young (server/stream_adaptation.py; "
+                        "default off until 'pibr bench network' measures it)")
     p.add_argument("--silent-slot-s", type=float, default=2.0, metavar="S",
                    help="a session that has sent no pose S seconds after its Welcome gives its slot to a Hello "
                         "waiting for one (default 2; a running client sends a pose every tick)")

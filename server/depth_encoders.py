@@ -35,11 +35,32 @@ class EdgeDepthStream:
         self.encoder = EdgeEncoder(width, height, bits=quantizer.bits, quantizer=quantizer, q=q, temporal=temporal,
                                    passes=passes)
         self.rate = RateController(kbps * 1000.0 / fps, threshold) if kbps > 0 else None
+        self._cap_bits = None if self.rate is None else self.rate.target   # the configured cap per frame
+        self._mean_bits: float | None = None   # bits per frame while the stream has its whole rate
         self.threshold = threshold
         self.intra_every = max(1, intra_every)
         self.perceptual = perceptual
         self._prev = None
         self.frames = 0
+
+    _share_of = None   # the share of its rate the stream adaptation gives it (None: all)
+
+    def set_share(self, share: float) -> None:
+        """Code at ``share`` of the stream's rate (the stream adaptation, server/stream_adaptation.py):
+        of its cap, or without one of the bits per frame it spent with its whole rate; 1 restores it."""
+        base = self._cap_bits if self._cap_bits is not None else self._mean_bits
+        if share >= 1.0 or base is None:
+            self._share_of = None
+            if self._cap_bits is None:
+                self.rate = None
+            elif self.rate is not None:
+                self.rate.target = self._cap_bits
+            return
+        self._share_of = share
+        if self.rate is None:
+            self.rate = RateController(max(1.0, base * share), self.threshold)
+        else:
+            self.rate.target = max(1.0, base * share)
 
     def encode(self, distance: np.ndarray, pose: Pose, motion=None, moving=None,
                colour=None) -> tuple[bytes, EncodeStats]:
@@ -57,6 +78,9 @@ class EdgeDepthStream:
                                   codes=found.codes, motion=motion, moving=moving)
         if self.rate is not None:
             self.rate.update(enc.stats.total_bits)
+        if self._cap_bits is None and self._share_of is None:
+            bits = float(enc.stats.total_bits)
+            self._mean_bits = bits if self._mean_bits is None else 0.9 * self._mean_bits + 0.1 * bits
         self._prev = (enc.samples, pose)
         self.frames += 1
         return enc.payload, enc.stats
@@ -82,6 +106,11 @@ class EdgeDepthEncoder:
             for name, (view, kind) in views.items()}
         self.last_stats: dict = {}
 
+    def set_share(self, share: float) -> None:
+        """Every view's stream at ``share`` of its rate (EdgeDepthStream.set_share)."""
+        for stream, _ in self.streams.values():
+            stream.set_share(share)
+
     def encode(self, produced) -> list[tuple[int, bytes]]:
         payloads = []
         poses = {"primary": produced.primary_pose, "extra": produced.extra_pose}
@@ -103,6 +132,9 @@ class AtlasDepthEncoder:
 
     def __init__(self, session, fps: float, settings: EdgeSettings = EdgeSettings()):
         pass
+
+    def set_share(self, share: float) -> None:
+        pass   # depth is in the atlas: it follows the colour's target
 
     def encode(self, produced) -> list[tuple[int, bytes]]:
         return []

@@ -46,16 +46,18 @@ class EncodedFrame:
     motion: bytes | None = None
     level: int | None = None      # the rate control's level the frame was made at (None: no rate control)
     eye: str | None = None        # a stereo session's eye the frame was rendered for (None: the head's centre)
+    stream_rate: bytes | None = None  # the STREAM_RATE payload of an adapting session (None: no adaptation)
 
     @property
     def payloads(self) -> tuple:
         """The Frame's payloads, always in this order: atlas, depth, quadtree, object poses, motion
-        flow, the frame's level, its eye."""
+        flow, the frame's level, its eye, its stream rate."""
         out = [(PayloadKind.H264_ATLAS, self.video), *self.depth]
         for kind, data in ((PayloadKind.QUADTREE, self.quadtree), (PayloadKind.OBJECT_POSES, self.object_poses),
                            (PayloadKind.MOTION_FLOW, self.motion),
                            (PayloadKind.FRAME_LEVEL, None if self.level is None else encode_frame_level(self.level)),
-                           (PayloadKind.EYE, None if self.eye is None else encode_eye(self.eye))):
+                           (PayloadKind.EYE, None if self.eye is None else encode_eye(self.eye)),
+                           (PayloadKind.STREAM_RATE, self.stream_rate)):
             if data is not None:
                 out.append((kind, data))
         return tuple(out)
@@ -143,6 +145,14 @@ class SessionPipeline:
     def close_encoders(self) -> None:
         self.video.close()
         self.depth.close()
+
+    def adapt_stream(self, video_kbps: float, share: float) -> None:
+        """The stream adaptation's choice for the frames to come (server/stream_adaptation.py): the
+        colour's target, and ``share`` of its rate for a depth stream of its own. Call between frames."""
+        self.video.retarget(video_kbps)
+        set_share = getattr(self.depth, "set_share", None)
+        if set_share is not None:
+            set_share(share)
 
     def encode_video(self, produced: ProducedFrame, force_keyframe: bool = False) -> tuple[bytes, bool]:
         return self.video.encode(produced.yuv, force_keyframe)

@@ -22,7 +22,8 @@ from collections import deque
 
 from pibr.protocol.connection import Envelope
 from pibr.protocol.errors import ClientClosed, ConfigError, PeerTimeout, ProtocolError, SceneError
-from pibr.protocol.messages import DISPLAY_AGE_MS, FRAMES_DECODED, Bye, Clock, Error, Hello, PoseMsg, Welcome
+from pibr.protocol.messages import (ARRIVAL_AGE_MS, DELIVERED_KBPS, DISPLAY_AGE_MS, FRAMES_DECODED, Bye, Clock, Error,
+                                    Hello, PoseMsg, Welcome, encode_stream_rate)
 from pibr.protocol.sides import ServerSide
 from pibr.protocol.stereo import CENTRE, eye_pose, frame_eyes
 
@@ -52,6 +53,9 @@ class Session:
         self.frames_skipped = 0
         self.frames_held = 0            # real clock: ticks not rendered while the client caught up
         self.tick_overruns = 0          # real clock: frames that overran their interval (the next began at once)
+        self.adaptation = None          # the stream's adaptation to the link (server/stream_adaptation.py), if on
+        self._adapt_ticks = 0
+        self.frames_thinned = 0         # ticks without a frame: the adaptation lowered the frame rate
         self.idle_timeout_s: float | None = None   # set by the Hello's clock
         self._accepted = asyncio.get_running_loop().time()
         self._hello_deadline: asyncio.Timeout | None = None
@@ -171,6 +175,12 @@ class Session:
         log.info("session %d: closed after %d frames (%d skipped for a slow connection, %d held while the client "
                  "decoded, %d tick overruns)", self.id, self.frames_sent, self.frames_skipped, self.frames_held,
                  self.tick_overruns)
+        if self.adaptation is not None:
+            a = self.adaptation.summary()
+            log.info("session %d: stream adaptation: %d reports (%s), colour at %.0f of %.0f kbit/s, a frame every "
+                     "%d ticks at the end, %d ticks without a frame", self.id, a["reports"],
+                     ", ".join(f"{k} {v}" for k, v in a["reasons"].items() if v), a["video_kbps"], a["max_kbps"],
+                     a["every"], self.frames_thinned)
         if self.rate is not None:
             made = self.rate.summary()["frames_at_level"]
             log.info("session %d: frames by rate-control level: %s", self.id,
@@ -205,6 +215,11 @@ class Session:
             from .pose_prediction import make_predictor
 
             self.predictor = make_predictor(self.config.options["predict"])
+        if self.config.options.get("adapt"):
+            from .scene_plan import MIN_VIDEO_KBPS
+            from .stream_adaptation import StreamAdaptation
+
+            self.adaptation = StreamAdaptation(self.config.video_bitrate_kbps, MIN_VIDEO_KBPS)
         if "server_levels" in self.config.options:   # the plan turned the rate control on (session_plan.py)
             self.rate = RateControl(server_levels(self.config.extra is not None), cfg.fps)
         setup_us = int((time.monotonic() - t_hello) * 1e6)
@@ -226,10 +241,39 @@ class Session:
         """The frames of one server tick: one from the head's pose, or a stereo session's eyes for
         this tick (protocol/stereo.py: one alternating eye, or both, each a frame of its own)."""
         reference = self.stereo["reference"] if self.stereo else None
+        stream_rate = None
+        if self.adaptation is not None:
+            choice = self._adapt(t_us)
+            self._adapt_ticks += 1
+            if (self._adapt_ticks - 1) % choice.every:
+                self.frames_thinned += 1
+                return       # the adaptation makes one frame every `every` ticks
+            stream_rate = encode_stream_rate(choice.video_kbps, choice.every, choice.reason)
         pose_msg = self._predicted(pose_msg)
         for i, eye in enumerate(frame_eyes(reference, self.server_ticks)):
-            await self._send_frame(pose_msg, t_us, vtime_us, force_keyframe and i == 0, level, eye)
+            await self._send_frame(pose_msg, t_us, vtime_us, force_keyframe and i == 0, level, eye, stream_rate)
         self.server_ticks += 1
+
+    def _adapt(self, t_us: int):
+        """The stream adaptation's choice for a tick at ``t_us`` (server/stream_adaptation.py): the
+        client's reports up to then taken in order (on the virtual clock, those stamped by then:
+        reproducible), the pipeline told when the colour's target moves."""
+        adaptation, stats = self.adaptation, self.side.stats_log
+        virtual = self.side.hello.clock == "virtual"
+        before = adaptation.choice
+        while stats and (not virtual or stats[0][0] <= t_us):
+            vtime_us, values = stats.popleft()
+            age, delivered = values.get(ARRIVAL_AGE_MS), values.get(DELIVERED_KBPS)
+            if age is None or delivered is None:
+                continue
+            t = vtime_us / 1e6 if virtual else t_us / 1e6
+            c = adaptation.report(t, float(age), max(0.0, float(delivered)))
+            log.debug("session %d: stream report at %.3f s: age %.0f ms, %.0f kbit/s arrived -> colour %.0f kbit/s, "
+                      "a frame every %d ticks (%s)", self.id, t, age, delivered, c.video_kbps, c.every, c.reason_name)
+        choice = adaptation.choice
+        if choice.video_kbps != before.video_kbps:
+            self.pipeline.adapt_stream(choice.video_kbps, adaptation.share)
+        return choice
 
     def _take_pose(self, msg: PoseMsg) -> None:
         """A pose the session will render from: the predictor sees every one, in order."""
@@ -247,7 +291,7 @@ class Session:
         return PoseMsg(pose_msg.seq, pose_msg.t_us, self.predictor.predict(ahead))
 
     async def _send_frame(self, pose_msg: PoseMsg, t_us: int, vtime_us: int, force_keyframe: bool = False,
-                          level: tuple | None = None, eye: str = CENTRE) -> None:
+                          level: tuple | None = None, eye: str = CENTRE, stream_rate: bytes | None = None) -> None:
         """The pipeline's stages (server/pipeline.py) where they belong: rendering on the shared GL
         thread, the encoders in the pool, the H.264 encode and the quadtrees side by side.
         ``level``: (index, FrameLevel) of the rate control (server/rate_control.py), or None;
@@ -267,7 +311,7 @@ class Session:
         if produced.motion is not None:   # a scene that moves: its flow, whatever the depth codec
             motion = await self.server.encode(self.id, pipeline.encode_motion, produced)
         encoded = EncodedFrame(video, key, depth, quadtree[0] if quadtree else None, produced.object_poses, motion,
-                               None if level is None else level[0], None if eye == CENTRE else eye)
+                               None if level is None else level[0], None if eye == CENTRE else eye, stream_rate)
         encode_ms = (time.perf_counter() - t0) * 1e3   # H.264 and, with the edge codec, depth (and quadtrees)
         frame = pipeline.frame(frame_id, t_us, pose_msg.t_us, pose_msg.seq, produced, encoded,
                                (produced.render_ms, produced.readback_ms, produced.pack_ms, encode_ms))
@@ -418,5 +462,6 @@ class Session:
 
     def stats(self) -> dict:
         return {"frames_sent": self.frames_sent, "frames_skipped": self.frames_skipped,
-                "frames_held": self.frames_held, "tick_overruns": self.tick_overruns}
+                "frames_held": self.frames_held, "tick_overruns": self.tick_overruns,
+                "frames_thinned": self.frames_thinned}
 

@@ -78,6 +78,8 @@ def plan_session(cfg: ServerConfig, scene, hello: Hello, proxies: dict | None = 
         options["peel_marker"] = bool(cfg.peel_marker)
     if cfg.predict != "none":   # frames rendered for the predicted pose; the client reports display ages
         options["predict"] = cfg.predict
+    if cfg.adapt == "on":   # the client reports what arrives; frames say what the adaptation chose
+        options["adapt"] = True
     if hello.stereo:   # the eyes the frames are rendered for (protocol/stereo.py)
         if hello.stereo != "cyclops" and cfg.colour_scale != 1.0:
             raise ConfigError(f"stereo {hello.stereo} interleaves the eyes' views in one stream; colour at scale "

@@ -38,6 +38,9 @@ INITIAL_TARGET_FACTOR = 1.14
 #: The factor on x264's target never leaves this range (a group that sends next to nothing, a
 #: black screen, must not make the next one ask for ten times the rate).
 TARGET_FACTOR_RANGE = (0.5, 1.5)
+#: A new target within this ratio of the current one waits for the next group of pictures; beyond
+#: it, the encoder starts again at once (H264Encoder.retarget).
+RETARGET_KEEP = (0.8, 1.5)
 
 
 class H264Encoder:
@@ -61,6 +64,7 @@ class H264Encoder:
         self._group_frames = 0
         self._av = av
         self._ctx = self._context()
+        self._restart = False   # a new target that cannot wait for the next group (retarget)
 
     def _context(self):
         return x264_context(self._av, self.width, self.height, "yuv420p", self.fps,
@@ -77,11 +81,28 @@ class H264Encoder:
         self._ctx = self._context()
         self._group_bits = self._group_frames = 0
 
+    def retarget(self, kbps: float) -> None:
+        """A new target for the frames to come (the stream adaptation). Within RETARGET_KEEP of the
+        current one it waits for the next group of pictures; further, x264 starts again at the next
+        frame: a keyframe, held to two frames of the new rate by its VBV (an open context's VBV
+        cannot change, module docstring)."""
+        kbps = float(kbps)
+        if not kbps > 0:
+            raise ValueError(f"an H.264 target must be positive, got {kbps}")
+        lo, hi = RETARGET_KEEP
+        if not lo <= kbps / self.target_kbps <= hi:
+            self._restart = True
+        self.target_kbps = kbps
+
     def encode(self, yuv: np.ndarray, force_keyframe: bool = False) -> tuple[bytes, bool]:
         """yuv : (1.5 H, W) uint8 yuv420p buffer -> (Annex B access unit, is keyframe)."""
         if yuv.shape != (self.height * 3 // 2, self.width):
             raise ValueError(f"expected a ({self.height * 3 // 2}, {self.width}) yuv420p buffer, got {yuv.shape}")
-        if self._group_frames >= self.keyint:
+        if self._restart:
+            self._ctx = self._context()
+            self._group_bits = self._group_frames = 0
+            self._restart = False
+        elif self._group_frames >= self.keyint:
             self._next_group()
         frame = self._av.VideoFrame.from_ndarray(yuv, format="yuv420p")
         frame.pts = self.frames

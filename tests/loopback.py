@@ -27,12 +27,12 @@ async def running_server(config: ServerConfig):
 
 @contextlib.asynccontextmanager
 async def server_behind_relay(config: ServerConfig, up_ms: float = 64.0, down_ms: float = 64.0, jitter_ms: float = 0.0,
-                              **relay_kw):
-    """Start a server and a relay in front of it (``relay_kw``: more RelayConfig fields); yields
-    the relay's (host, port)."""
+                              down_trace=None, **relay_kw):
+    """Start a server and a relay in front of it (``down_trace``: the downlink's bandwidth trace;
+    ``relay_kw``: more RelayConfig fields); yields the relay's (host, port)."""
     async with running_server(config) as (_, host, port):
         relay = Relay(RelayConfig(("127.0.0.1", 0), (host, port), LinkParams(up_ms, jitter_ms),
-                                  LinkParams(down_ms, jitter_ms), **relay_kw))
+                                  LinkParams(down_ms, jitter_ms, trace=down_trace), **relay_kw))
         rhost, rport = await relay.start()
         rtask = asyncio.create_task(relay.serve_forever())
         try:

@@ -53,7 +53,7 @@ def test_docker_image_installs_the_whole_project():
     ["client", "--connect", "[::1]:7451", "--method", "none,rotation", "--clock", "real", "--size", "1280x720"],
     ["demo", "--duration", "2"], ["evaluate", "out"], ["bench", "server", "--projection", "vertex"],
     ["bench", "client"], ["scenes"], ["trace", "list"], ["link", "list"],
-    ["relay", "--down-trace", "cellular", "--up-trace", "steps.csv"],
+    ["relay", "--down-trace", "cellular", "--up-trace", "steps.csv"], ["serve", "--adapt", "on"],
 ])
 def test_documented_invocations_parse(argv):
     build_parser().parse_args(argv)

@@ -1,0 +1,142 @@
+"""The stream's adaptation to its link (server/stream_adaptation.py, issue 28 item 2): the
+controller against scripted reports, the H.264 encoder's new targets, and a session through a
+relay whose bandwidth drops."""
+import numpy as np
+import pytest
+
+from pibr.protocol.errors import MalformedMessage
+from pibr.protocol.messages import decode_stream_rate, encode_stream_rate
+from pibr.server.stream_adaptation import (CONGESTED, FLOOR, HOLD_S, MAX_EVERY, OUTAGE, PROBE, PROBE_GAIN,
+                                           RECOVERED, StreamAdaptation)
+
+
+def _steady(a, t0, t1, age_ms=90.0, kbps=8000.0, step=0.2):
+    t = t0
+    while t < t1 - 1e-9:
+        a.report(t, age_ms, kbps)
+        t += step
+    return t
+
+
+def test_a_link_with_room_keeps_the_whole_rate():
+    a = StreamAdaptation(8000.0)
+    _steady(a, 0.0, 5.0)
+    assert a.choice.video_kbps == 8000.0 and a.choice.every == 1
+    assert a.reasons["congested"] == a.reasons["outage"] == 0
+
+
+def test_a_queue_brings_the_colour_under_what_arrived_and_holds_before_the_next_decrease():
+    a = StreamAdaptation(8000.0)
+    t = _steady(a, 0.0, 2.0)
+    c = a.report(t, 90.0 + 300.0, 3000.0)        # 300 ms queued, 3 Mbit/s arrived
+    assert c.reason == CONGESTED
+    assert c.video_kbps == pytest.approx(3000.0 * (1 - 0.3 - 0.1))   # drains the queue within about a second
+    held = a.report(t + 0.2, 90.0 + 500.0, 3000.0)   # the frames queued before it arrive older still: held
+    assert held.video_kbps == c.video_kbps and held.reason != CONGESTED
+    held = a.report(t + HOLD_S + 0.2, 90.0 + 400.0, 3000.0)   # the hold is 0.6 s and the queue's 0.3 s
+    assert held.video_kbps == c.video_kbps and held.reason != CONGESTED
+    again = a.report(t + HOLD_S + 0.31, 90.0 + 320.0, 2900.0)
+    assert again.reason == CONGESTED and again.video_kbps < c.video_kbps
+    worse = a.report(t + HOLD_S + 0.51, 90.0 + 320.0, 1000.0)   # the link itself slower: at once
+    assert worse.reason == CONGESTED and worse.video_kbps < 1000.0
+
+
+def test_an_outage_halves_then_thins_the_frames_and_recovery_comes_back_step_by_step():
+    a = StreamAdaptation(8000.0)
+    t = _steady(a, 0.0, 2.0)
+    kbps, everies = [], []
+    for i in range(30):                           # nothing arrives; the newest frame ages
+        c = a.report(t, 90.0 + 200.0 + 200.0 * i, 0.0)
+        kbps.append(c.video_kbps)
+        everies.append(c.every)
+        t += 0.2
+    assert a.reasons["outage"] >= 3 and kbps[0] == 4000.0
+    assert min(kbps) == a.floor_kbps == 800.0
+    assert everies[-1] == MAX_EVERY and a.reasons["floor"] == 2      # 1 -> 2 -> 4
+    reasons = []
+    for _ in range(60):                           # the link is back: nothing queued
+        reasons.append(a.report(t, 90.0, 800.0).reason)
+        t += 0.2
+    assert reasons.count(RECOVERED) == 2 and a.choice.every == 1
+    assert reasons.index(RECOVERED) < reasons.index(PROBE)   # the frame rate first, then the bitrate
+    assert a.choice.video_kbps == 8000.0
+    probes = reasons.count(PROBE)
+    assert probes == int(np.ceil(np.log(8000.0 / 800.0) / np.log(PROBE_GAIN)))
+
+
+def test_the_baseline_is_the_least_age_so_a_clock_offset_cancels():
+    a, b = StreamAdaptation(8000.0), StreamAdaptation(8000.0)
+    for i in range(40):
+        age = 90.0 + (250.0 if 20 <= i < 25 else 0.0)
+        ca = a.report(i * 0.2, age, 5000.0)
+        cb = b.report(i * 0.2, age - 7_654_321.0, 5000.0)   # another clock's zero
+        assert ca == cb
+
+
+def test_the_stream_rate_payload_round_trips_and_refuses_bad_bytes():
+    assert encode_stream_rate(4000, 2, CONGESTED) == b"\xa0\x0f\x00\x00\x02\x03"
+    assert decode_stream_rate(b"\xa0\x0f\x00\x00\x02\x03") == (4000, 2, CONGESTED)
+    for bad in (b"\xa0\x0f\x00\x00\x02", b"\xa0\x0f\x00\x00\x00\x03"):
+        with pytest.raises(MalformedMessage):
+            decode_stream_rate(bad)
+    with pytest.raises(ValueError):
+        encode_stream_rate(4000, 0, FLOOR)
+    assert OUTAGE != CONGESTED
+
+
+def test_a_new_target_far_below_restarts_x264_at_once_and_near_it_waits_for_the_group():
+    from pibr.server.video import H264Encoder
+
+    def frame(i):   # noise anew each frame: x264 spends all it is given
+        y = np.random.default_rng(i).integers(0, 256, (64, 128), dtype=np.uint8)
+        return np.concatenate([y, np.full((32, 128), 128, np.uint8)])
+    enc = H264Encoder(128, 64, 10.0, 2000.0, keyint=30, deterministic=True)
+    sizes, keys = [], []
+    for i in range(12):
+        if i == 6:
+            enc.retarget(1800.0)          # within the keep range: no keyframe
+        data, key = enc.encode(frame(i))
+        sizes.append(len(data)); keys.append(key)
+    assert keys == [True] + [False] * 11
+    enc.retarget(300.0)                   # far below: x264 starts again
+    after = [enc.encode(frame(12 + i)) for i in range(10)]
+    assert after[0][1] and not any(k for _, k in after[1:])
+    mean_before = np.mean(sizes[3:]) * 8 * 10 / 1000
+    mean_after = np.mean([len(d) for d, _ in after[3:]]) * 8 * 10 / 1000
+    assert mean_after < 0.4 * mean_before and mean_after < 300.0 * 1.6
+
+
+@pytest.mark.gl
+async def test_through_a_link_that_drops_the_adapting_stream_keeps_its_frames_young(tmp_path):
+    """Server, relay and client in one process on the virtual clock: the downlink carries 20
+    Mbit/s for a second, then 1.2 Mbit/s, about half the stream. Without adaptation the frames
+    queue and age by the second; with it the colour's target falls (the records say to what), the
+    queue drains and the age comes back. The run is reproducible: a second one records the same."""
+    from pibr.client.app import run_client
+    from pibr.client.config import ClientConfig
+    from pibr.client.recorder import read_records
+    from pibr.common.bandwidth import parse_rate_csv
+    from pibr.server.config import ServerConfig
+
+    from ..loopback import server_behind_relay
+
+    trace = parse_rate_csv("0,20000\n1,1200\n60,1200\n")
+    runs = []
+    for adapt in ("off", "on", "on"):
+        config = ServerConfig(port=0, scene="room", view_size=(192, 192), bitrate_kbps=2400, adapt=adapt)
+        async with server_behind_relay(config, down_trace=trace) as (host, port):
+            out = tmp_path / f"run{len(runs)}"
+            await run_client(ClientConfig(host=host, port=port, trace="pred6dof-1", start_s=12.0, duration_s=4.0,
+                                          rate_hz=30.0, methods=("rotation",), out_dir=str(out), width=96,
+                                          height=64, progress="none"))
+        runs.append(read_records(out / "rotation.records.csv"))
+    off, on, again = runs
+    late = lambda rows: [r["age_ms"] for r in rows if r["t"] >= 3.2]
+    assert min(late(off)) > 1000.0                   # queued: a second old and growing
+    assert max(late(on)) < 400.0                     # drained: the delays and a frame interval
+    assert max(r["age_ms"] for r in on) < 0.8 * max(r["age_ms"] for r in off)
+    assert {r["stream_kbps"] for r in off} == {-1}
+    kbps = [r["stream_kbps"] for r in on if r["frame_id"] >= 0]
+    assert kbps[0] == 2400 and max(kbps[-10:]) < 1200    # under what the link carries
+    strip = lambda rows: [{k: v for k, v in r.items() if k != "client_ms"} for r in rows]
+    assert strip(on) == strip(again)
