@@ -396,6 +396,31 @@ def register(sub) -> None:
     _out(pr)
     pr.set_defaults(func=commands.cmd_bench_predict)
 
+    nw = bs.add_parser("network", help="links whose bandwidth changes: static bitrates against the adapting stream",
+                       description="Runs server, relay and client processes on the virtual clock, the relay's "
+                                   "downlink replaying each bandwidth trace (pibr link list), once per static "
+                                   "--bitrate-kbps and once with --adapt on; scores what was shown against ground "
+                                   "truth. Per run: frame age p50/p95, stalls (no new frame for 250 ms), the longest, "
+                                   "the bitrate that arrived, DSSIM; per link, the adapting stream's DSSIM per 5 s "
+                                   "segment against the best static setting in hindsight. Writes network.json. About "
+                                   "a minute a run at the defaults (links x (statics + 1) runs).")
+    nw.add_argument("--links", type=arguments.names, default=("steps", "oscillation", "outage", "cellular"),
+                    metavar="TRACE,...", help="bandwidth traces, built-in or files (default the four built-ins)")
+    nw.add_argument("--static-kbps", type=arguments.positives, default=(2000.0, 4000.0, 8000.0, 16000.0),
+                    metavar="KBPS,...", help="static bitrates to compare (default 2000,4000,8000,16000)")
+    nw.add_argument("--adapt-kbps", type=arguments.positive, default=16000.0, metavar="KBPS",
+                    help="the adapting stream's most (default 16000)")
+    nw.add_argument("--method", default="proxy", help="the client's method (default proxy)")
+    nw.add_argument("--trace", default="pred6dof-1", help="head trace (default pred6dof-1)")
+    nw.add_argument("--start", type=arguments.non_negative, default=30.0, metavar="S", help="window start (default 30)")
+    nw.add_argument("--duration", type=arguments.positive, default=30.0, metavar="S",
+                    help="window length; the links loop (default 30)")
+    _rate(nw)
+    _view_size(nw, default=(512, 512))
+    _output_size(nw, default=(480, 270))
+    _out(nw)
+    nw.set_defaults(func=commands.cmd_bench_network)
+
     sp = bs.add_parser("split", help="a one-mesh level, whole against cut into pieces: LoD, client ms, DSSIM",
                        description="Generates a one-mesh atrium (167k triangles) and serves it whole and cut into "
                                    "pieces (scenes/split.py): LoD build time, proxy's client ms and quality on "

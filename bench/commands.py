@@ -97,6 +97,21 @@ def cmd_bench_predict(args) -> int:
     return 0
 
 
+def cmd_bench_network(args) -> int:
+    from pibr.common.bandwidth import load_bandwidth_trace
+
+    from .network_bench import print_network, run_network_bench
+
+    for link in args.links:
+        load_bandwidth_trace(link)   # a bad name or file refused before any process starts
+    r = run_network_bench(out_dir=args.out, links=args.links, static_kbps=args.static_kbps,
+                          adapt_kbps=args.adapt_kbps, method=args.method, trace=args.trace, start_s=args.start,
+                          duration_s=args.duration, rate_hz=args.rate, size=args.size, view_size=args.view_size)
+    print_network(r)
+    print(f"written: {args.out}/network.json")
+    return 0
+
+
 def cmd_bench_split(args) -> int:
     from .split_bench import print_split_table, run_split_bench
 

@@ -300,12 +300,25 @@ def predict_quality(r: dict) -> list[str]:
     return _table(["predictor", *(f"{lat} ms ({methods})" for lat in latencies)], rows)
 
 
+def network(r: dict) -> list[str]:
+    """``pibr bench network``: per bandwidth trace and setting, frame age p50 / p95, stalls (the
+    longest), the bitrate that arrived and DSSIM of what was shown."""
+    rows = []
+    for link, entry in r["links"].items():
+        for name, v in entry["runs"].items():
+            rows.append([link, name, f"{v['age_ms_p50']:.0f} / {v['age_ms_p95']:.0f}",
+                         f"{v['stalls']} ({v['longest_stall_ms']:.0f} ms)", f"{v['arrived_kbps']:.0f}",
+                         f"{v['dssim_mean']:.4f}"])
+    return _table(["link", "setting", "age ms p50 / p95", "stalls > 250 ms (longest)", "kbit/s arrived", "DSSIM"],
+                  rows)
+
+
 RENDERERS = {"realtime": realtime, "levels": levels, "upsampling": upsampling, "pareto": pareto,
              "pareto-windows": pareto_windows, "coverage": coverage, "dynamic": dynamic, "ibr": ibr,
              "split": split, "server-projection": server_projection, "server-edges": server_edges,
              "codec-matched": codec_matched, "codec-end-to-end": codec_end_to_end, "lod-target": lod_target,
              "stereo": stereo, "stereo-server": stereo_server, "predict": predict,
-             "predict-quality": predict_quality}
+             "predict-quality": predict_quality, "network": network}
 
 
 # -- the README ---------------------------------------------------------------------------------------------------

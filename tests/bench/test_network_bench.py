@@ -1,0 +1,34 @@
+"""pibr bench network end to end: server, relay (replaying a bandwidth trace) and client processes
+on the virtual clock, a static bitrate against the adapting stream (issue 28, items 2 and 5)."""
+import json
+
+import pytest
+
+from pibr.bench.network_bench import print_network, run_network_bench
+
+pytestmark = [pytest.mark.integration, pytest.mark.gl]
+
+
+def test_a_link_that_drops_ages_the_static_stream_and_not_the_adapting_one(tmp_path, capsys):
+    link = tmp_path / "drop.csv"
+    link.write_text("t,kbps\n0,20000\n1,1200\n60,1200\n")
+    r = run_network_bench(str(tmp_path), links=(str(link),), static_kbps=(2400.0,), adapt_kbps=2400.0,
+                          method="rotation", duration_s=3.0, size=(96, 64), view_size=(192, 192), segment_s=1.0,
+                          progress=False)
+    runs = r["links"][str(link)]["runs"]
+    static, adapt = runs["static 2400"], runs["adapt 2400"]
+    assert static["age_ms_p95"] > 1000.0                      # the queue behind a link at half the stream
+    assert adapt["age_ms_p95"] < 0.7 * static["age_ms_p95"]
+    assert static["colour_kbps_chosen"] is None
+    assert adapt["colour_kbps_chosen"]["max"] == 2400 and adapt["colour_kbps_chosen"]["min"] < 1200
+    assert 0 < static["arrived_kbps"] <= 20000 * 1 / 3 + 1200 * 2 / 3 + 1
+    for run in (static, adapt):
+        assert len(run["dssim_by_segment"]) == 3 and 0 < run["dssim_mean"] < 1
+        assert run["longest_stall_ms"] >= 100.0 and run["stalls"] >= 0
+    verdict = r["links"][str(link)]["verdict"]
+    assert verdict["age_p95_over_rtt_ms"]["value"] == pytest.approx(adapt["age_ms_p95"] - 128.0)
+    assert len(verdict["dssim_of_best_static"]["per_segment"]) == 3
+    with open(tmp_path / "network.json") as f:
+        assert json.load(f)["links"][str(link)]["runs"]["adapt 2400"]["frames"] == adapt["frames"]
+    print_network(r)
+    assert "adapting: age p95" in capsys.readouterr().out
