@@ -80,11 +80,10 @@ class BandwidthTrace:
         s = np.mod(np.asarray(t_us, dtype=np.int64), self.period_us)
         return self.rates_kbps[np.searchsorted(self.times_us, s, side="right") - 1]
 
-    def _bits_before(self, s: float) -> float:
-        """Bits delivered from the period's start to ``s`` µs within it."""
-        i = int(np.searchsorted(self.times_us, s, side="right")) - 1
-        i = min(i, len(self.rates_kbps) - 1)
-        return float(self._cum_bits[i] + self.rates_kbps[i] / 1e3 * (s - self.times_us[i]))
+    def _bits_before(self, s):
+        """Bits delivered from the period's start to ``s`` µs within it (a number or an array:
+        the cumulative bits are piecewise linear between the segments' bounds)."""
+        return np.interp(s, self.times_us, self._cum_bits)
 
     def finish_us(self, start_us: int, nbytes: int) -> int:
         """When ``nbytes`` sent from ``start_us`` (µs on the trace's clock, any sign) have all left."""
@@ -92,7 +91,7 @@ class BandwidthTrace:
             return int(start_us)
         period, per_period = self.period_us, float(self._cum_bits[-1])
         q, s = divmod(int(start_us), period)
-        target = self._bits_before(s) + nbytes * 8.0
+        target = float(self._bits_before(s)) + nbytes * 8.0
         q2, rem = divmod(target, per_period)
         if rem == 0.0:               # exactly at a period's end, not the next one's start
             q2, rem = q2 - 1, per_period
@@ -105,7 +104,7 @@ class BandwidthTrace:
         (a Mahimahi trace is 0 or 12 Mbit/s in each millisecond)."""
         step = min(int(window_ms * 1e3), self.period_us)
         edges = np.append(np.arange(0, self.period_us, step, dtype=np.int64), self.period_us)
-        bits = np.array([self._bits_before(float(e)) for e in edges[:-1]] + [float(self._cum_bits[-1])])
+        bits = self._bits_before(edges)
         rates = np.diff(bits) / np.diff(edges) * 1e3
         weights = np.diff(edges) / self.period_us
         order = np.argsort(rates)
@@ -133,9 +132,7 @@ class BandwidthTrace:
         """The trace as Mahimahi delivery opportunities (one millisecond per 1500-byte packet; one
         more at the period's last millisecond if it has none, since Mahimahi loops after the last)."""
         ms = np.arange(1, self.period_us // 1000 + 1, dtype=np.int64)
-        bits = np.array([self._bits_before(float(m * 1000)) for m in ms]) if len(ms) < 200_000 else None
-        if bits is None:
-            raise ConfigError(f"bandwidth trace {self.name}: too long to write as Mahimahi opportunities")
+        bits = self._bits_before(ms * 1000)
         packets = np.floor(bits / PACKET_BITS).astype(np.int64)
         counts = np.diff(np.concatenate([[0], packets]))
         stamps = np.repeat(ms, counts)

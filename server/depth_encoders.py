@@ -37,27 +37,23 @@ class EdgeDepthStream:
         self.rate = RateController(kbps * 1000.0 / fps, threshold) if kbps > 0 else None
         self._cap_bits = None if self.rate is None else self.rate.target   # the configured cap per frame
         self._mean_bits: float | None = None   # bits per frame while the stream has its whole rate
+        self._shared = False                    # coding at a share of its rate (set_share)
         self.threshold = threshold
         self.intra_every = max(1, intra_every)
         self.perceptual = perceptual
         self._prev = None
         self.frames = 0
 
-    _share_of = None   # the share of its rate the stream adaptation gives it (None: all)
-
     def set_share(self, share: float) -> None:
         """Code at ``share`` of the stream's rate (the stream adaptation, server/stream_adaptation.py):
         of its cap, or without one of the bits per frame it spent with its whole rate; 1 restores it."""
         base = self._cap_bits if self._cap_bits is not None else self._mean_bits
-        if share >= 1.0 or base is None:
-            self._share_of = None
-            if self._cap_bits is None:
-                self.rate = None
-            elif self.rate is not None:
-                self.rate.target = self._cap_bits
-            return
-        self._share_of = share
-        if self.rate is None:
+        self._shared = share < 1.0 and base is not None
+        if not self._shared:
+            base, share = self._cap_bits, 1.0   # the cap again, or no rate control at all
+        if base is None:
+            self.rate = None
+        elif self.rate is None:
             self.rate = RateController(max(1.0, base * share), self.threshold)
         else:
             self.rate.target = max(1.0, base * share)
@@ -78,7 +74,7 @@ class EdgeDepthStream:
                                   codes=found.codes, motion=motion, moving=moving)
         if self.rate is not None:
             self.rate.update(enc.stats.total_bits)
-        if self._cap_bits is None and self._share_of is None:
+        if self._cap_bits is None and not self._shared:
             bits = float(enc.stats.total_bits)
             self._mean_bits = bits if self._mean_bits is None else 0.9 * self._mean_bits + 0.1 * bits
         self._prev = (enc.samples, pose)

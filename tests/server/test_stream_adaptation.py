@@ -140,3 +140,23 @@ async def test_through_a_link_that_drops_the_adapting_stream_keeps_its_frames_yo
     assert kbps[0] == 2400 and max(kbps[-10:]) < 1200    # under what the link carries
     strip = lambda rows: [{k: v for k, v in r.items() if k != "client_ms"} for r in rows]
     assert strip(on) == strip(again)
+
+
+def test_an_edge_stream_without_a_cap_codes_at_a_share_of_what_it_spent_and_comes_back():
+    from pibr.protocol.depth_codecs import edge_quantizer
+    from pibr.protocol.pose import Pose
+    from pibr.server.depth_encoders import EdgeDepthStream
+
+    q = edge_quantizer(0.1, 50.0)
+    stream = EdgeDepthStream(64, 48, q, 10.0)          # no cap: no rate control
+    yy, xx = np.mgrid[0:48, 0:64]
+    def frame(i):   # boxes that move: every frame has edges to code
+        d = np.full((48, 64), 8.0, np.float32)
+        d[(np.abs(yy - 24) < 10) & (np.abs(xx - 10 - 3 * i) < 8)] = 2.0
+        return d
+    bits = [stream.encode(frame(i), Pose.identity())[1].total_bits for i in range(6)]
+    assert stream.rate is None
+    stream.set_share(0.25)
+    assert stream.rate.target == pytest.approx(0.25 * stream._mean_bits) and stream._mean_bits > 0
+    stream.set_share(1.0)
+    assert stream.rate is None and len(bits) == 6
