@@ -14,7 +14,10 @@ delay cancel, and so does an offset between the two clocks). Each report:
   target); once a decrease was made, the next waits :data:`HOLD_S` and the queue's length (the
   frames already queued arrive old whatever the new rate) unless what arrives drops further;
 * queued less than :data:`QUEUE_LOW_MS`: room, probed by :data:`PROBE_GAIN` per report up to
-  the session's bitrate;
+  the session's bitrate, and never past :data:`RECEIVED_CAP` times what arrived over the last
+  :data:`RECEIVED_WINDOW_S` (the bound of Google's congestion control for WebRTC, Carlucci et al.
+  2016: the encoder takes a new target at its next group of pictures, seconds later, and probes
+  that add up unseen meanwhile would land on the link all at once);
 * in between: held.
 
 Under the floor (:data:`FLOOR_SHARE` of the session's bitrate, where a colour atlas stops being
@@ -37,6 +40,8 @@ BASELINE_S = 10.0
 QUEUE_HIGH_MS = 100.0
 QUEUE_LOW_MS = 40.0
 PROBE_GAIN = 1.08
+RECEIVED_CAP = 1.5
+RECEIVED_WINDOW_S = 1.0
 MIN_DRAIN_SHARE = 0.3
 HOLD_S = 0.6
 FLOOR_SHARE = 0.1
@@ -64,6 +69,7 @@ class StreamAdaptation:
         self.floor_kbps = max(float(min_video_kbps), FLOOR_SHARE * self.max_kbps)
         self.choice = StreamChoice(self.max_kbps, 1, START)
         self._ages: deque = deque()       # (t, age ms) of the reports within BASELINE_S
+        self._received: deque = deque()   # (t, kbit/s arrived x every) of the reports within RECEIVED_WINDOW_S
         self._last_decrease: tuple | None = None   # (t, hold s, kbit/s arrived) of the last decrease
         self._last_every_change = float("-inf")
         self.reports = 0
@@ -85,6 +91,10 @@ class StreamAdaptation:
         """Take one report of the client (at ``t`` s) -> the choice for the frames that follow."""
         queue = self.queue_ms(t, age_ms)
         kbps, every = self.choice.video_kbps, self.choice.every
+        self._received.append((t, delivered_kbps * every))
+        while self._received[0][0] <= t - RECEIVED_WINDOW_S:
+            self._received.popleft()
+        received = sum(k for _, k in self._received) / len(self._received)
         reason = HOLD
         if queue > QUEUE_HIGH_MS:
             # After a decrease the frames already queued keep arriving old: wait for them to drain
@@ -111,8 +121,8 @@ class StreamAdaptation:
             if every > 1 and t - self._last_every_change >= HOLD_S:
                 every, reason = every // 2, RECOVERED
                 self._last_every_change = t
-            elif kbps < self.max_kbps:
-                kbps, reason = min(self.max_kbps, kbps * PROBE_GAIN), PROBE
+            elif kbps < self.max_kbps and kbps < RECEIVED_CAP * received:
+                kbps, reason = min(self.max_kbps, kbps * PROBE_GAIN, RECEIVED_CAP * received), PROBE
         self.choice = StreamChoice(kbps, every, reason)
         self.reports += 1
         self.reasons[REASONS[reason]] += 1

@@ -67,6 +67,7 @@ class H264Encoder:
         self._restart = False   # a new target that cannot wait for the next group (retarget)
 
     def _context(self):
+        self.applied_kbps = self.target_kbps   # what the running context was asked for (before the factor)
         return x264_context(self._av, self.width, self.height, "yuv420p", self.fps,
                             self.target_kbps * self.target_factor, self.keyint, self.preset, threads=self._threads)
 
@@ -77,20 +78,21 @@ class H264Encoder:
         if delivered_kbps > 0:
             lo, hi = TARGET_FACTOR_RANGE
             self.target_factor = min(hi, max(lo, self.target_factor
-                                             * (self.target_kbps / delivered_kbps) ** UNDERSHOOT_GAIN))
+                                             * (self.applied_kbps / delivered_kbps) ** UNDERSHOOT_GAIN))
         self._ctx = self._context()
         self._group_bits = self._group_frames = 0
 
     def retarget(self, kbps: float) -> None:
         """A new target for the frames to come (the stream adaptation). Within RETARGET_KEEP of the
-        current one it waits for the next group of pictures; further, x264 starts again at the next
+        target x264 runs at (``applied_kbps``, not the last one asked for: small steps must not add
+        up unseen) it waits for the next group of pictures; further, x264 starts again at the next
         frame: a keyframe, held to two frames of the new rate by its VBV (an open context's VBV
         cannot change, module docstring)."""
         kbps = float(kbps)
         if not kbps > 0:
             raise ValueError(f"an H.264 target must be positive, got {kbps}")
         lo, hi = RETARGET_KEEP
-        if not lo <= kbps / self.target_kbps <= hi:
+        if not lo <= kbps / self.applied_kbps <= hi:
             self._restart = True
         self.target_kbps = kbps
 

@@ -7,7 +7,7 @@ import pytest
 from pibr.protocol.errors import MalformedMessage
 from pibr.protocol.messages import decode_stream_rate, encode_stream_rate
 from pibr.server.stream_adaptation import (CONGESTED, FLOOR, HOLD_S, MAX_EVERY, OUTAGE, PROBE, PROBE_GAIN,
-                                           RECOVERED, StreamAdaptation)
+                                           RECEIVED_CAP, RECOVERED, StreamAdaptation)
 
 
 def _steady(a, t0, t1, age_ms=90.0, kbps=8000.0, step=0.2):
@@ -54,14 +54,28 @@ def test_an_outage_halves_then_thins_the_frames_and_recovery_comes_back_step_by_
     assert min(kbps) == a.floor_kbps == 800.0
     assert everies[-1] == MAX_EVERY and a.reasons["floor"] == 2      # 1 -> 2 -> 4
     reasons = []
-    for _ in range(60):                           # the link is back: nothing queued
-        reasons.append(a.report(t, 90.0, 800.0).reason)
+    for _ in range(60):                           # the link is back: nothing queued, all of it carried
+        reasons.append(a.report(t, 90.0, a.choice.video_kbps / a.choice.every).reason)
         t += 0.2
     assert reasons.count(RECOVERED) == 2 and a.choice.every == 1
     assert reasons.index(RECOVERED) < reasons.index(PROBE)   # the frame rate first, then the bitrate
     assert a.choice.video_kbps == 8000.0
     probes = reasons.count(PROBE)
     assert probes == int(np.ceil(np.log(8000.0 / 800.0) / np.log(PROBE_GAIN)))
+
+
+def test_probes_stay_within_half_again_what_arrives():
+    """The encoder takes a new target only at its next group of pictures: while what arrives stays
+    at 3 Mbit/s, probing stops at 1.5 times it instead of climbing to the session's 16."""
+    a = StreamAdaptation(16000.0)
+    t = _steady(a, 0.0, 1.0, kbps=16000.0)
+    a.report(t, 90.0 + 300.0, 3000.0)            # congested: down to what arrived, less a share
+    t += 0.2
+    for _ in range(40):                          # nothing queued, 3 Mbit/s keeps arriving
+        a.report(t, 90.0, 3000.0)
+        t += 0.2
+    assert a.reasons["probe"] > 0
+    assert a.choice.video_kbps == pytest.approx(RECEIVED_CAP * 3000.0)
 
 
 def test_the_baseline_is_the_least_age_so_a_clock_offset_cancels():
@@ -104,6 +118,24 @@ def test_a_new_target_far_below_restarts_x264_at_once_and_near_it_waits_for_the_
     mean_before = np.mean(sizes[3:]) * 8 * 10 / 1000
     mean_after = np.mean([len(d) for d, _ in after[3:]]) * 8 * 10 / 1000
     assert mean_after < 0.4 * mean_before and mean_after < 300.0 * 1.6
+
+
+def test_small_steps_that_add_up_far_from_the_running_target_restart_x264():
+    """Each step within the keep range of the one before, together far from what x264 runs at:
+    compared with the last target asked for, x264 ran at the first until its next group."""
+    from pibr.server.video import RETARGET_KEEP, H264Encoder
+
+    enc = H264Encoder(128, 64, 10.0, 2000.0, keyint=30, deterministic=True)
+    grey = np.full((96, 128), 128, np.uint8)
+    assert enc.encode(grey)[1]
+    kbps = 2000.0
+    for _ in range(3):                    # 0.9 ** 3 = 0.73 of the running target
+        kbps *= 0.9
+        assert kbps / 2000.0 < RETARGET_KEEP[1]
+        enc.retarget(kbps)
+    assert enc.encode(grey)[1] and enc.applied_kbps == kbps
+    enc.retarget(kbps * 1.2)              # near the running target again: no keyframe
+    assert not enc.encode(grey)[1] and enc.applied_kbps == kbps
 
 
 @pytest.mark.gl
