@@ -108,7 +108,7 @@ def cmd_bench_network(args) -> int:
                           adapt_kbps=args.adapt_kbps, method=args.method, trace=args.trace, start_s=args.start,
                           duration_s=args.duration, rate_hz=args.rate, size=args.size, view_size=args.view_size)
     print_network(r)
-    print(f"written: {args.out}/network.json")
+    print(f"written: {args.out}/network.json, {args.out}/network.png")
     return 0
 
 

@@ -23,6 +23,8 @@ from .results import write_result
 
 STALL_MS = 250.0
 SEGMENT_S = 5.0
+#: The time step of each run's series in the JSON (what the plot draws).
+SERIES_STEP_S = 0.25
 GOALS = {"age_p95_over_rtt_ms_max": 300.0, "stall_ms_max": 1000.0, "dssim_of_best_static_max": 1.10}
 
 
@@ -49,6 +51,25 @@ def _records_summary(out: str, method: str, duration_s: float) -> dict:
             "colour_kbps_chosen": {"min": min(kbps), "max": max(kbps), "mean": float(np.mean(kbps))} if kbps else None}
 
 
+def _series(out: str, method: str, duration_s: float, step_s: float = SERIES_STEP_S) -> dict:
+    """Per ``step_s`` of display time: the largest frame age shown and the colour bitrate the
+    frames shown were made at (the stream's choice; -1 when no frame says)."""
+    from pibr.client.recorder import read_records
+
+    rows = read_records(os.path.join(out, f"{method}.records.csv"))
+    t = np.array([r["t"] for r in rows], float)
+    age = np.array([r["age_ms"] for r in rows], float)
+    kbps = np.array([r["stream_kbps"] for r in rows], float)
+    edges = np.arange(0.0, duration_s + 1e-9, step_s)
+    ages, rates = [], []
+    for a, b in zip(edges, edges[1:]):
+        inside = (t >= a) & (t < b) & np.isfinite(age)
+        ages.append(round(float(age[inside].max()), 1) if inside.any() else None)
+        chosen = inside & (kbps >= 0)
+        rates.append(round(float(kbps[chosen][-1]), 1) if chosen.any() else None)
+    return {"step_s": step_s, "age_ms_max": ages, "stream_kbps": rates}
+
+
 def _dssim_by_segment(out: str, method: str, duration_s: float, segment_s: float) -> list:
     with open(os.path.join(out, "metrics_frames.csv")) as f:
         rows = [r for r in csv.DictReader(f) if r["method"] == method]
@@ -64,8 +85,10 @@ def run_network_bench(out_dir="out/bench", links=("steps", "oscillation", "outag
                       method: str = "proxy", scene: str = "room", trace: str = "pred6dof-1", start_s: float = 30.0,
                       duration_s: float = 30.0, rate_hz: float = 30.0, size=(480, 270), view_size=(512, 512),
                       latency_ms: float = 128.0, server_fps: float = 10.0, segment_s: float = SEGMENT_S,
-                      progress: bool = True) -> dict:
-    """Every link trace x (each static bitrate, the adapting stream); writes ``out_dir/network.json``."""
+                      progress: bool = True, plot: bool = True) -> dict:
+    """Every link trace x (each static bitrate, the adapting stream); writes ``out_dir/network.json``
+    (and ``network.png`` with ``plot``: per link, its rate and the stream's choice, and the frame
+    age shown, over time)."""
     from pibr.common.bandwidth import load_bandwidth_trace
 
     from .evaluate import evaluate_run
@@ -101,10 +124,15 @@ def run_network_bench(out_dir="out/bench", links=("steps", "oscillation", "outag
         entry = result["links"].setdefault(link, {"trace": summary, "runs": {}})
         entry["runs"][name] = {**_records_summary(out, method, duration_s), "dssim_mean": scored["dssim_mean"],
                                "psnr_mean": scored["psnr_mean"],
-                               "dssim_by_segment": _dssim_by_segment(out, method, duration_s, segment_s)}
+                               "dssim_by_segment": _dssim_by_segment(out, method, duration_s, segment_s),
+                               "series": _series(out, method, duration_s)}
     for link, entry in result["links"].items():
         entry["verdict"] = _verdict(entry["runs"], latency_ms)
     write_result(out_dir, "network.json", result)
+    if plot:
+        from .plots import plot_network
+
+        plot_network(result, os.path.join(out_dir, "network.png"))
     return result
 
 

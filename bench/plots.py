@@ -1,6 +1,8 @@
 """Plots of benchmark results (matplotlib, Agg backend, imported lazily)."""
 from __future__ import annotations
 
+import os
+
 import numpy as np
 
 from .variants import ORACLE, pareto_front, sweep_labels
@@ -332,6 +334,52 @@ def plot_predict(result: dict, path: str) -> None:
         ax.grid(alpha=0.3)
     axes[0].legend(fontsize=8)
     axes[0].set_title(f"{result['windows']['purpose']} windows", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
+def plot_network(result: dict, path: str) -> None:
+    """``pibr bench network``: per link (a column each), above: the link's rate (averaged over
+    each series step) and the colour bitrate the adapting stream chose; below: the oldest frame
+    shown in each step, adapting against every static bitrate."""
+    from pibr.common.bandwidth import load_bandwidth_trace
+
+    plt = _pyplot()
+    links = list(result["links"])
+    fig, axes = plt.subplots(2, len(links), figsize=(4.2 * len(links), 6.4), squeeze=False, sharex=True)
+    rtt = result["settings"]["latency_ms"]
+    for col, link in enumerate(links):
+        runs = result["links"][link]["runs"]
+        adapt_name = next((k for k in runs if k.startswith("adapt")), None)
+        step = next(iter(runs.values()))["series"]["step_s"]
+        n = len(next(iter(runs.values()))["series"]["age_ms_max"])
+        t = np.arange(n) * step
+        trace = load_bandwidth_trace(link)
+        edges_us = (np.arange(n + 1) * step * 1e6).astype(np.int64)
+        bits = trace.bits_until(edges_us)
+        link_kbps = np.diff(bits) / np.diff(edges_us) * 1e3
+        top, bottom = axes[0, col], axes[1, col]
+        top.step(t, link_kbps / 1e3, where="post", color="k", lw=1, label="link")
+        if adapt_name:
+            chosen = np.array([np.nan if v is None else v for v in runs[adapt_name]["series"]["stream_kbps"]])
+            top.step(t, chosen / 1e3, where="post", color="C3", lw=1.2, label="adapting: colour target")
+        top.set_title(os.path.basename(link), fontsize=10)
+        top.set_ylabel("Mbit/s")
+        top.grid(alpha=0.3)
+        for k, (name, r) in enumerate(runs.items()):
+            ages = np.array([np.nan if v is None else v for v in r["series"]["age_ms_max"]])
+            adapting = name == adapt_name
+            bottom.plot(t, ages, lw=1.6 if adapting else 0.9, color="C3" if adapting else f"C{k % 3}",
+                        alpha=1.0 if adapting else 0.6, label=name)
+        bottom.axhline(rtt + result["goals"]["age_p95_over_rtt_ms_max"], color="k", ls=":", lw=1,
+                       label="goal: p95 age")
+        bottom.set_yscale("log")
+        bottom.set_ylabel("frame age shown, ms")
+        bottom.set_xlabel("time s")
+        bottom.grid(alpha=0.3)
+    axes[0, 0].legend(fontsize=7)
+    axes[1, 0].legend(fontsize=7)
     fig.tight_layout()
     fig.savefig(path, dpi=100)
     plt.close(fig)

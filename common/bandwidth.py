@@ -85,6 +85,11 @@ class BandwidthTrace:
         the cumulative bits are piecewise linear between the segments' bounds)."""
         return np.interp(s, self.times_us, self._cum_bits)
 
+    def bits_until(self, t_us) -> np.ndarray:
+        """Bits delivered from the trace's start to ``t_us`` µs (any shape; looping)."""
+        q, s = np.divmod(np.asarray(t_us, dtype=np.int64), self.period_us)
+        return q * self._cum_bits[-1] + self._bits_before(s)
+
     def finish_us(self, start_us: int, nbytes: int) -> int:
         """When ``nbytes`` sent from ``start_us`` (µs on the trace's clock, any sign) have all left."""
         if nbytes <= 0:

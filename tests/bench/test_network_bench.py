@@ -28,6 +28,13 @@ def test_a_link_that_drops_ages_the_static_stream_and_not_the_adapting_one(tmp_p
     verdict = r["links"][str(link)]["verdict"]
     assert verdict["age_p95_over_rtt_ms"]["value"] == pytest.approx(adapt["age_ms_p95"] - 128.0)
     assert len(verdict["dssim_of_best_static"]["per_segment"]) == 3
+    # the series the plot draws: the static stream's oldest frame grows through the drop, the
+    # adapting stream's choice goes below the link's 1.2 Mbit/s
+    static_ages = [a for a in static["series"]["age_ms_max"] if a is not None]
+    assert len(static["series"]["age_ms_max"]) == 12 and static_ages[-1] > 4 * min(static_ages)
+    assert min(k for k in adapt["series"]["stream_kbps"] if k is not None) < 1200
+    assert set(static["series"]["stream_kbps"]) == {None}
+    assert (tmp_path / "network.png").stat().st_size > 10_000
     with open(tmp_path / "network.json") as f:
         assert json.load(f)["links"][str(link)]["runs"]["adapt 2400"]["frames"] == adapt["frames"]
     print_network(r)

@@ -36,6 +36,9 @@ def test_a_message_across_a_step_is_sent_at_both_rates():
     # and the trace loops: the same a period later, and a period earlier
     assert trace.finish_us(3_950_000, 100_000) == 4_200_000
     assert trace.finish_us(-2_050_000, 100_000) == -1_800_000
+    # bits carried from the trace's start, across periods: 8e6 in the first second, then 2e6 a second
+    assert trace.bits_until([0, 1_000_000, 1_500_000, 3_000_000, 4_000_000]).tolist() == \
+        [0, 8e6, 9e6, 18e6, 26e6]
 
 
 def test_an_outage_holds_a_message_until_it_ends():
