@@ -9,9 +9,11 @@ and the bits they brought over the report's interval. The age less its least ove
 delay cancel, and so does an offset between the two clocks). Each report:
 
 * queued more than :data:`QUEUE_HIGH_MS`: the link carries less than the stream. The colour's
-  target goes to what was delivered, less a share that drains the queue within about a second
+  target goes to the link's rate, less a share that drains the queue within about a second
   (never under :data:`MIN_DRAIN_SHARE` of it; nothing delivered at all, an outage: half the
-  target); once a decrease was made, the next waits :data:`HOLD_S` and the queue's length (the
+  target). The link's rate is what arrived over the reports of the last
+  :data:`RECEIVED_WINDOW_S` that found frames queued: the link was busy all along them, while a
+  single report sees whole frames (none, or one in 200 ms); once a decrease was made, the next waits :data:`HOLD_S` and the queue's length (the
   frames already queued arrive old whatever the new rate) unless what arrives drops further;
 * queued less than :data:`QUEUE_LOW_MS`: room, probed by :data:`PROBE_GAIN` per report up to
   the session's bitrate, and never past :data:`RECEIVED_CAP` times what arrived over the last
@@ -91,20 +93,24 @@ class StreamAdaptation:
         """Take one report of the client (at ``t`` s) -> the choice for the frames that follow."""
         queue = self.queue_ms(t, age_ms)
         kbps, every = self.choice.video_kbps, self.choice.every
-        self._received.append((t, delivered_kbps * every))
+        self._received.append((t, delivered_kbps * every, queue > QUEUE_LOW_MS))
         while self._received[0][0] <= t - RECEIVED_WINDOW_S:
             self._received.popleft()
-        received = sum(k for _, k in self._received) / len(self._received)
+        received = sum(k for _, k, _ in self._received) / len(self._received)
+        # What the link carries: while frames queue it is busy all the time, so what arrived over
+        # those reports is its rate (one report alone sees whole frames: none, or one in 200 ms)
+        busy = [k for _, k, queued in self._received if queued]
+        capacity = sum(busy) / len(busy) if busy else delivered_kbps * every
         reason = HOLD
         if queue > QUEUE_HIGH_MS:
             # After a decrease the frames already queued keep arriving old: wait for them to drain
             # (the hold and the queue's own length) unless the link itself got slower still.
-            worse = self._last_decrease is not None and delivered_kbps * every < 0.8 * self._last_decrease[2]
+            worse = self._last_decrease is not None and capacity < 0.8 * self._last_decrease[2]
             if self._last_decrease is None or t - self._last_decrease[0] >= self._last_decrease[1] or worse:
-                if delivered_kbps > 0:
+                if capacity > 0:
                     share = max(MIN_DRAIN_SHARE, 1.0 - queue / 1000.0 - 0.1)
                     # the colour's part of what arrived: the same share of it the colour had
-                    wanted = min(kbps, delivered_kbps * every * share)
+                    wanted = min(kbps, capacity * share)
                     reason = CONGESTED
                 else:
                     wanted, reason = kbps * 0.5, OUTAGE
@@ -115,8 +121,8 @@ class StreamAdaptation:
                     wanted = self.floor_kbps
                 kbps = wanted
                 # an outage drains nothing: only the hold
-                hold = HOLD_S + (queue / 1e3 if delivered_kbps > 0 else 0.0)
-                self._last_decrease = (t, hold, delivered_kbps * every)
+                hold = HOLD_S + (queue / 1e3 if capacity > 0 else 0.0)
+                self._last_decrease = (t, hold, capacity)
         elif queue < QUEUE_LOW_MS and (self._last_decrease is None or t - self._last_decrease[0] >= HOLD_S):
             if every > 1 and t - self._last_every_change >= HOLD_S:
                 every, reason = every // 2, RECOVERED
