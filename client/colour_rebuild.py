@@ -317,7 +317,7 @@ class ColourRebuild:
             self.poses[view] = pose
         self.current = target
         self.frames += 1
-        if bound is not None:
+        if bound is not None and type(bound.mglo).__name__ != "InvalidObject":   # not released since
             bound.use()
 
     def reset(self) -> None:

@@ -124,6 +124,22 @@ def _still(ctx, settings, frames=6):
     return np.stack(errors)
 
 
+def test_a_released_framebuffer_left_bound_by_others_does_not_break_an_upload(ctx):
+    """The rebuild binds the caller's framebuffer back afterwards: one that code elsewhere released
+    while bound (the shared context of a process) must not make the upload fail."""
+    cfg = _config()
+    pose = Pose.make([0.0, 1.6, 0.0], quat_from_euler([0.3, 0.1, 0.0], "yxz"))
+    textures = FrameTextures(ctx, cfg, RebuildSettings())
+    other = ctx.simple_framebuffer((8, 8))
+    try:
+        other.use()
+        other.release()
+        _upload(textures, cfg, _whole_view(pose), 0, pose, np.zeros(SIZE[::-1]))
+        assert textures.rebuild.frames == 1
+    finally:
+        textures.release()
+
+
 def test_a_still_view_is_whole_after_four_frames(ctx):
     """With the interpolations between samples given next to no weight, four frames rebuild the
     whole colour exactly: every pixel's luma and every block's chroma was sent once."""
