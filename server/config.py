@@ -65,7 +65,7 @@ class ServerConfig:
     max_sessions: int = 8               # sessions past their Hello
     admit_wait_s: float = 5.0           # a Hello at a full server waits this long for a slot
     max_pending: int = 64               # connections yet to send a Hello; beyond, the oldest is dropped
-    predict: str = "none"               # render for the head pose predicted at display (server/pose_prediction.py)
+    predict: str = "kalman"             # render for the head pose predicted at display (server/pose_prediction.py; pibr bench predict)
     adapt: str = "off"                  # the stream follows the link the client reports (server/stream_adaptation.py)
     silent_slot_s: float = 2.0          # a session without a pose this long after its Welcome yields its slot to a waiting client
     hello_timeout_s: float = 10.0       # from connecting to a whole Hello
