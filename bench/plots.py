@@ -370,7 +370,8 @@ def plot_network(result: dict, path: str) -> None:
         for k, (name, r) in enumerate(runs.items()):
             ages = np.array([np.nan if v is None else v for v in r["series"]["age_ms_max"]])
             adapting = name == adapt_name
-            bottom.plot(t, ages, lw=1.6 if adapting else 0.9, color="C3" if adapting else f"C{k % 3}",
+            colour = "C3" if adapting else f"C{(0, 1, 2, 4, 5, 6, 7, 8, 9)[k % 9]}"   # red: the adapting one
+            bottom.plot(t, ages, lw=1.6 if adapting else 0.9, color=colour,
                         alpha=1.0 if adapting else 0.6, label=name)
         bottom.axhline(rtt + result["goals"]["age_p95_over_rtt_ms_max"], color="k", ls=":", lw=1,
                        label="goal: p95 age")
