@@ -13,8 +13,9 @@ delay cancel, and so does an offset between the two clocks). Each report:
   (never under :data:`MIN_DRAIN_SHARE` of it; nothing delivered at all, an outage: half the
   target). The link's rate is what arrived over the reports of the last
   :data:`RECEIVED_WINDOW_S` that found frames queued: the link was busy all along them, while a
-  single report sees whole frames (none, or one in 200 ms); once a decrease was made, the next waits :data:`HOLD_S` and the queue's length (the
-  frames already queued arrive old whatever the new rate) unless what arrives drops further;
+  single report sees whole frames (none, or one in 200 ms). Once a decrease was made, the next
+  waits :data:`HOLD_S` and the queue's length (the frames already queued arrive old whatever the
+  new rate) unless the link's rate drops further;
 * queued less than :data:`QUEUE_LOW_MS`: room, probed by :data:`PROBE_GAIN` per report up to
   the session's bitrate, and never past :data:`RECEIVED_CAP` times what arrived over the last
   :data:`RECEIVED_WINDOW_S` (the bound of Google's congestion control for WebRTC, Carlucci et al.
@@ -71,8 +72,8 @@ class StreamAdaptation:
         self.floor_kbps = max(float(min_video_kbps), FLOOR_SHARE * self.max_kbps)
         self.choice = StreamChoice(self.max_kbps, 1, START)
         self._ages: deque = deque()       # (t, age ms) of the reports within BASELINE_S
-        self._received: deque = deque()   # (t, kbit/s arrived x every) of the reports within RECEIVED_WINDOW_S
-        self._last_decrease: tuple | None = None   # (t, hold s, kbit/s arrived) of the last decrease
+        self._received: deque = deque()   # (t, kbit/s arrived x every, frames queued?) within RECEIVED_WINDOW_S
+        self._last_decrease: tuple | None = None   # (t, hold s, the link's kbit/s) of the last decrease
         self._last_every_change = float("-inf")
         self.reports = 0
         self.reasons = {name: 0 for name in REASONS}   # reports per reason
