@@ -31,10 +31,8 @@ def _config(colour_scale=0.5, extra=False):
 
 
 @pytest.fixture
-def ctx(gl_ctx):
-    with gl_ctx:
-        _ = gl_ctx.error
-        yield gl_ctx
+def ctx(gl_current):
+    return gl_current
 
 
 def _pattern(directions: np.ndarray) -> np.ndarray:

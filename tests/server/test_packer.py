@@ -11,12 +11,9 @@ from pibr.server.packer import AtlasPacker, CpuAtlasPacker
 
 
 @pytest.fixture
-def ctx(gl_ctx):
-    """The shared context, made current, with no error left pending by earlier tests' GL calls
-    (moderngl reports a stale error as its own failure)."""
-    with gl_ctx:
-        _ = gl_ctx.error
-        yield gl_ctx
+def ctx(gl_current):
+    """The shared context, made current (tests/conftest.py)."""
+    return gl_current
 
 
 def _both(ctx, layout, quantizer, colors: dict, distances: dict):
