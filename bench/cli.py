@@ -591,6 +591,20 @@ def register(sub) -> None:
     _out(o)
     o.set_defaults(func=commands.cmd_bench_offset)
 
+    r = sub.add_parser("report", help="one HTML page of a run or a benchmark folder: tables, videos, scrubber, plots",
+                       description="Write OUT/report.html: a self-contained page (no server, no internet) with the "
+                                   "run's parameters, metrics, videos in sync, a frame scrubber and plots, or a "
+                                   "benchmark folder's tables and plots. demo, evaluate and every bench write it "
+                                   "at their end too.")
+    r.add_argument("out", help="a scored run (pibr demo, pibr evaluate) or a benchmark's --out folder")
+    r.set_defaults(func=commands.cmd_report)
+
+    # Every command that leaves results in a folder ends by writing that folder's report.
+    d.set_defaults(func=commands.with_report(commands.cmd_demo, "out"))
+    e.set_defaults(func=commands.with_report(commands.cmd_evaluate, "run"))
+    for bench in bs.choices.values():
+        bench.set_defaults(func=commands.with_report(bench.get_default("func"), "out"))
+
 
 def _trade_knobs(text: str) -> tuple:
     from pibr.protocol.errors import ConfigError

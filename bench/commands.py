@@ -3,6 +3,34 @@ parsed arguments (bench/cli.py declares them): run, print the table, say what wa
 from __future__ import annotations
 
 
+def cmd_report(args) -> int:
+    from .report import write_report
+
+    print(f"written: {write_report(args.out)}")
+    return 0
+
+
+def with_report(command, folder_arg: str):
+    """``command`` followed, when it succeeds, by the report of the folder it wrote (``args.<folder_arg>``).
+    A folder with nothing to show gets no report; the command's own outputs stand either way."""
+    def run(args) -> int:
+        code = command(args)
+        if code == 0:
+            import logging
+
+            from pibr.protocol.errors import ConfigError
+
+            from .report import write_report
+
+            try:
+                print(f"report: {write_report(getattr(args, folder_arg))}")
+            except ConfigError as exc:
+                logging.getLogger(__name__).warning("no report: %s", exc)
+        return code
+    run.__wrapped__, run.folder_arg = command, folder_arg
+    return run
+
+
 def realtime_server_args(view_size, extra_view) -> tuple:
     """The server options ``pibr bench realtime`` passes on: only those the user set."""
     out = () if view_size is None else ("--view-size", "%dx%d" % tuple(view_size))

@@ -140,5 +140,5 @@ def print_report(metrics: dict, out_dir: str) -> None:
                       f"draw the best level).")
     print(f"\nFLIP on every {metrics['flip_every']} frame(s). Finished in {t.get('total', 0):.0f} s "
           f"(streaming {t.get('streaming', 0):.0f} s, evaluation {t.get('evaluation', 0):.0f} s).")
-    print(f"Outputs in {out_dir}/: side_by_side.mp4, metrics.json, metrics_frames.csv, quality.png, "
-          f"<method>.mp4, logs/")
+    print(f"Outputs in {out_dir}/: report.html (open it in a browser), side_by_side.mp4, metrics.json, "
+          f"metrics_frames.csv, quality.png, <method>.mp4, logs/")
