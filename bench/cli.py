@@ -130,6 +130,8 @@ def register(sub) -> None:
     d.add_argument("--ipd-mm", type=arguments.positive, default=None, help="with --stereo: the eyes' distance "
                                                                             "(default 64)")
     d.add_argument("--anaglyph", action="store_true", help="with --stereo: also a red-cyan anaglyph video per method")
+    d.add_argument("--live", type=arguments.non_negative_int, default=None, metavar="PORT",
+                   help="show the client's session live at http://127.0.0.1:PORT/ while it runs (0: any free port)")
     d.set_defaults(func=commands.cmd_demo)
 
     e = sub.add_parser("evaluate", help="score a client recording against ground truth",
@@ -491,6 +493,18 @@ def register(sub) -> None:
                     help="generate every proxy afresh (timing this machine) instead of reading the LoD cache")
     _out(lo)
     lo.set_defaults(func=commands.cmd_bench_lod)
+
+    li = bs.add_parser("live", help="what watching a session live (--live, a page in Chromium) costs the client",
+                       description="The same wall-clock session alone and watched by the live page in headless "
+                                   "Chromium, in turn: the client's render ms and missed ticks, and the page's "
+                                   "share of the tick time.")
+    li.add_argument("--method", default="proxy", help="the client's method (default proxy)")
+    _output_size(li, (640, 360))
+    _rate(li)
+    li.add_argument("--duration", type=arguments.positive, default=20.0, help="seconds of trace per run (default 20)")
+    li.add_argument("--repeats", type=arguments.positive_int, default=2, help="alone/watched pairs (default 2)")
+    _out(li)
+    li.set_defaults(func=commands.cmd_bench_live)
 
     rt = bs.add_parser("realtime", help="server, relay and client processes on the wall clock: fps, missed "
                                         "deadlines, frame age, CPU; and the cost per session",

@@ -56,6 +56,22 @@ def cmd_bench_realtime(args) -> int:
     return 0
 
 
+def cmd_bench_live(args) -> int:
+    from .live_bench import run_live_bench
+
+    r = run_live_bench(out_dir=args.out, method=args.method, size=args.size, rate_hz=args.rate,
+                       duration_s=args.duration, repeats=args.repeats)
+    s = r["summary"]
+    print(f"\n{'':8} {'client ms p50':>14} {'p95':>8} {'missed %':>9}")
+    for k in ("alone", "watched"):
+        print(f"{k:8} {s[k]['client_ms_median']:14.1f} {s[k]['client_ms_p95']:8.1f} {100 * s[k]['missed_fraction']:9.1f}")
+    print(f"\nwatched / alone client ms: {s['client_ms_ratio']:.3f}; the page's share of the tick time in the client: "
+          f"{100 * s['loop_share_of_tick_time']:.2f} % event loop + {100 * s['thread_share_of_tick_time']:.2f} % image "
+          f"thread (goal under {100 * s['goal_share']:.0f} %)")
+    print(f"written: {args.out}/live.json")
+    return 0
+
+
 def cmd_bench_soak(args) -> int:
     from pibr.protocol.errors import ConfigError
 
@@ -173,6 +189,15 @@ def cmd_bench_trade(args) -> int:
     return 0
 
 
+def _free_port() -> int:
+    """A TCP port free on loopback now (the client binds it a moment later)."""
+    import socket
+
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return sock.getsockname()[1]
+
+
 def demo_client_args(args) -> tuple:
     """The client options ``pibr demo`` passes on: only those the user set."""
     from pibr.protocol.errors import ConfigError
@@ -184,6 +209,10 @@ def demo_client_args(args) -> tuple:
         out += ("--stereo", args.stereo)
     if args.ipd_mm is not None:
         out += ("--ipd-mm", str(args.ipd_mm))
+    if args.live is not None:
+        port = args.live or _free_port()
+        print(f"pibr demo: the client's live view at http://127.0.0.1:{port}/ while it streams", flush=True)
+        out += ("--live", str(port))
     return out + (("--anaglyph",) if args.anaglyph else ())
 
 

@@ -313,12 +313,22 @@ def network(r: dict) -> list[str]:
                   rows)
 
 
+def live(r: dict) -> list[str]:
+    """``pibr bench live``: the client alone and watched by the live page, and the page's share."""
+    s = r["summary"]
+    rows = [[k, f"{s[k]['client_ms_median']:.1f}", f"{s[k]['client_ms_p95']:.1f}", f"{100 * s[k]['missed_fraction']:.1f}",
+             "—" if k == "alone" else f"{100 * s['loop_share_of_tick_time']:.2f}",
+             "—" if k == "alone" else f"{100 * s['thread_share_of_tick_time']:.2f}"] for k in ("alone", "watched")]
+    return _table(["client", "render ms p50", "p95", "missed %", "page: event loop % of tick time",
+                   "page: image thread %"], rows)
+
+
 RENDERERS = {"realtime": realtime, "levels": levels, "upsampling": upsampling, "pareto": pareto,
              "pareto-windows": pareto_windows, "coverage": coverage, "dynamic": dynamic, "ibr": ibr,
              "split": split, "server-projection": server_projection, "server-edges": server_edges,
              "codec-matched": codec_matched, "codec-end-to-end": codec_end_to_end, "lod-target": lod_target,
              "stereo": stereo, "stereo-server": stereo_server, "predict": predict,
-             "predict-quality": predict_quality, "network": network}
+             "predict-quality": predict_quality, "network": network, "live": live}
 
 
 # -- the README ---------------------------------------------------------------------------------------------------

@@ -109,13 +109,14 @@
   }
 
   // -- plots over time ------------------------------------------------------------------------------------------
-  function timePlot(parent, key, title) {
+  // lines: name -> one value (or null) per tick
+  function timePlot(parent, key, title, lines) {
     const W = 900, H = 170, L = 60, R = 10, T = 22, B = 24;
-    const methods = run.methods.filter(function (m) { return (run.series[m][key] || []).some(function (v) { return v !== null; }); });
+    const methods = Object.keys(lines).filter(function (m) { return (lines[m] || []).some(function (v) { return v !== null; }); });
     if (!methods.length) return;
-    const n = Math.max.apply(null, run.methods.map(function (m) { return run.series[m][key].length; }));
+    const n = Math.max.apply(null, methods.map(function (m) { return lines[m].length; }));
     let lo = Infinity, hi = -Infinity;
-    for (const m of methods) for (const v of run.series[m][key]) if (v !== null) { lo = Math.min(lo, v); hi = Math.max(hi, v); }
+    for (const m of methods) for (const v of lines[m]) if (v !== null) { lo = Math.min(lo, v); hi = Math.max(hi, v); }
     if (hi === lo) { hi += 1; lo -= 1; }
     const x = function (i) { return L + (W - L - R) * (n > 1 ? i / (n - 1) : 0.5); };
     const y = function (v) { return T + (H - T - B) * (1 - (v - lo) / (hi - lo)); };
@@ -131,7 +132,7 @@
     el("line", { x1: L, x2: W - R, y1: H - B, y2: H - B, class: "frame" }, svg);
     methods.forEach(function (m, k) {
       const pts = [];
-      run.series[m][key].forEach(function (v, i) { if (v !== null) pts.push(x(i).toFixed(1) + "," + y(v).toFixed(1)); });
+      lines[m].forEach(function (v, i) { if (v !== null) pts.push(x(i).toFixed(1) + "," + y(v).toFixed(1)); });
       el("polyline", { points: pts.join(" "), fill: "none", stroke: COLOURS[k % COLOURS.length], "stroke-width": 1.3, "data-method": m }, svg);
       el("text", { x: L + 8 + 110 * k, y: H - 6, fill: COLOURS[k % COLOURS.length], class: "legend" }, svg).textContent = m;
     });
@@ -148,7 +149,7 @@
     svg.addEventListener("mousemove", function (ev) {
       const i = tickAt(ev);
       hover.setAttribute("x1", x(i)); hover.setAttribute("x2", x(i)); hover.setAttribute("visibility", "visible");
-      tip.textContent = "tick " + i + ": " + methods.map(function (m) { return m + " " + fmt(run.series[m][key][i], hi < 1 ? 4 : 1); }).join(" · ");
+      tip.textContent = "tick " + i + ": " + methods.map(function (m) { return m + " " + fmt(lines[m][i], hi < 1 ? 4 : 1); }).join(" · ");
     });
     svg.addEventListener("mouseleave", function () { hover.setAttribute("visibility", "hidden"); tip.textContent = ""; });
     svg.addEventListener("click", function (ev) { showTick(tickAt(ev)); });
@@ -157,7 +158,14 @@
 
   if (run) {
     const plots = document.getElementById("plots");
-    for (const key in run.series_titles) timePlot(plots, key, run.series_titles[key]);
+    for (const key in run.series_titles) {
+      const lines = {};
+      for (const m of run.methods) lines[m] = run.series[m][key] || [];
+      timePlot(plots, key, run.series_titles[key], lines);
+    }
+    for (const key in run.stream_titles) {
+      if (run.stream[key]) timePlot(plots, key, run.stream_titles[key], { stream: run.stream[key] });
+    }
     if (!scrub) showTick = function (i) { for (const move of cursors) move(i); };
   }
 

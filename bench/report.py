@@ -39,7 +39,7 @@ BENCH_TABLES = {
     "coverage.json": ("coverage",), "dynamic.json": ("dynamic",), "ibr.json": ("ibr",), "split.json": ("split",),
     "codec.json": ("codec-matched", "codec-end-to-end"), "stereo.json": ("stereo", "stereo-server"),
     "predict.json": ("predict", "predict-quality"), "network.json": ("network",),
-    "bench_server.json": ("server-projection",),
+    "bench_server.json": ("server-projection",), "live.json": ("live",),
 }
 #: Other JSON a benchmark writes: shown folded, without a table.
 BENCH_FILES = ("trade.json", "codec_speed.json", "proxy_speed.json", "bench_client.json", "lod.json",
@@ -54,6 +54,9 @@ METRIC_COLUMNS = (
 #: Per-tick series for the plots: (file, column, plot title).
 FRAME_SERIES = (("dssim", "DSSIM (lower is better)"), ("psnr", "PSNR dB (higher is better)"))
 RECORD_SERIES = (("age_ms", "frame age ms"), ("client_ms", "client ms per tick"), ("level", "quality level (0 best)"))
+#: The session's series from stream.csv (client/live.py), per tick the newest value: (column, title).
+STREAM_SERIES = (("server_fps", "server frames/s (last second)"), ("kbps", "kbit/s received (last second)"),
+                 ("decode_ms", "decode ms per batch of frames"))
 
 
 def _esc(x) -> str:
@@ -189,6 +192,23 @@ def _series(out_dir: str, methods: list[str]) -> dict:
     return series
 
 
+def _stream_series(out_dir: str, ticks_t: list) -> dict:
+    """stream.csv's columns at each tick's time ``ticks_t`` (s): the newest batch decoded by then."""
+    path = os.path.join(out_dir, "stream.csv")
+    if not os.path.exists(path) or not ticks_t:
+        return {}
+    rows = [r for r in _read_csv(path) if _number(r.get("t")) is not None]
+    rows.sort(key=lambda r: float(r["t"]))
+    out = {key: [] for key, _ in STREAM_SERIES}
+    k = -1
+    for t in ticks_t:
+        while t is not None and k + 1 < len(rows) and float(rows[k + 1]["t"]) <= t + 1e-9:
+            k += 1
+        for key, _ in STREAM_SERIES:
+            out[key].append(_number(rows[k].get(key)) if k >= 0 else None)
+    return out
+
+
 def _run_section(out_dir: str, metrics: dict) -> tuple[str, dict]:
     methods = list(metrics["methods"])
     out = metrics["output"]
@@ -232,8 +252,10 @@ def _run_section(out_dir: str, metrics: dict) -> tuple[str, dict]:
         parts.append(f'<details><summary>quality.png</summary><img alt="quality over time" '
                      f'src="{_png_data_uri(png)}"></details>')
     parts.append("</section>")
-    data = {"rate_hz": out["rate_hz"], "methods": methods, "series": _series(out_dir, methods),
-            "series_titles": dict(FRAME_SERIES + RECORD_SERIES)}
+    series = _series(out_dir, methods)
+    data = {"rate_hz": out["rate_hz"], "methods": methods, "series": series,
+            "series_titles": dict(FRAME_SERIES + RECORD_SERIES),
+            "stream": _stream_series(out_dir, series[methods[0]]["t"]), "stream_titles": dict(STREAM_SERIES)}
     return "".join(parts), data
 
 

@@ -47,6 +47,7 @@ from .connection import ClientConnection
 from .deadline import levels_for
 from .depth_decoders import make_depth_decoder
 from .frame_textures import FrameTextures
+from .live import LiveSeries, LiveServer
 from .methods import needs_proxies, quadtree_threshold
 from .recorder import POSE_FIELDS, MethodRecorder, anaglyph, side_by_side, side_by_side_size
 from .video import H264Decoder
@@ -161,6 +162,11 @@ class Client:
         self._stopped: str | None = None    # why the run ended before its last tick (interrupted, failed)
         self.ticks_shown = 0                # ticks displayed (afresh or repeated) so far
         self._ages: deque = deque(maxlen=AGE_REPORT_TICKS)   # ms, of the frames the last ticks showed
+        #: the last seconds' ticks and frame batches (client/live.py): the live page's series, and
+        #: the server's frame rate and bitrate written to stream.csv
+        self.series = LiveSeries(config.methods, config.rate_hz)
+        self.live: LiveServer | None = None     # --live PORT: the page that shows them
+        self._stream_log = None                 # stream.csv, one row per batch of frames decoded
 
     # ------------------------------------------------------------------ set-up
 
@@ -348,6 +354,10 @@ class Client:
             self._set_up_deadline()
             self.gl = await loop.run_in_executor(None, GLThread, "pibr-client-gl")
             await self.gl.run(self._gl_setup)
+            if cfg.live_port is not None:
+                self.live = LiveServer(self.series, cfg.live_port)
+                await self.live.start()
+                print(f"pibr client: live view at {self.live.url}", file=sys.stderr, flush=True)
             if cfg.record:
                 self._open_recorders()
                 # written first (what evaluate needs is known now) and again when the run ends, so an
@@ -378,12 +388,17 @@ class Client:
             await self._shutdown()
             if self._stopped is not None and self.recorders:
                 self._write_session(None, trace)   # the recorders are closed: everything up to the last tick
+            if self.live is not None:
+                await self.live.close()
 
     def _open_recorders(self) -> None:
         """A recorder per method and eye shown (on the wall clock the videos are encoded after the
         run); with two eyes, per method a side-by-side video to watch (and an anaglyph if asked)."""
         cfg = self.cfg
         defer = cfg.clock == "real"
+        os.makedirs(cfg.out_dir, exist_ok=True)
+        self._stream_log = open(os.path.join(cfg.out_dir, "stream.csv"), "w", buffering=1 << 16)
+        self._stream_log.write("t,frames,wire_bytes,decode_ms,server_fps,kbps\n")
         for m in cfg.methods:
             for eye in self._eyes:
                 name = m if eye == CENTRE else f"{m}.{eye}"
@@ -399,6 +414,8 @@ class Client:
                 self.pair_recorders[m] = pair
 
     async def _shutdown(self) -> None:
+        if self._stream_log is not None:
+            self._stream_log.close()
         if self.conn is not None:
             await self.conn.close()
         for rec in [*self.recorders.values(), *(r for pair in self.pair_recorders.values() for r in pair)]:
@@ -475,13 +492,15 @@ class Client:
         loop = asyncio.get_running_loop()
 
         def decode():  # every frame, in order: both decoders keep state from the previous frame
-            out = {}
+            t0 = time.perf_counter()
+            out = {"ms": 0.0}
             for i, (frame, _) in enumerate(frames):
                 newest = last[slots[i]] == i
                 image = self._decoder.decode(frame.payload(PayloadKind.H264_ATLAS), convert=newest)
                 depth = self._depth_decoder.decode(frame, reconstruct=newest)
                 if newest:   # the flow (its decoder keeps no state) only for frames that will be shown
                     out[slots[i]] = (image, depth, self._flow_frame(frame, image, depth))
+            out["ms"] = (time.perf_counter() - t0) * 1e3
             return out
 
         decoded = await loop.run_in_executor(self._decode_pool, decode)
@@ -499,6 +518,10 @@ class Client:
         # 0 only for a frame id the server sent twice (the second copy's size was taken with the first)
         sizes = [self._wire_sizes.pop(f.frame_id, 0) for f, _ in frames]
         self._frame_bytes.extend(sizes)
+        t_s = (frames[-1][1] - self._time_base_us) / 1e6
+        fps, kbps = self.series.frames(t_s, len(frames), sum(sizes), decoded["ms"])
+        if self._stream_log is not None:
+            self._stream_log.write(f"{t_s:.6f},{len(frames)},{sum(sizes)},{decoded['ms']:.3f},{fps:.3f},{kbps:.3f}\n")
         if self._adapting:   # what the next stream report tells the server (_report_stream)
             self._stream_arrived.extend((arrival - f.render_t_us, size) for (f, arrival), size in zip(frames, sizes))
             self._newest_render_us = max(f.render_t_us for f, _ in frames)
@@ -540,8 +563,9 @@ class Client:
         budget = self.deadline.budget_ms if self.deadline is not None else 1e3 / self.cfg.rate_hz
         predicted = {m: (self.deadline.predicted(m, k) if self.deadline is not None else None)
                      for m, (k, _) in chosen.items()}
+        watched = self.live is not None and self.live.wants_image()
         results = await self.gl.run(self._gl_render, poses, shown, (t_us + offset) / 1e6, chosen,
-                                    bool(self.recorders))
+                                    bool(self.recorders) or watched)
         drawn = sum(ms for per_eye in results for _, _, ms in per_eye)
         for name, per_eye in zip(self.cfg.methods, results):
             level, reason = chosen[name]
@@ -563,11 +587,21 @@ class Client:
                 for rec, compose in zip(pair, (side_by_side, anaglyph)):   # composed off the tick
                     rec.submit_pair(left, right, {"tick": tick}, compose)
         self.ticks_shown += 1
+        age = float("nan")
         if shown:   # the age of what the head-centre (or left eye) slot showed: pose sent -> now
             f = shown[self._slot(self._eyes[0])].frame if self._slot(self._eyes[0]) in shown else None
             if f is not None:
                 pose_t_us = f.pose_t_us - (self._time_base_us if f.pose_seq == WARMUP_SEQ else 0)
-                self._ages.append((t_us - pose_t_us) / 1e3)
+                age = (t_us - pose_t_us) / 1e3
+                self._ages.append(age)
+        t0 = time.perf_counter()
+        self.series.tick(t_us / 1e6, age, False, {m: sum(ms for _, _, ms in per_eye)
+                                                  for m, per_eye in zip(self.cfg.methods, results)},
+                         {m: level for m, (level, _) in chosen.items()})
+        if watched and results[0][0][0] is not None:
+            self.live.set_image(results[0][0][0])
+        if self.live is not None:
+            self.live.account((time.perf_counter() - t0) * 1e3)
         return drawn
 
     async def _report_stream(self, t_us: int, vtime_us: int) -> None:
@@ -763,6 +797,9 @@ class Client:
     def _repeat_last(self, tick: int, t_us: int, trace) -> None:
         """Record a missed tick: the display kept showing the previous image."""
         self.ticks_shown += 1
+        last = self.series.ticks[-1] if self.series.ticks else None
+        self.series.tick(t_us / 1e6, float("nan") if last is None else last[1] + (t_us / 1e6 - last[0]) * 1e3,
+                         True, {}, {})
         poses = self._eye_poses(self._pose_at(trace, t_us / 1e6))
         for name, rec in self.recorders.items():
             pose = poses[self._recorded[name][1]]
@@ -845,6 +882,9 @@ class Client:
             # what recording cost each tick on the client's clock (reading the images back and
             # handing them over; on the wall clock the videos are encoded after the run)
             "record_ms": _percentiles(self._record_ms),
+            # --live: what the live page cost the client (client/live.py)
+            "live": None if self.live is None else {
+                "url": self.live.url, **self.live.cost(self.ticks_shown, 1e3 / self.cfg.rate_hz)},
         }
         path = os.path.join(self.cfg.out_dir, "session.json")
         with open(path + ".tmp", "w") as f:   # replaced whole: never a half-written file

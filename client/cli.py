@@ -62,6 +62,10 @@ def register(sub) -> None:
                    help=f"with --stereo: interpupillary distance in mm (default {DEFAULT_IPD_MM:g})")
     p.add_argument("--anaglyph", action="store_true",
                    help="with --stereo: also a red-cyan anaglyph video per method (METHOD.anaglyph.mp4)")
+    p.add_argument("--live", dest="live_port", type=int, default=None, metavar="PORT",
+                   help="while the session runs, show it on a page at http://127.0.0.1:PORT/ (0: any free port, "
+                        "printed): frame age, missed ticks, server frames/s, bitrate, decode and render ms over "
+                        "the last seconds, and the current image")
     p.add_argument("--no-lossless", action="store_true", help="skip the lossless recording used for metrics")
     p.add_argument("--no-video", action="store_true",
                    help="write the per-tick records only, no video: the least work per tick (timing runs)")

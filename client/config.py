@@ -55,6 +55,7 @@ class ClientConfig:
     stereo: str = ""         # two eyes from frames rendered this way (protocol/stereo.py); "": one view
     ipd_mm: float = DEFAULT_IPD_MM   # with stereo: the eyes' distance along the head's x axis
     anaglyph: bool = False   # with stereo: also a red-cyan anaglyph video per method
+    live_port: int | None = None   # serve the live page on 127.0.0.1:PORT (0: any free port; None: no page)
 
     def __post_init__(self):
         if self.clock not in ("virtual", "real"):
@@ -99,6 +100,8 @@ class ClientConfig:
         check_ipd_mm(self.ipd_mm)
         if self.anaglyph and not self.stereo:
             raise ConfigError("an anaglyph needs two eyes: add --stereo cyclops, alternate or per-eye")
+        if self.live_port is not None and not (0 <= self.live_port <= 65535):
+            raise ConfigError(f"--live takes a TCP port 0..65535 (0: any free one), got {self.live_port}")
         if self.progress not in ("bar", "lines", "none"):
             raise ConfigError(f"progress must be bar, lines or none, got {self.progress!r}")
         OutputConfig(self.width, self.height, self.fov_deg, self.rate_hz)

@@ -1,4 +1,6 @@
-"""Shared fixtures: a GL context (skipped with a clear reason where EGL is missing)."""
+"""Shared fixtures: a GL context (skipped with a clear reason where EGL is missing), and a real
+browser (headless Chromium driven by Playwright; skipped where either is missing, except when
+``PIBR_REQUIRE_BROWSER=1``, as CI sets it: then their absence fails)."""
 from __future__ import annotations
 
 import pytest
@@ -27,3 +29,33 @@ def gl_current(gl_ctx):
     gl_ctx.__enter__()
     _ = gl_ctx.error
     yield gl_ctx
+
+
+def _chromium_path():
+    import os
+    import shutil
+
+    return os.environ.get("PIBR_CHROMIUM") or shutil.which("chromium") or shutil.which("chromium-browser")
+
+
+@pytest.fixture(scope="module")
+def chromium():
+    """A launched headless Chromium (playwright Browser). Per module, never longer: while
+    Playwright's sync API runs, its event loop counts as running in this thread, and every asyncio
+    test after it would fail ("cannot be called from a running event loop")."""
+    import os
+
+    try:
+        from playwright.sync_api import sync_playwright
+    except ImportError:
+        sync_playwright = None
+    path = _chromium_path()
+    if sync_playwright is None or path is None:
+        reason = "no Playwright (pip install playwright)" if sync_playwright is None else "no chromium on PATH"
+        if os.environ.get("PIBR_REQUIRE_BROWSER") == "1":
+            pytest.fail(f"browser tests required (PIBR_REQUIRE_BROWSER=1) but {reason}")
+        pytest.skip(reason)
+    with sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=path, args=["--no-sandbox"])
+        yield browser
+        browser.close()

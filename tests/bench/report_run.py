@@ -58,6 +58,11 @@ def make_run(out_dir: str, ticks: int = TICKS, methods=METHODS) -> dict:
                       "geometric_holes_mean": 0.0123 * (r + 1), "hole_fraction_mean": 0.00456 * r,
                       "client_ms_median": float(np.median(client)), "frames": ticks, "flip_frames": ticks // 4,
                       "age_ms_mean": float(np.mean(age)), "missed_deadlines": r}
+    with open(os.path.join(out_dir, "stream.csv"), "w", newline="") as f:   # a batch of one frame every 0.1 s
+        wr = csv.writer(f)
+        wr.writerow(["t", "frames", "wire_bytes", "decode_ms", "server_fps", "kbps"])
+        for k in range(int(ticks / RATE_HZ * 10)):
+            wr.writerow([round(k / 10 + 0.05, 6), 1, 20000 + k, 3.0 + k, 10.0, 160.0 + k])
     with open(os.path.join(out_dir, "metrics_frames.csv"), "w", newline="") as f:
         wr = csv.DictWriter(f, fieldnames=list(frame_rows[0]))
         wr.writeheader()

@@ -1,7 +1,5 @@
-"""The report page in a real browser (headless Chromium driven by Playwright): what a user sees.
-
-Skipped where Playwright or Chromium is missing (``apt-get install chromium``, ``pip install
-playwright``), except when ``PIBR_REQUIRE_BROWSER=1`` (CI sets it): then their absence fails."""
+"""The report page in a real browser (headless Chromium driven by Playwright, tests/conftest.py):
+what a user sees."""
 from __future__ import annotations
 
 import io
@@ -20,26 +18,9 @@ from .report_run import METHODS, RATE_HZ, TICKS, make_run, panel_colour
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 
 
-def _chromium() -> str | None:
-    return os.environ.get("PIBR_CHROMIUM") or shutil.which("chromium") or shutil.which("chromium-browser")
-
-
 @pytest.fixture(scope="module")
-def browser():
-    try:
-        from playwright.sync_api import sync_playwright
-    except ImportError:
-        sync_playwright = None
-    path = _chromium()
-    if sync_playwright is None or path is None:
-        reason = "no Playwright (pip install playwright)" if sync_playwright is None else "no chromium on PATH"
-        if os.environ.get("PIBR_REQUIRE_BROWSER") == "1":
-            pytest.fail(f"browser tests required (PIBR_REQUIRE_BROWSER=1) but {reason}")
-        pytest.skip(reason)
-    with sync_playwright() as p:
-        b = p.chromium.launch(executable_path=path, args=["--no-sandbox", "--autoplay-policy=no-user-gesture-required"])
-        yield b
-        b.close()
+def browser(chromium):
+    return chromium
 
 
 @pytest.fixture(scope="module")

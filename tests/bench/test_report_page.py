@@ -53,6 +53,15 @@ def test_series_follow_the_csv_files_tick_by_tick(run_dir):
     assert series["proxy"]["level"][:4] == [0, 2, 0, 2]
 
 
+def test_stream_series_show_the_newest_batch_at_each_tick(run_dir):
+    run = _data(build_report(run_dir))["run"]
+    stream = run["stream"]
+    assert set(stream) == {"server_fps", "kbps", "decode_ms"} and len(stream["kbps"]) == TICKS
+    # batches at 0.05, 0.15, ... s: tick 0 (0 s) has none yet, tick 3 (0.1 s) the first, tick 30 (1 s) the 10th
+    assert stream["kbps"][0] is None and stream["kbps"][3] == 160.0 and stream["kbps"][30] == 169.0
+    assert stream["decode_ms"][30] == 12.0
+
+
 def test_the_page_needs_nothing_from_outside_the_folder(run_dir):
     page = write_report(run_dir)
     text = open(page).read()
