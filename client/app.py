@@ -594,14 +594,14 @@ class Client:
                 pose_t_us = f.pose_t_us - (self._time_base_us if f.pose_seq == WARMUP_SEQ else 0)
                 age = (t_us - pose_t_us) / 1e3
                 self._ages.append(age)
-        t0 = time.perf_counter()
+        t0 = time.thread_time()
         self.series.tick(t_us / 1e6, age, False, {m: sum(ms for _, _, ms in per_eye)
                                                   for m, per_eye in zip(self.cfg.methods, results)},
                          {m: level for m, (level, _) in chosen.items()})
         if watched and results[0][0][0] is not None:
             self.live.set_image(results[0][0][0])
         if self.live is not None:
-            self.live.account((time.perf_counter() - t0) * 1e3)
+            self.live.account((time.thread_time() - t0) * 1e3)
         return drawn
 
     async def _report_stream(self, t_us: int, vtime_us: int) -> None:

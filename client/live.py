@@ -8,7 +8,8 @@ bitrate over the last second follow. The same per-batch rows go to the recording
 
 :class:`LiveServer` serves, on loopback only, a page that polls those series and the current
 image (``/``, ``/series.json``, ``/image.jpg``). It runs on the client's event loop and does
-little there: the series are appended in O(1), a snapshot is a few hundred numbers, and the JPEG
+little there: the series are appended in O(1), the page asks only for what it has not seen yet
+(``/series.json?ticks=N&batches=M``: a poll's few new entries, not the whole window), and the JPEG
 is encoded in a worker thread from the newest image, read back only while someone watches. What
 it costs the loop is measured (``cost()``) and written to ``session.json`` as ``live``.
 """
@@ -17,7 +18,9 @@ from __future__ import annotations
 import asyncio
 import json
 import logging
+import math
 import time
+import urllib.parse
 from collections import deque
 
 import numpy as np
@@ -50,6 +53,7 @@ class LiveSeries:
         self.ticks_total = 0
         self.missed_total = 0
         self.frames_total = 0
+        self.batches_total = 0
 
     def tick(self, t_s: float, age_ms: float, missed: bool, client_ms: dict, levels: dict) -> None:
         self.ticks.append((t_s, age_ms, bool(missed), dict(client_ms), dict(levels)))
@@ -65,16 +69,25 @@ class LiveSeries:
         kbps = 8.0 * sum(b for _, _, b in self._recent) / RATE_WINDOW_S / 1e3
         self.batches.append((t_s, count, wire_bytes, decode_ms, fps, kbps))
         self.frames_total += count
+        self.batches_total += 1
         return fps, kbps
 
-    def snapshot(self) -> dict:
-        """The series as JSON-ready lists (None where a value is not a finite number)."""
+    def snapshot(self, ticks_from: int = 0, batches_from: int = 0) -> dict:
+        """The series as JSON-ready lists (None where a value is not a finite number), from tick
+        number ``ticks_from`` and batch number ``batches_from`` on (counting from the session's
+        first; what the window still holds)."""
         def num(v):
-            return None if v is None or not np.isfinite(v) else round(float(v), 3)
-        ticks, batches = list(self.ticks), list(self.batches)
+            return None if v is None or not math.isfinite(v) else round(float(v), 3)
+
+        def newer(entries, total, start):
+            skip = max(0, start - (total - len(entries)))
+            return [e for k, e in enumerate(entries) if k >= skip] if skip else list(entries)
+        ticks = newer(self.ticks, self.ticks_total, ticks_from)
+        batches = newer(self.batches, self.batches_total, batches_from)
         return {
-            "methods": self.methods, "rate_hz": self.rate_hz,
+            "methods": self.methods, "rate_hz": self.rate_hz, "window": self._keep,
             "ticks_total": self.ticks_total, "missed_total": self.missed_total, "frames_total": self.frames_total,
+            "batches_total": self.batches_total,
             "tick": {"t": [num(t[0]) for t in ticks], "age_ms": [num(t[1]) for t in ticks],
                      "missed": [int(t[2]) for t in ticks],
                      "client_ms": {m: [num(t[3].get(m)) for t in ticks] for m in self.methods},
@@ -97,8 +110,11 @@ class LiveServer:
         self._jpeg_pool = None
         self._open = 0
         self.requests = 0
-        self.loop_ms = 0.0     # time the event loop spent on the page (requests, snapshots, series)
-        self.thread_ms = 0.0   # time the worker thread spent encoding images
+        # CPU time (time.thread_time: this thread's own, not the waits for the GIL that other
+        # threads hold meanwhile) the event loop spent on the page (requests, snapshots, series),
+        # and the worker thread encoding images
+        self.loop_ms = 0.0
+        self.thread_ms = 0.0
 
     async def start(self) -> int:
         import concurrent.futures
@@ -122,11 +138,12 @@ class LiveServer:
         self._image, self._image_t = rgb, time.monotonic()
 
     def account(self, ms: float) -> None:
-        """Count ``ms`` of the event loop's time spent for the page (by the caller, around its calls)."""
+        """Count ``ms`` of the event loop's CPU time spent for the page (the caller measures its calls
+        with ``time.thread_time``)."""
         self.loop_ms += ms
 
     def cost(self, ticks: int, interval_ms: float) -> dict:
-        """What the page cost: event-loop ms and worker ms, as shares of the ticks' time."""
+        """What the page cost: event-loop and worker CPU ms, and their shares of the ticks' time."""
         total = max(ticks, 1) * interval_ms
         return {"requests": self.requests, "loop_ms": round(self.loop_ms, 3), "thread_ms": round(self.thread_ms, 3),
                 "loop_share_of_tick_time": self.loop_ms / total, "thread_share_of_tick_time": self.thread_ms / total}
@@ -151,19 +168,19 @@ class LiveServer:
                 head = await asyncio.wait_for(reader.readuntil(b"\r\n\r\n"), REQUEST_TIMEOUT_S)
             except (asyncio.IncompleteReadError, asyncio.LimitOverrunError, asyncio.TimeoutError, ConnectionError):
                 return
-            t0 = time.perf_counter()
+            t0 = time.thread_time()
             status, ctype, body = self._answer(head)
             if ctype == "image/jpeg" and status == 200:
-                self.loop_ms += (time.perf_counter() - t0) * 1e3
+                self.loop_ms += (time.thread_time() - t0) * 1e3
                 body = await self._jpeg()
-                t0 = time.perf_counter()
+                t0 = time.thread_time()
                 if body is None:   # nothing read back yet: it will be from the next tick on
                     status, body = 204, b""
             writer.write(f"HTTP/1.1 {status} {_REASONS[status]}\r\nContent-Type: {ctype}\r\n"
                          f"Content-Length: {len(body)}\r\nCache-Control: no-store\r\nConnection: close\r\n\r\n"
                          .encode("ascii") + body)
             self.requests += 1
-            self.loop_ms += (time.perf_counter() - t0) * 1e3
+            self.loop_ms += (time.thread_time() - t0) * 1e3
             await writer.drain()
         except ConnectionError:
             pass
@@ -178,11 +195,17 @@ class LiveServer:
             return 400, "text/plain; charset=utf-8", b"bad request line\n"
         if method != "GET":
             return 405, "text/plain; charset=utf-8", b"only GET\n"
-        path = target.split("?", 1)[0]
+        path, _, query = target.partition("?")
         if path == "/":
             return 200, "text/html; charset=utf-8", PAGE.encode("utf-8")
         if path == "/series.json":
-            return 200, "application/json", json.dumps(self.series.snapshot(), separators=(",", ":")).encode()
+            try:
+                given = {k: int(v) for k, v in urllib.parse.parse_qsl(query, strict_parsing=bool(query))
+                         if k in ("ticks", "batches")}
+            except ValueError:
+                return 400, "text/plain; charset=utf-8", b"ticks= and batches= take whole numbers\n"
+            snap = self.series.snapshot(max(0, given.get("ticks", 0)), max(0, given.get("batches", 0)))
+            return 200, "application/json", json.dumps(snap, separators=(",", ":")).encode()
         if path == "/favicon.ico":   # browsers ask for one: none, and no error in the page's console
             return 204, "image/x-icon", b""
         if path == "/image.jpg":
@@ -253,9 +276,22 @@ function plot(id, title, xs, lines) {
   box.dataset.points = String(xs.length);
 }
 function last(a) { for (let i = a.length - 1; i >= 0; i--) if (a[i] !== null) return a[i]; return null; }
+// The page keeps the window and asks only for what it has not seen (a poll's few new entries).
+const kept = { tick: null, frames: null }, seen = { ticks: 0, batches: 0 };
+function merge(into, fresh, keep) {
+  if (into === null) return fresh;
+  for (const k in fresh) {
+    if (Array.isArray(fresh[k])) into[k] = into[k].concat(fresh[k]).slice(-keep);
+    else into[k] = merge(into[k], fresh[k], keep);
+  }
+  return into;
+}
 async function poll() {
   try {
-    const s = await (await fetch("/series.json", { cache: "no-store" })).json();
+    const got = await (await fetch("/series.json?ticks=" + seen.ticks + "&batches=" + seen.batches, { cache: "no-store" })).json();
+    seen.ticks = got.ticks_total; seen.batches = got.batches_total;
+    kept.tick = merge(kept.tick, got.tick, got.window); kept.frames = merge(kept.frames, got.frames, got.window);
+    const s = Object.assign({}, got, { tick: kept.tick, frames: kept.frames });
     document.getElementById("ticks").textContent = s.ticks_total;
     document.getElementById("missed").textContent = s.missed_total;
     const fps = last(s.frames.server_fps), kbps = last(s.frames.kbps), age = last(s.tick.age_ms);

@@ -33,6 +33,12 @@ def test_series_keep_the_last_window_and_become_json():
     assert len(snap["tick"]["t"]) == int(WINDOW_S * 20)
     assert snap["tick"]["t"][-1] == pytest.approx((n - 1) / 20)
     assert snap["tick"]["client_ms"]["proxy"][-1] == 9.5 and snap["tick"]["level"]["proxy"][-2:] in ([0, 1], [1, 0])
+    # only what the page has not seen: from tick n - 3 on, and nothing older than the window holds
+    part = s.snapshot(ticks_from=n - 3, batches_from=0)
+    assert part["tick"]["t"] == pytest.approx([(n - 3) / 20, (n - 2) / 20, (n - 1) / 20])
+    assert part["tick"]["client_ms"]["proxy"] == [9.5] * 3 and part["ticks_total"] == n
+    assert len(s.snapshot(ticks_from=5)["tick"]["t"]) == int(WINDOW_S * 20)
+    assert s.snapshot(ticks_from=n)["tick"]["t"] == []
     s2 = LiveSeries(["proxy"], 20.0)
     s2.tick(0.0, float("nan"), False, {"proxy": float("inf")}, {})
     assert s2.snapshot()["tick"]["age_ms"] == [None] and s2.snapshot()["tick"]["client_ms"]["proxy"] == [None]
@@ -65,8 +71,12 @@ async def test_the_page_its_series_and_the_image():
         assert status == 200 and headers["Content-Type"].startswith("text/html") and b"pibr live" in body
         for k in range(5):
             series.tick(k / 30, 180.0, False, {"proxy": 12.0}, {"proxy": 0})
-        status, _, body = await _get(port, _request("/series.json?x=1"))
-        assert status == 200 and json.loads(body)["ticks_total"] == 5
+        status, _, body = await _get(port, _request("/series.json"))
+        assert status == 200 and json.loads(body)["ticks_total"] == 5 and len(json.loads(body)["tick"]["t"]) == 5
+        status, _, body = await _get(port, _request("/series.json?ticks=3&batches=0"))
+        assert status == 200 and json.loads(body)["tick"]["t"] == pytest.approx([3 / 30, 4 / 30], abs=1e-3)
+        status, _, body = await _get(port, _request("/series.json?ticks=three"))
+        assert status == 400 and b"whole numbers" in body
         assert not live.wants_image()             # nobody asked for an image: no tick reads one back
         status, _, body = await _get(port, _request("/image.jpg"))
         assert status == 204 and body == b""      # asked, none yet
@@ -83,7 +93,7 @@ async def test_the_page_its_series_and_the_image():
         assert img.shape == (540, 960, 3)         # 960 wide: no downscaling below 640 steps
         assert np.abs(img[270, 100].astype(int) - (200, 30, 30)).max() < 12 and img[270, 800].max() < 12
         cost = live.cost(ticks=5, interval_ms=1000 / 30)
-        assert cost["requests"] == 4 and cost["thread_ms"] > 0
+        assert cost["requests"] == 6 and cost["thread_ms"] > 0
         assert math.isclose(cost["loop_share_of_tick_time"], live.loop_ms / (5 * 1000 / 30))
     finally:
         await live.close()
