@@ -37,7 +37,7 @@ from pibr.protocol import bounded_json
 from pibr.protocol.errors import ConfigError, JSONError
 from pibr.protocol.pose import Pose
 
-from .metrics import error_image, frame_metrics, nearly_uniform, pixels_per_degree
+from .metrics import error_image, nearly_uniform, pixels_per_degree, tick_metrics
 from .results import write_result
 
 log = logging.getLogger(__name__)
@@ -142,9 +142,10 @@ def evaluate_run(run_dir: str, scene_spec: str | None = None, flip_every: int = 
     pending: deque = deque()
 
     def settle(block: bool):
-        while pending and (block or pool is None or pending[0][2].done() or len(pending) > 4 * max(1, workers)):
-            m, i, fut = pending.popleft()
-            results[m][i] = fut.result() if pool is not None else fut
+        while pending and (block or pool is None or pending[0][2].done() or len(pending) > 2 * max(1, workers)):
+            names, i, fut = pending.popleft()
+            for m, r in zip(names, fut.result() if pool is not None else fut):
+                results[m][i] = r
     try:
         for i in range(n):
             truth, truth_pose, truth_distance = {}, {}, {}
@@ -159,6 +160,7 @@ def evaluate_run(run_dir: str, scene_spec: str | None = None, flip_every: int = 
             uniform += nearly_uniform(truth[eyes[0]])
             rows = []
             displayed = {}
+            with_flip = flip_every > 0 and i % flip_every == 0
             for m in methods:
                 ref = truth[recordings[m]["eye"]]
                 if records[m][i]["missed"]:   # the display kept the previous image (blank before any)
@@ -173,13 +175,14 @@ def evaluate_run(run_dir: str, scene_spec: str | None = None, flip_every: int = 
                 if img.shape != ref.shape:
                     raise ConfigError(f"{m}.lossless.mkv frames are {img.shape}, expected {ref.shape}")
                 displayed[m] = img
-                with_flip = flip_every > 0 and i % flip_every == 0
-                if pool is not None:
-                    pending.append((m, i, pool.submit(frame_metrics, ref, img, ppd, with_flip)))
-                else:
-                    pending.append((m, i, frame_metrics(ref, img, ppd, with_flip)))
                 if writer is not None:
                     rows.append([img, ref, error_image(ref, img)])
+            # one task per eye and tick: its ground truth's share of SSIM is computed once for every method
+            for eye in eyes:
+                names = [m for m in methods if recordings[m]["eye"] == eye]
+                images = [displayed[m] for m in names]
+                pending.append((names, i, pool.submit(tick_metrics, truth[eye], images, ppd, with_flip)
+                                if pool is not None else tick_metrics(truth[eye], images, ppd, with_flip)))
             if pairs_of:
                 from .stereo_metrics import binocular_pairs, stereo_consistency
 

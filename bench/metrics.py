@@ -7,6 +7,7 @@ transmitted view covered (reported by the client).
 """
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -33,6 +34,67 @@ def ssim(ref: np.ndarray, test: np.ndarray) -> float:
 
     _check_pair(ref, test)
     return float(structural_similarity(ref, test, channel_axis=2, data_range=255))
+
+
+#: SSIM's window (scikit-image's default for uniform weights) and its constants at data range 255.
+SSIM_WIN = 7
+_SSIM_COV_NORM = SSIM_WIN ** 2 / (SSIM_WIN ** 2 - 1)
+_SSIM_C1 = (0.01 * 255) ** 2
+_SSIM_C2 = (0.03 * 255) ** 2
+
+
+class SsimReference:
+    """One ground-truth (H, W, 3) uint8 image's share of SSIM, computed once for every image
+    compared with it: per channel the local mean, its square and the local variance.
+
+    The arithmetic is scikit-image's ``structural_similarity(ref, test, channel_axis=2,
+    data_range=255)`` (uniform 7x7 window, sample covariance, the border of 3 pixels cropped,
+    the channels' mean) operation for operation, so it gives the same bits
+    (tests/bench/test_metrics.py); a tick's methods share the reference's filters instead of each
+    recomputing them."""
+
+    def __init__(self, ref: np.ndarray):
+        from scipy.ndimage import uniform_filter
+
+        if ref.ndim != 3 or ref.shape[2] != 3 or min(ref.shape[:2]) < SSIM_WIN:
+            raise ValueError(f"need an (H, W, 3) image of at least {SSIM_WIN}x{SSIM_WIN}, got {ref.shape}")
+        self.ref = ref
+        self._channels = []
+        for c in range(3):
+            x = ref[..., c].astype(np.float64)
+            ux = uniform_filter(x, size=SSIM_WIN)
+            uxx = uniform_filter(x * x, size=SSIM_WIN)
+            self._channels.append((x, ux, ux ** 2, _SSIM_COV_NORM * (uxx - ux * ux)))
+
+    def ssim(self, test: np.ndarray) -> float:
+        from scipy.ndimage import uniform_filter
+
+        _check_pair(self.ref, test)
+        pad = (SSIM_WIN - 1) // 2
+        values = np.empty(3, np.float64)
+        for c, (x, ux, ux2, vx) in enumerate(self._channels):
+            y = test[..., c].astype(np.float64)
+            uy = uniform_filter(y, size=SSIM_WIN)
+            uyy = uniform_filter(y * y, size=SSIM_WIN)
+            uxy = uniform_filter(x * y, size=SSIM_WIN)
+            vy = _SSIM_COV_NORM * (uyy - uy * uy)
+            vxy = _SSIM_COV_NORM * (uxy - ux * uy)
+            a1, a2, b1, b2 = 2 * ux * uy + _SSIM_C1, 2 * vxy + _SSIM_C2, ux2 + uy ** 2 + _SSIM_C1, vx + vy + _SSIM_C2
+            s = (a1 * a2) / (b1 * b2)
+            values[c] = s[pad:s.shape[0] - pad, pad:s.shape[1] - pad].mean(dtype=np.float64)
+        return float(values.mean())
+
+
+def tick_metrics(ref: np.ndarray, images: list, ppd: float, with_flip: bool = True) -> list[dict]:
+    """:func:`frame_metrics` of each of ``images`` against one ``ref`` (the same numbers), the
+    reference's share of SSIM computed once."""
+    reference = SsimReference(ref)
+    out = []
+    for test in images:
+        s = reference.ssim(test)
+        out.append({"psnr": psnr(ref, test), "ssim": s, "dssim": dssim(s),
+                    "flip": flip(ref, test, ppd) if with_flip else float("nan")})
+    return out
 
 
 def dssim(ssim_value: float) -> float:
@@ -65,13 +127,21 @@ def frame_metrics(ref: np.ndarray, test: np.ndarray, ppd: float, with_flip: bool
             "flip": flip(ref, test, ppd) if with_flip else float("nan")}
 
 
-def error_image(ref: np.ndarray, test: np.ndarray, gain: float = 4.0) -> np.ndarray:
-    """(H, W, 3) uint8 heat map of the per-pixel colour difference (magma), for videos."""
+@functools.lru_cache(maxsize=4)
+def _error_colours(gain: float) -> np.ndarray:
+    """(766, 3) uint8: the magma colour of each sum of the three channels' absolute differences
+    (0..765), as (sum / 3 / 255 * gain * 255) clipped to 0..255 picks it."""
     from matplotlib import colormaps
 
-    diff = np.abs(ref.astype(np.int16) - test.astype(np.int16)).mean(axis=2) / 255.0
     lut = (colormaps["magma"](np.linspace(0, 1, 256))[:, :3] * 255).astype(np.uint8)
-    return lut[np.clip(diff * gain * 255, 0, 255).astype(np.uint8)]
+    mean = np.arange(766, dtype=np.float64) / 3.0 / 255.0
+    return lut[np.clip(mean * gain * 255, 0, 255).astype(np.uint8)]
+
+
+def error_image(ref: np.ndarray, test: np.ndarray, gain: float = 4.0) -> np.ndarray:
+    """(H, W, 3) uint8 heat map of the per-pixel colour difference (magma), for videos."""
+    total = np.abs(ref.astype(np.int16) - test.astype(np.int16)).sum(axis=2, dtype=np.int16)
+    return _error_colours(float(gain))[total]
 
 
 def nearly_uniform(image: np.ndarray, fraction: float = 0.95, tolerance: int = 2) -> bool:

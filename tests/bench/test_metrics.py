@@ -76,3 +76,51 @@ def test_masked_metrics():
     assert m["psnr_rest"] == 100.0 and m["dssim_rest"] < m["dssim_object"]
     assert m["psnr_object"] < m["psnr"] < 100.0
     assert math.isnan(m["psnr_tiny"]) and math.isnan(m["dssim_tiny"])   # fewer than MIN_PIXELS
+
+
+def _scene_like_pair(seed: int, shape=(96, 160, 3)):
+    """A smooth image with edges and its noisy, shifted copy: SSIM well inside (0, 1)."""
+    rng = np.random.default_rng(seed)
+    yy, xx = np.mgrid[: shape[0], : shape[1]]
+    base = np.stack([(xx * 1.5) % 256, (yy * 2.5) % 256, ((xx + yy) // 16 % 2) * 200 + 20], axis=2)
+    test = np.roll(base, 2, axis=1) + rng.normal(0, 12, shape)
+    return base.astype(np.uint8), np.clip(test, 0, 255).astype(np.uint8)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_shared_reference_ssim_is_scikit_images_to_the_bit(seed):
+    from skimage.metrics import structural_similarity
+
+    from pibr.bench.metrics import SsimReference
+
+    ref, test = _scene_like_pair(seed)
+    rng = np.random.default_rng(seed)
+    noise = rng.integers(0, 256, ref.shape, dtype=np.uint8)
+    reference = SsimReference(ref)
+    for other in (test, noise, ref, 255 - ref):
+        assert reference.ssim(other) == float(structural_similarity(ref, other, channel_axis=2, data_range=255))
+    assert 0.2 < reference.ssim(test) < 0.95
+
+
+def test_tick_metrics_are_frame_metrics_of_each_image():
+    from pibr.bench.metrics import tick_metrics
+
+    ref, test = _scene_like_pair(3)
+    images = [test, np.roll(test, 5, axis=0), ref]
+    for with_flip in (True, False):
+        got = tick_metrics(ref, images, 30.0, with_flip)
+        want = [frame_metrics(ref, img, 30.0, with_flip) for img in images]
+        for g, w in zip(got, want):
+            assert g.keys() == w.keys()
+            for k in g:
+                assert g[k] == w[k] or (math.isnan(g[k]) and math.isnan(w[k])), k
+
+
+def test_error_image_is_the_magma_of_the_mean_difference():
+    from matplotlib import colormaps
+
+    ref, test = _scene_like_pair(4)
+    diff = np.abs(ref.astype(np.int16) - test.astype(np.int16)).mean(axis=2) / 255.0
+    lut = (colormaps["magma"](np.linspace(0, 1, 256))[:, :3] * 255).astype(np.uint8)
+    for gain in (1.0, 4.0):
+        assert np.array_equal(error_image(ref, test, gain), lut[np.clip(diff * gain * 255, 0, 255).astype(np.uint8)])
