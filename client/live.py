@@ -25,6 +25,8 @@ from collections import deque
 
 import numpy as np
 
+from pibr.protocol.errors import ConfigError
+
 log = logging.getLogger(__name__)
 
 #: What the page shows: the last this many seconds of the session.
@@ -120,7 +122,12 @@ class LiveServer:
         import concurrent.futures
 
         self._jpeg_pool = concurrent.futures.ThreadPoolExecutor(max_workers=1, thread_name_prefix="pibr-live")
-        self._server = await asyncio.start_server(self._handle, self.host, self.port, limit=MAX_REQUEST_BYTES)
+        try:
+            self._server = await asyncio.start_server(self._handle, self.host, self.port, limit=MAX_REQUEST_BYTES)
+        except OSError as exc:
+            self._jpeg_pool.shutdown(wait=False)
+            raise ConfigError(f"--live {self.port}: cannot serve the live page on {self.host}:{self.port} "
+                              f"({exc.strerror or exc}); choose another port, or 0 for any free one") from None
         self.port = self._server.sockets[0].getsockname()[1]
         return self.port
 

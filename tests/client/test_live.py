@@ -131,3 +131,15 @@ async def test_a_silent_connection_does_not_hold_the_page():
         for _, w in silent:
             w.close()
         await live.close()
+
+
+async def test_a_port_in_use_is_named():
+    from pibr.protocol.errors import ConfigError
+
+    first = LiveServer(LiveSeries(["proxy"], 30.0), 0)
+    port = await first.start()
+    try:
+        with pytest.raises(ConfigError, match=rf"--live {port}: cannot serve the live page on 127.0.0.1:{port}"):
+            await LiveServer(LiveSeries(["proxy"], 30.0), port).start()
+    finally:
+        await first.close()
