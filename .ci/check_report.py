@@ -7,18 +7,19 @@ usage: python check_report.py OUT_DIR
 import json
 import os
 import pathlib
-import shutil
 import sys
 
 
 def main() -> int:
     from playwright.sync_api import sync_playwright
 
+    from pibr.bench.processes import chromium_path
+
     out = sys.argv[1]
     metrics = json.load(open(os.path.join(out, "metrics.json")))["methods"]
     problems, errors = [], []
     with sync_playwright() as p:
-        browser = p.chromium.launch(executable_path=shutil.which("chromium"), args=["--no-sandbox"])
+        browser = p.chromium.launch(executable_path=chromium_path(), args=["--no-sandbox"])
         page = browser.new_page(viewport={"width": 1400, "height": 1000})
         page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
         page.on("pageerror", lambda e: errors.append(str(e)))

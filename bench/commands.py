@@ -189,15 +189,6 @@ def cmd_bench_trade(args) -> int:
     return 0
 
 
-def _free_port() -> int:
-    """A TCP port free on loopback now (the client binds it a moment later)."""
-    import socket
-
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return sock.getsockname()[1]
-
-
 def demo_client_args(args) -> tuple:
     """The client options ``pibr demo`` passes on: only those the user set."""
     from pibr.protocol.errors import ConfigError
@@ -210,7 +201,9 @@ def demo_client_args(args) -> tuple:
     if args.ipd_mm is not None:
         out += ("--ipd-mm", str(args.ipd_mm))
     if args.live is not None:
-        port = args.live or _free_port()
+        from .processes import free_port
+
+        port = args.live or free_port()
         print(f"pibr demo: the client's live view at http://127.0.0.1:{port}/ while it streams", flush=True)
         out += ("--live", str(port))
     return out + (("--anaglyph",) if args.anaglyph else ())

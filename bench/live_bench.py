@@ -11,7 +11,6 @@ drifts affects both alike.
 from __future__ import annotations
 
 import os
-import socket
 import threading
 import time
 import urllib.request
@@ -20,17 +19,11 @@ import numpy as np
 
 from pibr.protocol.errors import ConfigError
 
-from .processes import run_pipeline
+from .processes import chromium_path, free_port, run_pipeline
 from .results import write_result
 
 #: The issue's goal: the live page costs the client under this share of its tick time.
 GOAL_SHARE = 0.02
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def _reachable(url: str) -> bool:
@@ -60,9 +53,7 @@ def run_live_bench(out_dir: str = "out/bench", method: str = "proxy", size=(640,
                    latency_ms: float = 128.0, view_size=(1024, 1024)) -> dict:
     from playwright.sync_api import sync_playwright
 
-    import shutil
-
-    chromium = os.environ.get("PIBR_CHROMIUM") or shutil.which("chromium") or shutil.which("chromium-browser")
+    chromium = chromium_path()
     if chromium is None:
         raise ConfigError("pibr bench live needs Chromium (apt-get install chromium, or PIBR_CHROMIUM=PATH)")
     server_args = ["--view-size", "%dx%d" % tuple(view_size)]
@@ -75,7 +66,7 @@ def run_live_bench(out_dir: str = "out/bench", method: str = "proxy", size=(640,
                 for watched in (False, True):
                     name = f"{'watched' if watched else 'alone'}-{r + 1}"
                     run_dir = os.path.join(out_dir, "live", name)
-                    port = _free_port()
+                    port = free_port()
                     client_args = ["--trace", trace, "--start", str(start_s), "--duration", str(duration_s),
                                    "--rate", str(rate_hz), "--size", "%dx%d" % tuple(size), "--method", method,
                                    "--clock", "real", "--no-video"] + (["--live", str(port)] if watched else [])

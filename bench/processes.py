@@ -26,6 +26,23 @@ class ProcessFailed(PibrError):
     pass
 
 
+def free_port() -> int:
+    """A TCP port free on loopback now (for a child to bind a moment later)."""
+    import socket
+
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return sock.getsockname()[1]
+
+
+def chromium_path() -> str | None:
+    """The Chromium that drives pages in tests and ``pibr bench live``: ``$PIBR_CHROMIUM``, else
+    ``chromium`` (Debian's package) or ``chromium-browser`` on PATH; None when there is none."""
+    import shutil
+
+    return os.environ.get("PIBR_CHROMIUM") or shutil.which("chromium") or shutil.which("chromium-browser")
+
+
 def _child_setup(cpus) -> None:
     """In the child before it runs: Ctrl-C (SIGINT) stops it as from a terminal, even where this
     process was started ignoring it (a background job of a script ignores SIGINT, and children

@@ -493,17 +493,16 @@ class Client:
 
         def decode():  # every frame, in order: both decoders keep state from the previous frame
             t0 = time.perf_counter()
-            out = {"ms": 0.0}
+            out = {}
             for i, (frame, _) in enumerate(frames):
                 newest = last[slots[i]] == i
                 image = self._decoder.decode(frame.payload(PayloadKind.H264_ATLAS), convert=newest)
                 depth = self._depth_decoder.decode(frame, reconstruct=newest)
                 if newest:   # the flow (its decoder keeps no state) only for frames that will be shown
                     out[slots[i]] = (image, depth, self._flow_frame(frame, image, depth))
-            out["ms"] = (time.perf_counter() - t0) * 1e3
-            return out
+            return out, (time.perf_counter() - t0) * 1e3
 
-        decoded = await loop.run_in_executor(self._decode_pool, decode)
+        decoded, decode_ms = await loop.run_in_executor(self._decode_pool, decode)
         if self.poses is not None:   # every frame's transforms: the history sees each frame's time
             for frame, p in poses:
                 if p is not None and (self.poses.newest_time is None
@@ -519,9 +518,9 @@ class Client:
         sizes = [self._wire_sizes.pop(f.frame_id, 0) for f, _ in frames]
         self._frame_bytes.extend(sizes)
         t_s = (frames[-1][1] - self._time_base_us) / 1e6
-        fps, kbps = self.series.frames(t_s, len(frames), sum(sizes), decoded["ms"])
+        fps, kbps = self.series.frames(t_s, len(frames), sum(sizes), decode_ms)
         if self._stream_log is not None:
-            self._stream_log.write(f"{t_s:.6f},{len(frames)},{sum(sizes)},{decoded['ms']:.3f},{fps:.3f},{kbps:.3f}\n")
+            self._stream_log.write(f"{t_s:.6f},{len(frames)},{sum(sizes)},{decode_ms:.3f},{fps:.3f},{kbps:.3f}\n")
         if self._adapting:   # what the next stream report tells the server (_report_stream)
             self._stream_arrived.extend((arrival - f.render_t_us, size) for (f, arrival), size in zip(frames, sizes))
             self._newest_render_us = max(f.render_t_us for f, _ in frames)

@@ -31,13 +31,6 @@ def gl_current(gl_ctx):
     yield gl_ctx
 
 
-def _chromium_path():
-    import os
-    import shutil
-
-    return os.environ.get("PIBR_CHROMIUM") or shutil.which("chromium") or shutil.which("chromium-browser")
-
-
 @pytest.fixture(scope="module")
 def chromium():
     """A launched headless Chromium (playwright Browser). Per module, never longer: while
@@ -49,7 +42,9 @@ def chromium():
         from playwright.sync_api import sync_playwright
     except ImportError:
         sync_playwright = None
-    path = _chromium_path()
+    from pibr.bench.processes import chromium_path
+
+    path = chromium_path()
     if sync_playwright is None or path is None:
         reason = "no Playwright (pip install playwright)" if sync_playwright is None else "no chromium on PATH"
         if os.environ.get("PIBR_REQUIRE_BROWSER") == "1":

@@ -4,25 +4,18 @@ import csv
 import json
 import os
 import signal
-import socket
 import threading
 
 import pytest
 
-from pibr.bench.processes import PibrProcess
+from pibr.bench.processes import PibrProcess, free_port
 
 pytestmark = [pytest.mark.integration, pytest.mark.gl]
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 def test_the_live_page_follows_a_running_session(tmp_path, chromium):
     out = str(tmp_path / "live")
-    live_port = _free_port()
+    live_port = free_port()
     server = PibrProcess("server", ["serve", "--port", "0", "--scene", "room", "--view-size", "256x256"],
                          str(tmp_path / "server.log"))
     page = None
