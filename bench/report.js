@@ -76,11 +76,24 @@
       if (!ready || seeking) return;
       seeking = true;
       const tick = wanted;
-      scrub.addEventListener("seeked", function done() {
-        scrub.removeEventListener("seeked", done);
+      // 'seeked' can fire before the sought frame is presented (Chromium under load drew the old
+      // one): draw when the new frame is presented, or after a while if none is (the same frame)
+      let drawn = false;
+      const finish = function () {
+        if (drawn) return;
+        drawn = true;
         draw(tick);
         seeking = false;
         if (wanted !== tick) seek();
+      };
+      scrub.addEventListener("seeked", function done() {
+        scrub.removeEventListener("seeked", done);
+        if (scrub.requestVideoFrameCallback) {
+          scrub.requestVideoFrameCallback(finish);
+          setTimeout(finish, 1000);
+        } else {
+          finish();
+        }
       });
       scrub.currentTime = (tick + 0.5) / run.rate_hz;
     };
