@@ -92,6 +92,19 @@ def _output_size(p, default=(960, 540), help=None):
                    help=help or f"output size (default {default[0]}x{default[1]})")
 
 
+def _placement(p):
+    """Where a sweep's independent points run: this process, or Ray workers (pibr[cluster])."""
+    g = p.add_argument_group("workers (Ray: pip install 'pibr[cluster]')")
+    g.add_argument("--workers", type=arguments.positive_int, default=None, metavar="N",
+                   help="run the sweep's points on N Ray workers, each with its own GL context and CPU (default: "
+                        "in this process; the numbers are the same)")
+    g.add_argument("--ray-address", default=None, metavar="ADDRESS",
+                   help="a running Ray cluster (ray://HOST:10001, or auto) instead of a local Ray; --workers "
+                        "defaults to its CPUs (or GPUs, with --gpus-per-worker)")
+    g.add_argument("--gpus-per-worker", type=arguments.non_negative, default=0.0, metavar="G",
+                   help="GPUs each worker asks Ray for (default 0; 1 on a cluster with a GPU per worker)")
+
+
 def _out(p, default="out/bench"):
     p.add_argument("--out", default=default, help=f"output directory (default {default})")
 
@@ -192,6 +205,7 @@ def register(sub) -> None:
     cov.add_argument("--offset", type=arguments.offset, default=None, metavar="F,U,TILT",
                      help="extra view offset (default: the scene's, else Reinert et al.'s 1.5,1.8,15)")
     _out(cov)
+    _placement(cov)
     cov.set_defaults(func=commands.cmd_bench_coverage)
 
     i = bs.add_parser("ibr", help="none / rotation / proxy against ground truth, proxy speed against a floor",
@@ -293,6 +307,7 @@ def register(sub) -> None:
     pa.add_argument("--flip-every", type=arguments.non_negative_int, default=4, help="FLIP on every Nth scored frame, 0: never")
     pa.add_argument("--depth-codec", choices=tuple(DEPTH_CODECS), default="h264")
     _out(pa)
+    _placement(pa)
     pa.set_defaults(func=commands.cmd_bench_pareto)
 
     tr = bs.add_parser("trade", help="each knob swept with the others at their defaults: quality against bits and ms",
@@ -315,6 +330,7 @@ def register(sub) -> None:
     tr.add_argument("--flip-every", type=arguments.non_negative_int, default=4, help="FLIP on every Nth scored tick, 0: never")
     tr.add_argument("--seed", type=arguments.non_negative_int, default=0, help="jitter seed (default 0)")
     _out(tr)
+    _placement(tr)
     tr.set_defaults(func=commands.cmd_bench_trade)
 
     dy = bs.add_parser("dynamic", help="moving objects at the display time: static, velocity, accel, flow and the "
@@ -344,6 +360,7 @@ def register(sub) -> None:
     dy.add_argument("--flow-coder", choices=tuple(FLOW_CODERS), default=None,
                     help="the motion flow the flow methods receive (default: the server's); both are measured")
     _out(dy)
+    _placement(dy)
     dy.set_defaults(func=commands.cmd_bench_dynamic)
 
     st = bs.add_parser("stereo", help="two eyes from one stream: mono, cyclops, alternate and per-eye references per "

@@ -112,7 +112,8 @@ def cmd_bench_dynamic(args) -> int:
     r = run_dynamic_bench(scenes=args.scene, windows=args.windows or DEFAULT_WINDOWS, latencies=args.latency_ms,
                           rate_hz=args.rate, stride=args.stride, view_size=args.view_size, out_size=args.size,
                           depth_codec=args.depth_codec, flow_coder=args.flow_coder,
-                          event_latency_ms=args.event_latency_ms, event_stride=args.event_stride, out_dir=args.out)
+                          event_latency_ms=args.event_latency_ms, event_stride=args.event_stride,
+                          placement=placement_of(args), out_dir=args.out)
     print_dynamic_tables(r)
     print(f"written: {args.out}/dynamic.json, {args.out}/dynamic.png")
     return 0
@@ -172,10 +173,24 @@ def cmd_bench_pareto(args) -> int:
                               latency_ms=args.latency_ms, rate_hz=args.rate, stride=args.stride,
                               view_size=args.view_size, out_size=args.size, speed_sizes=args.speed_sizes,
                               speed_frames=args.speed_frames, flip_every=args.flip_every,
-                              depth_codec=args.depth_codec, out_dir=args.out)
+                              depth_codec=args.depth_codec, placement=placement_of(args), out_dir=args.out)
     print_pareto_table(result)
     print(f"written: {args.out}/pareto.json, pareto.png")
     return 0
+
+
+def placement_of(args):
+    """Where a sweep's points run, from --workers, --ray-address and --gpus-per-worker."""
+    from .cluster import Placement, import_ray
+
+    placement = Placement(args.workers, args.ray_address, args.gpus_per_worker)
+    if placement.uses_ray:
+        import_ray()      # a missing extra is said before anything is measured
+    elif args.gpus_per_worker:
+        from pibr.protocol.errors import ConfigError
+
+        raise ConfigError("--gpus-per-worker is what each Ray worker asks for: add --workers N or --ray-address")
+    return placement
 
 
 def cmd_bench_trade(args) -> int:
@@ -183,7 +198,8 @@ def cmd_bench_trade(args) -> int:
 
     knobs = args.knobs or tuple(KNOBS)
     result = run_trade_bench(scenes=args.scenes, knobs=knobs, windows=args.windows, window_s=args.window_seconds,
-                             stride=args.stride, out_size=args.size, flip_every=args.flip_every, seed=args.seed, out_dir=args.out)
+                             stride=args.stride, out_size=args.size, flip_every=args.flip_every, seed=args.seed,
+                             placement=placement_of(args), out_dir=args.out)
     print_trade_tables(result)
     print(f"written: {args.out}/trade.json, " + ", ".join(f"trade_{k}.png" for k in knobs))
     return 0
@@ -260,7 +276,7 @@ def cmd_bench_coverage(args) -> int:
 
     result = run_coverage_bench(scene_spec=args.scene, windows=args.windows, latency_ms=args.latency_ms,
                                 rate_hz=args.rate, view_size=args.view_size, out_size=args.size, offset=args.offset,
-                                stride=args.stride, out_dir=args.out)
+                                stride=args.stride, placement=placement_of(args), out_dir=args.out)
     print_coverage_table(result)
     print(f"written: {args.out}/coverage.json, {args.out}/coverage.png")
     return 0

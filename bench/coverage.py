@@ -68,15 +68,38 @@ def measure_coverage(probe: CoverageProbe, samples, offset: Pose, variants=VARIA
     return out
 
 
+def measure_window(worker, scene_spec, window, latency_ms, rate_hz, view_size, out_size, offset: Pose,
+                   stride) -> dict:
+    """One window's missing fractions per variant and sample (:func:`measure_coverage`), the
+    samples' display times and how many were nearly all sky. A :class:`~.cluster.Point`; the
+    probe (its GL targets and renderer) is kept by the worker between windows."""
+    scene = worker.scene(scene_spec)
+    probes = worker.cache("coverage-probes")
+    key = (scene_spec, tuple(view_size), tuple(out_size))
+    if key not in probes:
+        probes[key] = CoverageProbe(scene, view_size, out_size, ctx=worker.ctx)
+    schedule = SessionSchedule.round_trip(rate_hz, latency_ms)
+    samples = display_samples(scene, window.trace, window.start_s, window.duration_s, schedule)[::stride]
+    series = measure_coverage(probes[key], samples, offset)
+    sky_share = series.pop("sky_share")
+    return {"times": [s[0] for s in samples], "missing": series,
+            "means": {k: float(np.mean(v)) for k, v in series.items()},
+            "nearly_all_sky_frames": int(sum(x > 0.95 for x in sky_share))}
+
+
 def run_coverage_bench(scene_spec="room", windows=None, latency_ms=128.0, rate_hz=30.0, view_size=BENCH_VIEW_SIZE,
-                       out_size=(320, 180), offset=None, stride=2, out_dir="out/bench", progress=True) -> dict:
+                       out_size=(320, 180), offset=None, stride=2, placement=None, out_dir="out/bench",
+                       progress=True) -> dict:
     """``pibr bench coverage``: JSON and plot of the four variants' missing-pixel fractions,
-    per window (default: the evaluation windows of bench/windows.py)."""
+    per window (default: the evaluation windows of bench/windows.py), one point per window run
+    where ``placement`` says (default this process; :class:`~.cluster.Placement`)."""
     from pibr.scenes.registry import load_scene
     from pibr.server.config import PAPER_EXTRA_OFFSET, extra_offset_pose
 
+    from .cluster import Placement, Point, run_points
     from .windows import EVALUATION_WINDOWS, windows_json
 
+    placement = placement or Placement()
     windows = tuple(windows or EVALUATION_WINDOWS)
     scene = load_scene(scene_spec)
     if offset is None:
@@ -84,10 +107,12 @@ def run_coverage_bench(scene_spec="room", windows=None, latency_ms=128.0, rate_h
     else:
         offset_pose = extra_offset_pose(*offset)
     schedule = SessionSchedule.round_trip(rate_hz, latency_ms)
-    all_samples = {w.label: display_samples(scene, w.trace, w.start_s, w.duration_s, schedule)[::stride]
-                   for w in windows}
-    probe = CoverageProbe(scene, view_size, out_size)
-    per_window = {}
+    counts = {w.label: len(display_samples(scene, w.trace, w.start_s, w.duration_s, schedule)[::stride])
+              for w in windows}
+    points = [Point(measure_window, dict(scene_spec=scene_spec, window=w, latency_ms=latency_ms, rate_hz=rate_hz,
+                                         view_size=tuple(view_size), out_size=tuple(out_size), offset=offset_pose,
+                                         stride=stride), cost=counts[w.label], ticks=counts[w.label], name=w.label)
+              for w in windows]
     bar = None
     try:
         if progress:
@@ -95,31 +120,19 @@ def run_coverage_bench(scene_spec="room", windows=None, latency_ms=128.0, rate_h
 
             from tqdm import tqdm
 
-            bar = tqdm(total=sum(len(s) for s in all_samples.values()), unit="frame", desc="coverage",
-                       file=sys.stderr, leave=False,
+            bar = tqdm(total=sum(counts.values()), unit="frame", desc="coverage", file=sys.stderr, leave=False,
                        disable=None)  # None: no bar when stderr is not a terminal
-        for label, samples in all_samples.items():
-            series = {}
-            for s in samples:
-                for k, vals in measure_coverage(probe, [s], offset_pose).items():
-                    series.setdefault(k, []).extend(vals)
-                if bar is not None:
-                    bar.update(1)
-            sky_share = series.pop("sky_share")
-            per_window[label] = {"times": [s[0] for s in samples], "missing": series,
-                                 "means": {k: float(np.mean(v)) for k, v in series.items()},
-                                 "nearly_all_sky_frames": int(sum(x > 0.95 for x in sky_share))}
+        per_window = dict(zip(counts, run_points(points, placement, bar)))
     finally:
         if bar is not None:
             bar.close()
-        probe.close()
     labels = list(per_window)
     overall = {k: float(np.mean(np.concatenate([per_window[w]["missing"][k] for w in labels])))
                for k in per_window[labels[0]]["missing"]}
     result = {"scene": scene.name, "windows": windows_json(windows, "reporting"), "latency_ms": latency_ms,
               "rate_hz": rate_hz, "stride": stride, "view_size": list(view_size), "output_size": list(out_size),
               "offset": list(offset_pose.as_array()), "tolerance": COVERAGE_TOLERANCE, "means": overall,
-              "per_window": per_window}
+              "placement": placement.to_json(), "per_window": per_window}
     write_result(out_dir, "coverage.json", result)
     from .plots import plot_coverage
 

@@ -175,96 +175,120 @@ def _flow_summary(stats: dict) -> dict:
     return out
 
 
-def measure_scene(scene, windows, latencies, rate_hz, stride, view_size, out_size, depth_codec, flow_coder,
-                  event_latency_ms, event_stride=1, variants=VARIANTS, bar=None) -> dict:
-    """Every variant at every latency on one scene, its event probes and its flow coding."""
-    from pibr.client.motion_flow import MotionFlowDecoder
-    from pibr.protocol.motion_flow import DEFAULT_FLOW_CODER, FLOW_CODERS
+class _Session:
+    """One scene's session for a point: the simulation, every variant's method, the flow coders'
+    decoders and their statistics over the frames this session made."""
 
-    from .simulation import Simulation, bench_server_config, load_proxies
+    def __init__(self, worker, scene_spec, view_size, out_size, depth_codec, flow_coder, variants, warm_window):
+        from pibr.client.motion_flow import MotionFlowDecoder
+        from pibr.protocol.motion_flow import DEFAULT_FLOW_CODER, FLOW_CODERS
 
-    proxies, _ = load_proxies(scene, progress=False)
-    server = bench_server_config(view_size, depth_codec=depth_codec, flow_coder=flow_coder or DEFAULT_FLOW_CODER)
-    sim = Simulation(scene, server, out_size, proxies=proxies, flow_frames=True, moving_truth=True)
-    moving_names = {i: o.name for i, o in enumerate(scene.objects) if o.is_dynamic}
-    decoders = {c: MotionFlowDecoder(*view_size) for c in FLOW_CODERS}
-    flow_stats: dict = {}
-    result = {"scene": scene.name, "moving_objects": list(moving_names.values()), "latency": {}, "events": [],
-              "series": {}}
+        from .simulation import Simulation, bench_server_config, load_proxies
+
+        self.scene = scene = worker.scene(scene_spec)
+        proxies = worker.cache("dynamic-proxies")
+        if scene_spec not in proxies:
+            proxies[scene_spec] = load_proxies(scene, progress=False)[0]
+        server = bench_server_config(view_size, depth_codec=depth_codec, flow_coder=flow_coder or DEFAULT_FLOW_CODER)
+        self.sim = Simulation(scene, server, out_size, proxies=proxies[scene_spec], ctx=worker.ctx, flow_frames=True,
+                              moving_truth=True)
+        self.coders = FLOW_CODERS
+        self.decoders = {c: MotionFlowDecoder(*view_size) for c in FLOW_CODERS}
+        self.flow_stats: dict = {}
+        self.made: set = set()
+        self.methods = {}
+        try:
+            self.methods = {label: self.sim.make_method(name, **opts) for label, (name, opts) in variants.items()}
+            # warm-up: shader compilation and the kernels' first calls count against no method
+            first = display_samples(scene, warm_window.trace, warm_window.start_s, 0.2,
+                                    SessionSchedule.round_trip(30.0))
+            self.show(first[-1], lambda ids: {"moving": ids >= 0})
+        except BaseException:
+            self.close()
+            raise
+        self.sim.flow_decode_ms.clear()
+        self.sim.flow_prepare_ms.clear()
+        self.made.clear()
+        self.flow_stats.clear()
+        self.poses0, self.flows0 = len(self.sim.pose_bytes), len(self.sim.flow_bytes)   # after the warm-up's frame
+
+    def show(self, sample, masks) -> dict:
+        """label -> masked metrics and ms of one displayed sample."""
+        sim = self.sim
+        t_disp, display, t_render, rendered = sample
+        frame = sim.frame_at(t_render, rendered)
+        if frame.frame_id not in self.made:
+            self.made.add(frame.frame_id)
+            if sim.true_flow is not None:
+                _flow_coding(sim.true_flow, self.coders, self.decoders, self.flow_stats)
+        gt = sim.ground_truth(display, t_disp)
+        ids = sim.ground_truth_moving()
+        out = {}
+        for label, m in self.methods.items():
+            rgb, holes, ms = sim.display(m, display, frame, t_disp)
+            out[label] = dict(masked_metrics(gt, rgb, masks(ids)), ms=ms)
+        return out
+
+    def close(self) -> None:
+        for m in self.methods.values():
+            m.release()
+        self.sim.close()
+
+
+def measure_latency(worker, scene_spec, latency_ms, windows, rate_hz, stride, view_size, out_size, depth_codec,
+                    flow_coder, variants) -> dict:
+    """Every variant at one round trip on one scene's windows, a session of its own; with the
+    flow coders' raw statistics of the frames it made. A :class:`~.cluster.Point`."""
+    session = _Session(worker, scene_spec, view_size, out_size, depth_codec, flow_coder, variants, windows[0])
+    sim = session.sim
     try:
-        methods = {label: sim.make_method(name, **opts) for label, (name, opts) in variants.items()}
-        made = set()
+        schedule = SessionSchedule.round_trip(rate_hz, latency_ms)
+        series = _Series()
+        for w in windows:
+            for sample in display_samples(session.scene, w.trace, w.start_s, w.duration_s, schedule)[::stride]:
+                for label, values in session.show(sample, lambda ids: {"moving": ids >= 0}).items():
+                    series.add(label, **values)
+        poses, flows = sim.pose_bytes[session.poses0:], sim.flow_bytes[session.flows0:]
+        pose_bits = 8 * float(np.mean(poses)) if poses else 0.0
+        flow_bits = 8 * float(np.mean(flows)) if flows else 0.0
+        decode_ms = float(np.median(sim.flow_decode_ms)) if sim.flow_decode_ms else 0.0
+        prepare_ms = float(np.median(sim.flow_prepare_ms)) if sim.flow_prepare_ms else 0.0
+    finally:
+        session.close()
+    per = {}
+    for label, (name, opts) in variants.items():
+        uses_flow = opts.get("motion") == "flow"
+        per[label] = {
+            "method": name, "options": opts,
+            "dssim": series.mean(label, "dssim"), "psnr": series.mean(label, "psnr"),
+            "dssim_moving": series.mean(label, "dssim_moving"), "psnr_moving": series.mean(label, "psnr_moving"),
+            "frames": len(series.values[label]["dssim"]),
+            "frames_with_moving_pixels": int(np.sum(~np.isnan(series.values[label]["dssim_moving"]))),
+            "client_ms_median": float(np.median(series.values[label]["ms"])),
+            "per_server_frame_ms": {"flow_decode": decode_ms, "flow_background": prepare_ms} if uses_flow else {},
+            "motion_bits_per_frame": (pose_bits if name == "proxy" else 0.0) + (flow_bits if uses_flow else 0.0),
+        }
+    return {"latency": {"pose_bits_per_frame": pose_bits, "flow_bits_per_frame": flow_bits, "methods": per},
+            "flow_stats": session.flow_stats}
 
-        def show(sample, masks):
-            t_disp, display, t_render, rendered = sample
-            frame = sim.frame_at(t_render, rendered)
-            if frame.frame_id not in made:
-                made.add(frame.frame_id)
-                if sim.true_flow is not None:
-                    _flow_coding(sim.true_flow, FLOW_CODERS, decoders, flow_stats)
-            gt = sim.ground_truth(display, t_disp)
-            ids = sim.ground_truth_moving()
-            out = {}
-            for label, m in methods.items():
-                rgb, holes, ms = sim.display(m, display, frame, t_disp)
-                out[label] = dict(masked_metrics(gt, rgb, masks(ids)), ms=ms)
-            return out
 
-        def moving_mask(ids):
-            return {"moving": ids >= 0}
-
-        # warm-up: shader compilation and the kernels' first calls count against no method
-        first = display_samples(scene, windows[0].trace, windows[0].start_s, 0.2, SessionSchedule.round_trip(rate_hz))
-        show(first[-1], moving_mask)
-        sim.flow_decode_ms.clear()
-        sim.flow_prepare_ms.clear()
-        made.clear()
-        flow_stats.clear()
-        for latency_ms in latencies:
-            schedule = SessionSchedule.round_trip(rate_hz, latency_ms)
-            series = _Series()
-            poses0, flows0 = len(sim.pose_bytes), len(sim.flow_bytes)
-            decode0, prepare0 = len(sim.flow_decode_ms), len(sim.flow_prepare_ms)
-            for w in windows:
-                for sample in display_samples(scene, w.trace, w.start_s, w.duration_s, schedule)[::stride]:
-                    for label, values in show(sample, moving_mask).items():
-                        series.add(label, **values)
-                    if bar is not None:
-                        bar.update(1)
-            pose_bits = 8 * float(np.mean(sim.pose_bytes[poses0:])) if len(sim.pose_bytes) > poses0 else 0.0
-            flow_bits = 8 * float(np.mean(sim.flow_bytes[flows0:])) if len(sim.flow_bytes) > flows0 else 0.0
-            decode_ms = float(np.median(sim.flow_decode_ms[decode0:])) if len(sim.flow_decode_ms) > decode0 else 0.0
-            prepare_ms = float(np.median(sim.flow_prepare_ms[prepare0:])) if len(sim.flow_prepare_ms) > prepare0 else 0.0
-            per = {}
-            for label, (name, opts) in variants.items():
-                uses_flow = opts.get("motion") == "flow"
-                uses_poses = name == "proxy"
-                per[label] = {
-                    "method": name, "options": opts,
-                    "dssim": series.mean(label, "dssim"), "psnr": series.mean(label, "psnr"),
-                    "dssim_moving": series.mean(label, "dssim_moving"), "psnr_moving": series.mean(label, "psnr_moving"),
-                    "frames": len(series.values[label]["dssim"]),
-                    "frames_with_moving_pixels": int(np.sum(~np.isnan(series.values[label]["dssim_moving"]))),
-                    "client_ms_median": float(np.median(series.values[label]["ms"])),
-                    "per_server_frame_ms": {"flow_decode": decode_ms, "flow_background": prepare_ms} if uses_flow
-                    else {},
-                    "motion_bits_per_frame": (pose_bits if uses_poses else 0.0) + (flow_bits if uses_flow else 0.0),
-                }
-            result["latency"][f"{latency_ms:g}"] = {"pose_bits_per_frame": pose_bits, "flow_bits_per_frame": flow_bits,
-                                                     "methods": per}
-        # error over time around reversals and stops: a fixed pose looking at the object
+def measure_events(worker, scene_spec, event_latency_ms, event_stride, windows, rate_hz, view_size, out_size,
+                   depth_codec, flow_coder, variants) -> dict:
+    """Error over time around the scene's reversals and stops, a fixed pose looking at the object,
+    a session of its own; with the flow coders' raw statistics. A :class:`~.cluster.Point`."""
+    session = _Session(worker, scene_spec, view_size, out_size, depth_codec, flow_coder, variants, windows[0])
+    events = []
+    try:
         schedule = SessionSchedule.round_trip(rate_hz, event_latency_ms)
-        for probe in event_probes(scene):
+        for probe in event_probes(session.scene):
             series = _Series()
             times = []
+            index = probe["index"]
             for sample in _event_samples(probe, rate_hz, schedule, event_stride):
-                index = probe["index"]
-                for label, values in show(sample, lambda ids: {"object": ids == index}).items():
+                for label, values in session.show(sample, lambda ids: {"object": ids == index}).items():
                     series.add(label, **values)
                 times.append(sample[0] - probe["t"])
-                if bar is not None:
-                    bar.update(1)
-            result["events"].append({
+            events.append({
                 "object": probe["object"], "kind": probe["kind"], "t": probe["t"], "latency_ms": event_latency_ms,
                 "pose": probe["pose"].as_array().tolist(), "times": times,
                 "methods": {label: {"dssim_object": series.values[label]["dssim_object"],
@@ -272,51 +296,96 @@ def measure_scene(scene, windows, latencies, rate_hz, stride, view_size, out_siz
                                     "dssim_object_mean": series.mean(label, "dssim_object"),
                                     "psnr_object_mean": series.mean(label, "psnr_object")}
                             for label in variants}})
-        for m in methods.values():
-            m.release()
     finally:
-        sim.close()
-        sim.ctx.release()
-    result["flow_coding"] = _flow_summary(flow_stats)
-    return result
+        session.close()
+    return {"events": events, "flow_stats": session.flow_stats}
 
 
-def sample_count(scene, windows, latencies, rate_hz, stride, event_stride=1) -> int:
+def _merge_flow_stats(parts: list) -> dict:
+    """The flow coders' statistics of several sessions, as if gathered in one (in the given order)."""
+    out: dict = {}
+    for stats in parts:
+        for coder, s in stats.items():
+            o = out.setdefault(coder, {k: ([] if isinstance(v, list) else 0) for k, v in s.items()})
+            for k, v in s.items():
+                o[k] = o[k] + v
+    return out
+
+
+def _scene_points(scene, scene_spec, windows, latencies, rate_hz, stride, view_size, out_size, depth_codec,
+                  flow_coder, event_latency_ms, event_stride, variants) -> list:
+    """One point per round trip, and one for the events."""
+    from .cluster import Point
+
+    common = dict(scene_spec=scene_spec, windows=tuple(windows), rate_hz=rate_hz, view_size=tuple(view_size),
+                  out_size=tuple(out_size), depth_codec=depth_codec, flow_coder=flow_coder, variants=variants)
+    points = []
+    for latency_ms in latencies:
+        ticks = sample_count(scene, windows, (latency_ms,), rate_hz, stride, events=False)
+        points.append(Point(measure_latency, dict(common, latency_ms=latency_ms, stride=stride), cost=ticks,
+                            ticks=ticks, name=f"{scene.name} {latency_ms:g} ms"))
+    schedule = SessionSchedule.round_trip(rate_hz, event_latency_ms)
+    ticks = sum(len(_event_samples(p, rate_hz, schedule, event_stride)) for p in event_probes(scene))
+    points.append(Point(measure_events, dict(common, event_latency_ms=event_latency_ms, event_stride=event_stride),
+                        cost=ticks, ticks=ticks, name=f"{scene.name} events"))
+    return points
+
+
+def _scene_result(scene, latencies, parts) -> dict:
+    """One scene's result from its points' (in :func:`_scene_points`' order)."""
+    moving = [o.name for o in scene.objects if o.is_dynamic]
+    return {"scene": scene.name, "moving_objects": moving,
+            "latency": {f"{latency_ms:g}": part["latency"] for latency_ms, part in zip(latencies, parts)},
+            "events": parts[-1]["events"], "series": {},
+            "flow_coding": _flow_summary(_merge_flow_stats([part["flow_stats"] for part in parts]))}
+
+
+def sample_count(scene, windows, latencies, rate_hz, stride, event_stride=1, events=True) -> int:
     """Displayed samples a run scores on ``scene`` (for a progress bar)."""
     n = 0
     for latency_ms in latencies:
         schedule = SessionSchedule.round_trip(rate_hz, latency_ms)
         n += sum(len(display_samples(scene, w.trace, w.start_s, w.duration_s, schedule)[::stride])
                  for w in windows)
+    if not events:
+        return n
     schedule = SessionSchedule.round_trip(rate_hz)
     return n + sum(len(_event_samples(p, rate_hz, schedule, event_stride)) for p in event_probes(scene))
 
 
 def run_dynamic_bench(scenes=DEFAULT_SCENES, windows=DEFAULT_WINDOWS, latencies=DEFAULT_LATENCIES, rate_hz=30.0,
                       stride=3, view_size=(512, 512), out_size=(480, 270), depth_codec="h264", flow_coder=None,
-                      event_latency_ms=128.0, event_stride=2, out_dir="out/bench", progress=True) -> dict:
-    """See the module docstring; writes ``dynamic.json`` and ``dynamic.png`` into ``out_dir``."""
+                      event_latency_ms=128.0, event_stride=2, placement=None, out_dir="out/bench",
+                      progress=True) -> dict:
+    """See the module docstring; writes ``dynamic.json`` and ``dynamic.png`` into ``out_dir``.
+    Each (scene, round trip) and each scene's events is one point, a session of its own, run where
+    ``placement`` says (default this process; :class:`~.cluster.Placement`)."""
     from pibr.protocol.motion_flow import DEFAULT_FLOW_CODER
     from pibr.scenes.registry import load_scene
 
-    loaded = [load_scene(s) for s in scenes]
-    static = [s.name for s in loaded if not s.is_dynamic]
+    from .cluster import Placement, run_points
+
+    placement = placement or Placement()
+    loaded = {spec: load_scene(spec) for spec in scenes}
+    static = [s.name for s in loaded.values() if not s.is_dynamic]
     if static:
         from pibr.protocol.errors import ConfigError
 
         raise ConfigError(f"scene(s) {', '.join(static)} have nothing moving; choose scenes that move (dynamic, room)")
+    planned = {spec: _scene_points(scene, spec, tuple(windows), latencies, rate_hz, stride, view_size, out_size,
+                                   depth_codec, flow_coder, event_latency_ms, event_stride, VARIANTS)
+               for spec, scene in loaded.items()}
     bar = None
     if progress:
         from tqdm import tqdm
 
-        bar = tqdm(total=sum(sample_count(s, windows, latencies, rate_hz, stride, event_stride) for s in loaded),
-                   unit="frame",
+        bar = tqdm(total=sum(p.ticks for points in planned.values() for p in points), unit="frame",
                    desc="bench dynamic", file=sys.stderr, leave=False, disable=None)
     t0 = time.perf_counter()
     try:
-        per_scene = {s.name: measure_scene(s, tuple(windows), latencies, rate_hz, stride, view_size, out_size,
-                                           depth_codec, flow_coder, event_latency_ms, event_stride, bar=bar)
-                     for s in loaded}
+        parts = iter(run_points([p for points in planned.values() for p in points], placement, bar))
+        per_scene = {scene.name: _scene_result(scene, latencies, [next(parts) for _ in planned[spec]])
+                     for spec, scene in loaded.items()}
     finally:
         if bar is not None:
             bar.close()
@@ -328,7 +397,7 @@ def run_dynamic_bench(scenes=DEFAULT_SCENES, windows=DEFAULT_WINDOWS, latencies=
               "event_probes": "synthetic: a fixed head pose at the scene's viewer origin looking at the object, "
                               f"{EVENT_BEFORE:g} s before to {EVENT_AFTER:g} s after its first reversal or stop "
                               "after 1.5 s",
-              "scenes": per_scene, "seconds": time.perf_counter() - t0}
+              "placement": placement.to_json(), "scenes": per_scene, "seconds": time.perf_counter() - t0}
     write_result(out_dir, "dynamic.json", result)
     import os
 

@@ -13,16 +13,16 @@ bench/windows.py (disjoint from every window a default was fitted on), beside:
   methods that use only it, both views otherwise), reported beside each method's own holes (alpha 0: pixels where
   it accepted no transmitted sample, whatever it shows there; README, "Reading the metrics").
 
-Quality runs the real pipeline in one process (``simulation.Simulation``) at the display rate
-divided by ``stride``; metrics are computed in a worker process while the next frame renders.
+Quality runs the real pipeline (``simulation.Simulation``) at the display rate divided by
+``stride``, one point per (scene, window), each a session of its own: in this process with the
+metrics computed in a worker process while the next frame renders, or spread over Ray workers
+(:mod:`.cluster`) with the same numbers.
 Speed is measured afterwards in a separate pass with nothing else running, every variant on
 the same frames in turn, at each output size (960x540 and 1280x720 by default): median and
 mean wall-clock ms of the display pass (GPU work finished) and the process's CPU ms.
 """
 from __future__ import annotations
 
-import concurrent.futures
-import multiprocessing
 import os
 import sys
 import time
@@ -149,11 +149,11 @@ class _Quality:
     def __init__(self):
         self.series: dict = {}
 
-    def add(self, label, window, **values):
+    def extend(self, label, window, values: dict):
         s = self.series.setdefault(label, {})
         for k, v in values.items():
-            s.setdefault(k, []).append(v)
-            s.setdefault(f"{window}|{k}", []).append(v)
+            s.setdefault(k, []).extend(v)
+            s.setdefault(f"{window}|{k}", []).extend(v)
 
     def summary(self, label, windows) -> dict:
         s = self.series[label]
@@ -170,90 +170,122 @@ class _Quality:
         return out
 
 
-def measure_scene(scene, variants, windows, latency_ms=128.0, rate_hz=30.0, stride=8, view_size=BENCH_VIEW_SIZE,
-                  out_size=(960, 540), speed_sizes=((960, 540), (1280, 720)), speed_frames=12, flip_every=4,
-                  depth_codec="h264", workers=1, bar=None) -> dict:
-    """Quality and speed of every variant on one scene; see the module docstring."""
+def measure_window(worker, scene_spec, variants, window, latency_ms, rate_hz, stride, view_size, out_size,
+                   flip_every, depth_codec) -> dict:
+    """Every variant and the oracle on one window, a session of its own: per label the scored
+    ticks' values (lists), which variants use the extra view, the nearly uniform ground truths.
+    A :class:`~.cluster.Point`, so its numbers do not depend on where or after what it runs."""
     from .simulation import Simulation, bench_server_config, load_proxies
 
+    scene = worker.scene(scene_spec)
+    proxies = None
+    if any(v.method == "proxy" for v in variants):
+        cache = worker.cache("pareto-proxies")
+        if scene_spec not in cache:
+            cache[scene_spec] = load_proxies(scene)[0]
+        proxies = cache[scene_spec]
+    schedule = SessionSchedule.round_trip(rate_hz, latency_ms)
+    samples = display_samples(scene, window.trace, window.start_s, window.duration_s, schedule)[::stride]
+    oracle_rate = rate_hz / stride
+    ppd = pixels_per_degree(out_size[0], 90.0)
+    values: dict = {}
+    uniform = 0
+    pending = []
+
+    def settle(item):
+        label, job, extra = item
+        m = job.result()
+        for k, v in dict(psnr=m["psnr"], ssim=m["ssim"], dssim=m["dssim"], flip=m["flip"], **extra).items():
+            values.setdefault(label, {}).setdefault(k, []).append(v)
+
+    # frames carry and decode their motion flow, as a client's do, for the competitors' ``flow`` variants
+    sim = Simulation(scene, bench_server_config(view_size, depth_codec=depth_codec), out_size, proxies=proxies,
+                     ctx=worker.ctx, keep_distances=True, flow_frames=True)
+    rays = camera_rays(*out_size, sim.output.fov_deg)
+    methods = {}
+    try:
+        methods = {v.label: sim.make_method(v.method, **v.options) for v in variants}
+        methods[ORACLE] = oracle_method = sim.make_method("none")
+        uses_extra = {label: bool(m.uses_extra_view) for label, m in methods.items() if label != ORACLE}
+        for i, (t_disp, display, t_render, rendered) in enumerate(samples):
+            frame = sim.frame_at(t_render, rendered)
+            gt = sim.ground_truth(display, t_disp)
+            uniform += nearly_uniform(gt)
+            geo = geometric_holes(rays, display, sim.ground_truth_distance(), frame, sim.distances,
+                                  bool(sim.session.options.get("peel_marker")))
+            with_flip = flip_every > 0 and i % flip_every == 0
+            shown = []
+            for v in variants:
+                rgb, own, ms, _ = sim.display_timed(methods[v.label], display, frame, t_disp)
+                shown.append((v.label, rgb, own, ms, methods[v.label].last_primitives,
+                              geo["both" if uses_extra[v.label] else "primary"]))
+            oframe, otextures = sim.oracle_frame(t_disp, display, oracle_rate)
+            rgb, own, ms, _ = sim.display_timed(oracle_method, display, oframe, t_disp, otextures)
+            shown.append((ORACLE, rgb, own, ms, 0, 0.0))
+            for label, rgb, own, ms, prims, holes in shown:
+                pending.append((label, worker.submit(frame_metrics, gt, rgb, ppd, with_flip),
+                                dict(own_holes=own, ms=ms, primitives=prims, geometric_holes=holes)))
+            while len(pending) > 8 * len(shown):
+                settle(pending.pop(0))
+        while pending:
+            settle(pending.pop(0))
+        flow_frames = sim.motion_decoder is not None
+    finally:
+        for m in methods.values():
+            m.release()
+        sim.close()
+    return {"values": values, "uses_extra": uses_extra, "uniform": int(uniform), "frames": len(samples),
+            "flow_frames": flow_frames}
+
+
+def _scene_points(scene, scene_spec, variants, windows, latency_ms, rate_hz, stride, view_size, out_size,
+                  flip_every, depth_codec):
+    """(the variants with the scene's motion variants, display samples per window, one
+    :func:`measure_window` point per window)."""
+    from .cluster import Point
+
     variants = [*variants, *motion_variants(variants, scene)]
-    with_proxies = any(v.method == "proxy" for v in variants)
-    proxies, bundle = load_proxies(scene, progress=False) if with_proxies else (None, None)
     schedule = SessionSchedule.round_trip(rate_hz, latency_ms)
     samples = {w.label: display_samples(scene, w.trace, w.start_s, w.duration_s, schedule)[::stride]
                for w in windows}
-    oracle_rate = rate_hz / stride
-    quality = _Quality()
-    uses_extra = {}
-    uniform = {w: 0 for w in samples}
-    ppd = pixels_per_degree(out_size[0], 90.0)
-    pool = (concurrent.futures.ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"))
-            if workers > 0 else None)
-    pending = []
-    # frames carry and decode their motion flow, as a client's do, for the competitors' ``flow`` variants
-    sim = Simulation(scene, bench_server_config(view_size, depth_codec=depth_codec), out_size, proxies=proxies,
-                     keep_distances=True, flow_frames=True)
-    rays = camera_rays(*out_size, sim.output.fov_deg)
-    try:
-        methods = {v.label: sim.make_method(v.method, **v.options) for v in variants}
-        oracle_method = sim.make_method("none")
-        uses_extra = {label: bool(m.uses_extra_view) for label, m in methods.items()}
-        for window, window_samples in samples.items():
-            for i, (t_disp, display, t_render, rendered) in enumerate(window_samples):
-                frame = sim.frame_at(t_render, rendered)
-                gt = sim.ground_truth(display, t_disp)
-                uniform[window] += nearly_uniform(gt)
-                geo = geometric_holes(rays, display, sim.ground_truth_distance(), frame, sim.distances,
-                                       bool(sim.session.options.get("peel_marker")))
-                with_flip = flip_every > 0 and i % flip_every == 0
-                shown = []
-                for label, m in methods.items():
-                    rgb, own, ms, _ = sim.display_timed(m, display, frame, t_disp)
-                    shown.append((label, rgb, own, ms, m.last_primitives,
-                                  geo["both" if uses_extra[label] else "primary"]))
-                oframe, otextures = sim.oracle_frame(t_disp, display, oracle_rate)
-                rgb, own, ms, _ = sim.display_timed(oracle_method, display, oframe, t_disp, otextures)
-                shown.append((ORACLE, rgb, own, ms, 0, 0.0))
-                for label, rgb, own, ms, prims, holes in shown:
-                    job = (pool.submit(frame_metrics, gt, rgb, ppd, with_flip) if pool is not None
-                           else frame_metrics(gt, rgb, ppd, with_flip))
-                    pending.append((label, window, job, dict(own_holes=own, ms=ms, primitives=prims,
-                                                             geometric_holes=holes)))
-                while len(pending) > 8 * len(shown):
-                    _settle(pending.pop(0), quality, pool)
-                if bar is not None:
-                    bar.update(1)
-        while pending:
-            _settle(pending.pop(0), quality, pool)
-        for m in [*methods.values(), oracle_method]:
-            m.release()
-    finally:
-        if pool is not None:
-            pool.shutdown(cancel_futures=True)
-        sim.close()
-        sim.ctx.release()
+    points = [Point(measure_window, dict(scene_spec=scene_spec, variants=tuple(variants), window=w,
+                                         latency_ms=latency_ms, rate_hz=rate_hz, stride=stride,
+                                         view_size=tuple(view_size), out_size=tuple(out_size), flip_every=flip_every,
+                                         depth_codec=depth_codec),
+                    cost=len(samples[w.label]) * len(variants), ticks=len(samples[w.label]),
+                    name=f"{scene.name} {w.label}")
+              for w in windows]
+    return variants, samples, points
 
+
+def _scene_result(scene, variants, samples, parts, rate_hz, stride, view_size, out_size, speed_sizes, speed_frames,
+                  depth_codec, bar) -> dict:
+    """One scene's quality (its windows' :func:`measure_window` results, in window order) and the
+    variants' speed, measured here and now with nothing else running."""
+    from .simulation import load_proxies
+
+    windows = list(samples)
+    quality = _Quality()
+    for window, part in zip(windows, parts):
+        for label, vals in part["values"].items():
+            quality.extend(label, window, vals)
+    uses_extra = parts[0]["uses_extra"]
+    proxies, bundle = load_proxies(scene) if any(v.method == "proxy" for v in variants) else (None, None)
     speed = _measure_speed(scene, variants, samples, proxies, view_size, speed_sizes, speed_frames, depth_codec, bar)
     views_px = view_size[0] * view_size[1]
     result = {"scene": scene.name, "view_size": list(view_size), "output": list(out_size), "stride": stride,
-              "flow_frames": sim.motion_decoder is not None,   # frames decoded with their motion flow
-              "oracle_rate_hz": oracle_rate, "frames": {w: len(s) for w, s in samples.items()},
-              "nearly_uniform_frames": uniform, "variants": {}}
+              "flow_frames": parts[0]["flow_frames"],   # frames decoded with their motion flow
+              "oracle_rate_hz": rate_hz / stride, "frames": {w: len(s) for w, s in samples.items()},
+              "nearly_uniform_frames": {w: part["uniform"] for w, part in zip(windows, parts)}, "variants": {}}
     if bundle is not None:
         result["proxies"] = bundle.info(1 << 20)
     for v in [*variants, Variant(ORACLE, "none")]:
-        q = quality.summary(v.label, list(samples))
+        q = quality.summary(v.label, windows)
         q["primitives_per_view_pixel"] = (q["primitives_mean"] or 0.0) / views_px
         result["variants"][v.label] = {**v.to_json(), "uses_extra_view": uses_extra.get(v.label, False),
                                        "quality": q, "speed": speed.get(v.label, {})}
-    result["per_window"] = window_winners(result["variants"], list(samples))
+    result["per_window"] = window_winners(result["variants"], windows)
     return result
-
-
-def _settle(item, quality, pool):
-    label, window, job, extra = item
-    m = job.result() if pool is not None else job
-    quality.add(label, window, psnr=m["psnr"], ssim=m["ssim"], dssim=m["dssim"], flip=m["flip"], **extra)
 
 
 def _measure_speed(scene, variants, samples, proxies, view_size, sizes, frames, depth_codec, bar) -> dict:
@@ -294,33 +326,39 @@ def _measure_speed(scene, variants, samples, proxies, view_size, sizes, frames, 
 def run_pareto_bench(scenes=("room",), methods=None, windows=EVALUATION_WINDOWS, latency_ms=128.0,
                      rate_hz=30.0, stride=8, view_size=BENCH_VIEW_SIZE, out_size=(960, 540),
                      speed_sizes=((960, 540), (1280, 720)), speed_frames=12, flip_every=4, depth_codec="h264",
-                     workers=1, out_dir="out/bench", progress=True) -> dict:
+                     placement=None, out_dir="out/bench", progress=True) -> dict:
+    """Quality of every variant per (scene, window) point, run where ``placement`` says (default
+    this process; :class:`~.cluster.Placement`), then each scene's speed in this process."""
     from pibr.scenes.registry import load_scene
 
+    from .cluster import Placement, run_points
+
+    placement = placement or Placement()
     variants = default_variants(methods)
-    loaded = [load_scene(s) for s in scenes]
-    schedule = SessionSchedule.round_trip(rate_hz, latency_ms)
+    loaded = {spec: load_scene(spec) for spec in scenes}
+    planned = {spec: _scene_points(scene, spec, variants, windows, latency_ms, rate_hz, stride, view_size, out_size,
+                                   flip_every, depth_codec) for spec, scene in loaded.items()}
     bar = None
     if progress:
         from tqdm import tqdm
 
-        total = 0
-        for scene in loaded:
-            total += sum(len(display_samples(scene, w.trace, w.start_s, w.duration_s, schedule)[::stride])
-                         for w in windows)
-            total += speed_frames * len(speed_sizes)
+        total = sum(p.ticks for _, _, points in planned.values() for p in points)
+        total += speed_frames * len(speed_sizes) * len(loaded)
         bar = tqdm(total=total, unit="frame", desc="bench pareto", file=sys.stderr, leave=False, disable=None)
     t0 = time.perf_counter()
     try:
-        per_scene = {scene.name: measure_scene(scene, variants, windows, latency_ms, rate_hz, stride, view_size,
-                                               out_size, speed_sizes, speed_frames, flip_every, depth_codec,
-                                               workers, bar)
-                     for scene in loaded}
+        parts = iter(run_points([p for _, _, points in planned.values() for p in points], placement, bar))
+        per_scene = {}
+        for spec, scene in loaded.items():
+            scene_variants, samples, points = planned[spec]
+            per_scene[scene.name] = _scene_result(scene, scene_variants, samples, [next(parts) for _ in points],
+                                                  rate_hz, stride, view_size, out_size, speed_sizes, speed_frames,
+                                                  depth_codec, bar)
     finally:
         if bar is not None:
             bar.close()
     result = {"latency_ms": latency_ms, "rate_hz": rate_hz, "server_fps": 10.0, "depth_codec": depth_codec,
-              "windows": windows_json(windows, "reporting"), "scenes": per_scene,
+              "windows": windows_json(windows, "reporting"), "placement": placement.to_json(), "scenes": per_scene,
               "seconds": time.perf_counter() - t0}
     write_result(out_dir, "pareto.json", result)
     from .plots import plot_pareto

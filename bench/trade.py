@@ -21,9 +21,7 @@ rendered once per scored tick and reused by every point.
 from __future__ import annotations
 
 import collections
-import concurrent.futures
 import dataclasses
-import multiprocessing
 import os
 import sys
 import time
@@ -151,20 +149,29 @@ def _knob_value(point: StreamPoint, knob: str):
     return v[0] if knob == "view" else v
 
 
-class _GroundTruth:
-    """Ground truth per scored tick (rgb (h, w, 3) uint8, radial distance (h, w) float32), made
-    once: it depends on the display pose and time only."""
+def _ground_truth(worker, sim, scene_spec, out_size, window, rate_hz, i, pose, t):
+    """Ground truth of a scored tick (rgb (h, w, 3) uint8, radial distance (h, w) float32, nearly
+    uniform), rendered once per worker: it depends on the display pose and time only."""
+    cache = worker.cache("trade-ground-truth")
+    key = (scene_spec, tuple(out_size), window, rate_hz, i)
+    if key not in cache:
+        rgb = sim.ground_truth(pose, t)
+        cache[key] = (rgb, sim.ground_truth_distance(), bool(nearly_uniform(rgb)))
+    return cache[key]
 
-    def __init__(self):
-        self.cache: dict = {}
-        self.uniform = 0
 
-    def get(self, sim, key, pose, t):
-        if key not in self.cache:
-            rgb = sim.ground_truth(pose, t)
-            self.cache[key] = (rgb, sim.ground_truth_distance())
-            self.uniform += nearly_uniform(rgb)
-        return self.cache[key]
+def _proxies(worker, scene, lod) -> tuple:
+    """(proxy objects, bundle) of a LoD setting (resolution, fraction), built (or read from the LoD
+    cache) once per worker."""
+    from pibr.server.proxies import ProxySettings
+
+    from .simulation import load_proxies
+
+    cache = worker.cache("trade-proxies")
+    key = (scene.name, int(lod[0]), float(lod[1]))
+    if key not in cache:
+        cache[key] = load_proxies(scene, settings=ProxySettings(*key[1:]))
+    return cache[key]
 
 
 class _Series:
@@ -173,10 +180,10 @@ class _Series:
     def __init__(self):
         self.values: dict = collections.defaultdict(lambda: collections.defaultdict(list))
 
-    def add(self, label, window, **values):
+    def extend(self, label, window, values: dict):
         for k, v in values.items():
-            self.values[label][k].append(v)
-            self.values[label][f"{window}|{k}"].append(v)
+            self.values[label][k].extend(v)
+            self.values[label][f"{window}|{k}"].extend(v)
 
     def summary(self, label, windows) -> dict:
         s = self.values[label]
@@ -191,23 +198,6 @@ class _Series:
                 "frames": len(s.get("dssim", [])),
                 "flip_frames": sum(1 for v in s.get("flip", []) if v is not None and not np.isnan(v)),
                 "per_window_dssim": {w: mean(f"{w}|dssim") for w in windows}}
-
-
-class _Proxies:
-    """Proxy bundles per LoD setting (resolution, fraction), built (or read from the LoD cache) once."""
-
-    def __init__(self, scene):
-        self.scene, self.cache = scene, {}
-
-    def get(self, resolution, fraction):
-        from pibr.server.proxies import ProxySettings
-
-        from .simulation import load_proxies
-
-        key = (int(resolution), float(fraction))
-        if key not in self.cache:
-            self.cache[key] = load_proxies(self.scene, settings=ProxySettings(*key))
-        return self.cache[key]
 
 
 def _client_variants(knobs, methods, defaults, values_of) -> list[tuple[str, str, str, dict, tuple]]:
@@ -235,128 +225,156 @@ def _client_variants(knobs, methods, defaults, values_of) -> list[tuple[str, str
     return out
 
 
-def measure_point(scene, point: StreamPoint, windows, methods, extra_variants, proxies_by_lod, gt: _GroundTruth,
-                  ctx, rate_hz, stride, out_size, flip_every, seed, pool, bar=None) -> dict:
-    """One stream point on every window: figures per method label (and the stream's own)."""
+def measure_window(worker, scene_spec, point: StreamPoint, window, methods, client_variants, lod_default, rate_hz,
+                   stride, out_size, flip_every, seed) -> dict:
+    """One stream point on one window, a session of its own that starts with the window: per method
+    label the scored ticks' values (lists), the stream's per-frame figures, the scored ticks whose
+    ground truth is nearly uniform, and the proxy bundles' sizes. A :class:`~.cluster.Point`."""
     from .simulation import Simulation
 
-    default_lod = next(iter(proxies_by_lod))
-    proxies = proxies_by_lod[default_lod][0]
-    sim = Simulation(scene, point.server_config(), out_size, proxies=proxies, ctx=ctx, keep_distances=True)
-    series = _Series()
+    scene = worker.scene(scene_spec)
+    bundles = {lod: _proxies(worker, scene, lod) for lod in {lod_default} | {v[4] for v in client_variants}}
+    proxies = bundles[lod_default][0]
+    sim = Simulation(scene, point.server_config(), out_size, proxies=proxies, ctx=worker.ctx, keep_distances=True)
     ppd = pixels_per_degree(out_size[0], sim.output.fov_deg)
     rays = camera_rays(*out_size, sim.output.fov_deg)
     peeled_marked = bool(sim.session.options.get("peel_marker"))
-    stream = {"bits": [], "server_cpu_ms": [], "age_ms": [], "skipped": 0, "unserved_ticks": 0, "served": 0,
-              "span_us": 0, "delivered_bits": 0}
+    stream = {"bits": [], "server_cpu_ms": [], "age_ms": [], "skipped": 0, "unserved_ticks": 0, "span_us": 0,
+              "delivered_bits": 0, "atlas": [sim.spec.layout.width, sim.spec.layout.height]}
+    values = collections.defaultdict(lambda: collections.defaultdict(list))
+    uniform = []
     made = {}
+    pending = []
+
+    def settle(item):
+        label, job, extra = item
+        m = job.result()
+        for k, v in dict(psnr=m["psnr"], dssim=m["dssim"], flip=m["flip"], **extra).items():
+            values[label][k].append(v)
+
     try:
         for v in methods:
             made[v.label] = sim.make_method(v.method, **v.options)
-        for label, _, _, options, lod in extra_variants:
-            sim.proxies = proxies_by_lod[lod][0]
+        for label, _, _, options, lod in client_variants:
+            sim.proxies = bundles[lod][0]
             made[label] = sim.make_method("proxy", **options)
         sim.proxies = proxies
         uses_extra = {label: bool(m.uses_extra_view) for label, m in made.items()}
-        pending = []
-        for w in windows:
-            ticks, pose_at = trace_poses(scene, w.trace, w.start_s, w.duration_s, rate_hz)
-            half = point.latency_ms / 2
-            schedule = SessionSchedule(rate_hz, point.fps, LinkParams(half, point.jitter_ms),
-                                       LinkParams(half, point.jitter_ms, point.cap_kbps), seed=seed,
-                                       max_in_flight=DEFAULT_MAX_IN_FLIGHT)
-            sim.restart_stream()
-            in_flight = collections.deque()
-            shown = shown_distances = None
-            first_render = None
-            for i, t_us in enumerate(ticks):
-                while (due := schedule.next_due(t_us)) is not None:
-                    render_us, pose_us = due
-                    first_render = render_us if first_render is None else first_render
-                    frame, distances = sim.serve(render_us / 1e6, pose_at(pose_us))
-                    bits = sim.frame_bits()
-                    stream["bits"].append(bits)
-                    stream["server_cpu_ms"].append(sim.server_cpu_ms[-1])
-                    in_flight.append((schedule.sent(render_us, bits // 8), frame, distances, bits))
-                while in_flight and in_flight[0][0] <= t_us:
-                    _, frame, distances, bits = in_flight.popleft()
-                    stream["delivered_bits"] += bits
-                    sim.receive(frame, distances)
-                    shown, shown_distances = frame, distances
-                if i % stride:
-                    continue
-                if shown is None:
-                    stream["unserved_ticks"] += 1
-                    continue
-                t = t_us / 1e6
-                display = pose_at(t_us)
-                stream["age_ms"].append((t_us - shown.render_t_us) / 1e3)
-                gt_rgb, gt_distance = gt.get(sim, (w.label, i), display, t)
-                geo = geometric_holes(rays, display, gt_distance, shown, shown_distances, peeled_marked)
-                with_flip = flip_every > 0 and (i // stride) % flip_every == 0
-                for label, m in made.items():
-                    rgb, own, _, cpu = sim.display_timed(m, display, shown, t)
-                    job = (pool.submit(frame_metrics, gt_rgb, rgb, ppd, with_flip) if pool is not None
-                           else frame_metrics(gt_rgb, rgb, ppd, with_flip))
-                    pending.append((label, w.label, job, dict(cpu_ms=cpu, own_holes=own, geometric_holes=geo[
-                        "both" if uses_extra[label] else "primary"])))
-                while len(pending) > 4 * len(made):
-                    _settle(pending.pop(0), series, pool)
-                if bar is not None:
-                    bar.update(1)
-            stream["skipped"] += schedule.skipped
-            # from the first frame served (the pre-roll's, before the window) to the window's end
-            stream["span_us"] += ticks[-1] + schedule.tick_us - (first_render if first_render is not None else 0)
+        ticks, pose_at = trace_poses(scene, window.trace, window.start_s, window.duration_s, rate_hz)
+        half = point.latency_ms / 2
+        schedule = SessionSchedule(rate_hz, point.fps, LinkParams(half, point.jitter_ms),
+                                   LinkParams(half, point.jitter_ms, point.cap_kbps), seed=seed,
+                                   max_in_flight=DEFAULT_MAX_IN_FLIGHT)
+        in_flight = collections.deque()
+        shown = shown_distances = None
+        first_render = None
+        for i, t_us in enumerate(ticks):
+            while (due := schedule.next_due(t_us)) is not None:
+                render_us, pose_us = due
+                first_render = render_us if first_render is None else first_render
+                frame, distances = sim.serve(render_us / 1e6, pose_at(pose_us))
+                bits = sim.frame_bits()
+                stream["bits"].append(bits)
+                stream["server_cpu_ms"].append(sim.server_cpu_ms[-1])
+                in_flight.append((schedule.sent(render_us, bits // 8), frame, distances, bits))
+            while in_flight and in_flight[0][0] <= t_us:
+                _, frame, distances, bits = in_flight.popleft()
+                stream["delivered_bits"] += bits
+                sim.receive(frame, distances)
+                shown, shown_distances = frame, distances
+            if i % stride:
+                continue
+            if shown is None:
+                stream["unserved_ticks"] += 1
+                continue
+            t = t_us / 1e6
+            display = pose_at(t_us)
+            stream["age_ms"].append((t_us - shown.render_t_us) / 1e3)
+            gt_rgb, gt_distance, flat = _ground_truth(worker, sim, scene_spec, out_size, window, rate_hz, i,
+                                                      display, t)
+            if flat:
+                uniform.append(i)
+            geo = geometric_holes(rays, display, gt_distance, shown, shown_distances, peeled_marked)
+            with_flip = flip_every > 0 and (i // stride) % flip_every == 0
+            for label, m in made.items():
+                rgb, own, _, cpu = sim.display_timed(m, display, shown, t)
+                pending.append((label, worker.submit(frame_metrics, gt_rgb, rgb, ppd, with_flip),
+                                dict(cpu_ms=cpu, own_holes=own,
+                                     geometric_holes=geo["both" if uses_extra[label] else "primary"])))
+            while len(pending) > 4 * len(made):
+                settle(pending.pop(0))
         while pending:
-            _settle(pending.pop(0), series, pool)
+            settle(pending.pop(0))
+        stream["skipped"] = schedule.skipped
+        # from the first frame served (the pre-roll's, before the window) to the window's end
+        stream["span_us"] = ticks[-1] + schedule.tick_us - (first_render if first_render is not None else 0)
     finally:
         for m in made.values():
             m.release()
         sim.close()
-    stream["served"] = len(stream["bits"])
+    return {"labels": {label: dict(v) for label, v in values.items()}, "stream": stream, "uniform": uniform,
+            "proxy_bundles": {f"{r}/{f:g}": {"bytes": len(b.compressed), "triangles": b.triangles}
+                              for (r, f), (_, b) in bundles.items()}}
+
+
+def _point_figures(parts: list, windows) -> dict:
+    """A stream point's figures from its windows' :func:`measure_window` results (in window order)."""
+    series = _Series()
+    stream = {"bits": [], "server_cpu_ms": [], "age_ms": []}
+    counts = collections.Counter()
+    for w, part in zip(windows, parts):
+        for label, values in part["labels"].items():
+            series.extend(label, w.label, values)
+        for k in stream:
+            stream[k].extend(part["stream"][k])
+        for k in ("skipped", "unserved_ticks", "span_us", "delivered_bits"):
+            counts[k] += part["stream"][k]
     labels = [w.label for w in windows]
-    figures = {label: series.summary(label, labels) for label in made}
+    span = max(counts["span_us"], 1)
     return {"stream": {"bits_per_frame": float(np.mean(stream["bits"])),
                        # what was sent (frames skipped under a cap or the in-flight limit send nothing)
-                       "kbps": float(np.sum(stream["bits"]) / max(stream["span_us"], 1) * 1e3),
+                       "kbps": float(np.sum(stream["bits"]) / span * 1e3),
                        # ... and what reached the client by the window's end
-                       "delivered_kbps": float(stream["delivered_bits"] / max(stream["span_us"], 1) * 1e3),
+                       "delivered_kbps": float(counts["delivered_bits"] / span * 1e3),
                        "server_cpu_ms": float(np.median(stream["server_cpu_ms"])),
                        "age_ms_mean": float(np.mean(stream["age_ms"])) if stream["age_ms"] else None,
-                       "frames_served": stream["served"], "frames_skipped": stream["skipped"],
-                       "ticks_without_frame": stream["unserved_ticks"],
-                       "atlas": [sim.spec.layout.width, sim.spec.layout.height]},
-            "methods": figures}
+                       "frames_served": len(stream["bits"]), "frames_skipped": counts["skipped"],
+                       "ticks_without_frame": counts["unserved_ticks"], "atlas": parts[0]["stream"]["atlas"]},
+            "methods": {label: series.summary(label, labels) for label in series.values}}
 
 
-def _settle(item, series, pool):
-    label, window, job, extra = item
-    m = job.result() if pool is not None else job
-    series.add(label, window, psnr=m["psnr"], dssim=m["dssim"], flip=m["flip"], **extra)
+def _point_cost(point: StreamPoint, scored_ticks: int, labels: int, window_s: float) -> float:
+    """A rough CPU-s estimate of one window of a point: server frames (~0.5 s per 1024^2 primary,
+    the extra view by its area) and ~0.25 s per method and scored tick (display and scoring)."""
+    area = point.view_size[0] * point.view_size[1] / 1024 ** 2 * (1 + point.extra_scale ** 2)
+    return 0.5 * area * point.fps * (window_s + point.latency_ms / 1e3) + 0.25 * scored_ticks * labels
 
 
 def run_trade_bench(scenes=("room",), knobs=tuple(KNOBS), windows=EVALUATION_WINDOWS, purpose=None,
                     methods=DEFAULT_METHODS, rate_hz=30.0, stride=16, out_size=(960, 540), flip_every=4,
-                    window_s=None, stream=None, values=None, seed=0, workers=1, out_dir="out/bench",
+                    window_s=None, stream=None, values=None, seed=0, placement=None, out_dir="out/bench",
                     progress=True) -> dict:
     """Sweep ``knobs`` (names of :data:`KNOBS`) one at a time; write trade.json and one plot per
     knob. ``window_s``: keep only the first seconds of each window (every server frame is made,
     about 0.5 CPU-s each at 1024² on this machine); ``stream``: the default StreamPoint (None: the
     server's defaults); ``values``: knob name -> values swept instead of :data:`KNOBS`' (the
-    default is always added)."""
-    from pibr.common.gl import create_context
-    from pibr.scenes.registry import load_scene
-
+    default is always added); ``placement``: where the points run (:class:`~.cluster.Placement`,
+    default this process). Each (stream point, window) is one point of the sweep, a session of its
+    own, so the numbers are the same wherever and in whatever order the points run."""
+    from .cluster import Placement, Point, run_points
     from .windows import overlapping_tuning
 
+    placement = placement or Placement()
     for name in knobs:
         if name not in KNOBS:
             raise ConfigError(f"unknown knob {name!r}; choose from {', '.join(KNOBS)}")
     if window_s is not None:
         windows = tuple(dataclasses.replace(w, duration_s=min(w.duration_s, window_s)) for w in windows)
+    windows = tuple(windows)
     base = stream or default_stream(out_size)
     values_of = {name: knob.values for name, knob in KNOBS.items()} | dict(values or {})
     defaults = default_client()
+    lod_default = (defaults["lod_resolution"], defaults["lod_fraction"])
     purpose = purpose or ("tuning" if overlapping_tuning(windows) else "reporting")
     # stream points: the default, then every knob's other values
     points = {"default": base}
@@ -383,51 +401,72 @@ def run_trade_bench(scenes=("room",), knobs=tuple(KNOBS), windows=EVALUATION_WIN
             sweeps[name] = [(defaults[name], "proxy")] + [(value, label) for label, k, value, _, _ in client_variants
                                                          if k == name]
             sweeps[name].sort(key=lambda x: x[0])
-    loaded = [load_scene(s) for s in scenes]
-    per_tick = sum(len(trace_poses(loaded[0], w.trace, w.start_s, w.duration_s, rate_hz)[0][::stride])
-                   for w in windows)
+    from pibr.scenes.registry import load_scene
+
+    loaded = {spec: load_scene(spec) for spec in scenes}
+    scored = {}
+    for spec, scene in loaded.items():
+        for w in windows:
+            scored[spec, w] = len(trace_poses(scene, w.trace, w.start_s, w.duration_s, rate_hz)[0][::stride])
+    per_tick = sum(scored[scenes[0], w] for w in windows)
+    work = []     # (scene spec, point key, window) of each sweep point, in the order results are merged
+    sweep_points = []
+    for spec in scenes:
+        for key, point in points.items():
+            extra = client_variants if key == "default" else []
+            for w in windows:
+                work.append((spec, key, w))
+                sweep_points.append(Point(
+                    measure_window, dict(scene_spec=spec, point=point, window=w, methods=tuple(methods),
+                                         client_variants=tuple(extra), lod_default=lod_default, rate_hz=rate_hz,
+                                         stride=stride, out_size=tuple(out_size), flip_every=flip_every, seed=seed),
+                    cost=_point_cost(point, scored[spec, w], len(methods) + len(extra), w.duration_s),
+                    ticks=scored[spec, w], name=f"{spec} {key} {w.label}"))
     bar = None
     if progress:
         from tqdm import tqdm
 
-        bar = tqdm(total=per_tick * len(points) * len(loaded), unit="tick", desc="bench trade", file=sys.stderr,
+        bar = tqdm(total=per_tick * len(points) * len(scenes), unit="tick", desc="bench trade", file=sys.stderr,
                    leave=False, disable=None)
-    pool = (concurrent.futures.ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"))
-            if workers > 0 else None)
-    ctx = create_context()
     t0 = time.perf_counter()
     result = {"knobs": list(knobs), "defaults": {"stream": base.to_json(), "client": defaults},
               "methods": {v.label: v.to_json() for v in methods}, "rate_hz": rate_hz, "stride": stride,
               "output": list(out_size), "flip_every": flip_every, "seed": seed,
-              "windows": windows_json(windows, purpose), "scenes": {}}
+              "windows": windows_json(windows, purpose), "placement": placement.to_json(), "scenes": {}}
+    parts: dict = {}
+
+    def gather(final: bool) -> None:
+        for spec, scene in loaded.items():
+            measured, uniform, bundles = {}, set(), {}
+            for key in points:
+                got = [parts.get((spec, key, w)) for w in windows]
+                if any(g is None for g in got):
+                    continue
+                measured[key] = _point_figures(got, windows)
+                for w, g in zip(windows, got):
+                    uniform |= {(w.label, i) for i in g["uniform"]}
+                    bundles |= g["proxy_bundles"]
+            if not measured and not final:
+                continue
+            result["scenes"][scene.name] = {
+                "ticks_scored_per_point": per_tick, "nearly_uniform_ticks": len(uniform),
+                "frames": {w.label: scored[spec, w] for w in windows},
+                "proxy_bundles": bundles,
+                "sweeps": {name: _sweep_json(name, sweep, measured, points) for name, sweep in sweeps.items()
+                           if "default" in measured}}
+
+    def on_result(i, r):
+        parts[work[i]] = r
+        gather(False)
+        # what is measured so far, for a long run stopped early
+        write_result(out_dir, "trade.json", result | {"complete": False, "seconds": time.perf_counter() - t0})
+
     try:
-        for scene in loaded:
-            proxies = _Proxies(scene)
-            lods = {(defaults["lod_resolution"], defaults["lod_fraction"]): None}
-            for _, _, _, _, lod in client_variants:
-                lods[lod] = None
-            lods = {k: proxies.get(*k) for k in lods}
-            gt = _GroundTruth()
-            measured = {}
-            for key, point in points.items():
-                measured[key] = measure_point(scene, point, windows, methods,
-                                              client_variants if key == "default" else [], lods, gt, ctx, rate_hz,
-                                              stride, out_size, flip_every, seed, pool, bar)
-                result["scenes"][scene.name] = {
-                    "ticks_scored_per_point": per_tick, "nearly_uniform_ticks": gt.uniform,
-                    "frames": {w.label: len(trace_poses(scene, w.trace, w.start_s, w.duration_s, rate_hz)[0][::stride])
-                               for w in windows},
-                    "proxy_bundles": {f"{r}/{f:g}": {"bytes": len(b.compressed), "triangles": b.triangles}
-                                      for (r, f), (_, b) in lods.items()},
-                    "sweeps": {name: _sweep_json(name, sweep, measured, points) for name, sweep in sweeps.items()}}
-                # what is measured so far, for a long run stopped early
-                write_result(out_dir, "trade.json", result | {"complete": False, "seconds": time.perf_counter() - t0})
+        run_points(sweep_points, placement, bar, on_result)
     finally:
         if bar is not None:
             bar.close()
-        if pool is not None:
-            pool.shutdown(cancel_futures=True)
-        ctx.release()
+    gather(True)
     result["seconds"] = time.perf_counter() - t0
     result["complete"] = True
     write_result(out_dir, "trade.json", result)

@@ -11,7 +11,7 @@ def test_tiny_trade_sweep(tmp_path):
     r = run_trade_bench(knobs=("bitrate", "latency", "cap", "tau"), windows=(Window("pred6dof-1", 30.0, 0.8),),
                         stride=2, out_size=(160, 96), flip_every=2, stream=stream,
                         values={"bitrate": (300.0,), "latency": (0.0, 256.0), "cap": (300.0,), "tau": (0.4,)},
-                        out_dir=str(tmp_path), progress=False, workers=0)
+                        out_dir=str(tmp_path), progress=False)
     with open(tmp_path / "trade.json") as f:
         assert json.load(f) == json.loads(json.dumps(r))
     for name in ("bitrate", "latency", "cap", "tau"):
