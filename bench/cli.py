@@ -523,6 +523,24 @@ def register(sub) -> None:
     _out(li)
     li.set_defaults(func=commands.cmd_bench_live)
 
+    cl = bs.add_parser("cluster", help="one trade sweep in this process and on 1 and 2 Ray workers: the speed-up, "
+                                       "and that the numbers are the same",
+                       description="Runs the same pibr bench trade sweep in this process, then on a local Ray with "
+                                   "each count of --workers, one after the other: wall seconds, speed-up, and "
+                                   "whether every number but the timings is the in-process run's. Needs "
+                                   "pip install 'pibr[cluster]'. Writes cluster.json.")
+    cl.add_argument("--knobs", type=_trade_knobs, default=("bitrate", "latency"), metavar="NAME,...",
+                    help="the trade knobs swept (default bitrate,latency: 8000 and 256 beside the defaults)")
+    _windows_option(cl)
+    cl.add_argument("--window-seconds", type=arguments.positive, default=1.0,
+                    help="the first seconds of each window (default 1)")
+    cl.add_argument("--stride", type=arguments.positive_int, default=4, help="score every Nth tick (default 4)")
+    _output_size(cl)
+    cl.add_argument("--workers", type=arguments.positive_ints, default=(1, 2), metavar="N,...",
+                    help="Ray worker counts to time (default 1,2)")
+    _out(cl)
+    cl.set_defaults(func=commands.cmd_bench_cluster)
+
     rt = bs.add_parser("realtime", help="server, relay and client processes on the wall clock: fps, missed "
                                         "deadlines, frame age, CPU; and the cost per session",
                        description="Runs each method with each depth codec as separate server, relay and client "

@@ -58,10 +58,14 @@ class Worker:
     """What one worker keeps between points: a GL context, loaded scenes, named caches.
 
     ``score_processes``: worker processes for :meth:`submit` (0: inline, as on a Ray actor whose
-    CPU is all it has)."""
+    CPU is all it has); ``gl_threads``: the software rasteriser's threads (Mesa llvmpipe's
+    LP_NUM_THREADS, unless already set; None: llvmpipe's own choice, a thread per core), so that
+    workers given one CPU each do not crowd each other's cores."""
 
-    def __init__(self, score_processes: int = 0):
+    def __init__(self, score_processes: int = 0, gl_threads: int | None = None):
         self.score_processes = score_processes
+        if gl_threads is not None:
+            os.environ.setdefault("LP_NUM_THREADS", str(gl_threads))
         self._ctx = None
         self._scenes: dict = {}
         self._caches: dict = {}
@@ -99,6 +103,10 @@ class Worker:
     def run(self, function, kwargs: dict):
         return function(self, **kwargs)
 
+    def gl_renderer(self) -> str | None:
+        """The GL renderer this worker's context runs on (None before it made one)."""
+        return None if self._ctx is None else self._ctx.info.get("GL_RENDERER")
+
     def close(self) -> None:
         if self._pool is not None:
             self._pool.shutdown(cancel_futures=True)
@@ -122,13 +130,39 @@ class Placement:
     def uses_ray(self) -> bool:
         return self.workers is not None or self.ray_address is not None
 
-    def to_json(self, actual_workers: int | None = None) -> dict:
+    def to_json(self, ran: dict | None = None) -> dict:
+        """What this placement asks for, with ``ran``: what :func:`run_points` found (workers, GL renderers)."""
         if not self.uses_ray:
-            return {"mode": "in-process", "workers": 1,
-                    "note": "points in order in one process, scored on one extra process"}
-        return {"mode": "ray", "workers": actual_workers or self.workers, "address": self.ray_address or "local",
-                "gpus_per_worker": self.gpus_per_worker,
-                "note": "timings (ms per display, server CPU ms) were taken beside the other workers' points"}
+            out = {"mode": "in-process", "workers": 1,
+                   "note": "points in order in one process, scored on one extra process"}
+        else:
+            out = {"mode": "ray", "workers": self.workers, "address": self.ray_address or "local",
+                   "gpus_per_worker": self.gpus_per_worker,
+                   "note": "timings (ms per display, server CPU ms) were taken beside the other workers' points"}
+        return out | (ran or {})
+
+
+#: Fields of a sweep's result that are measured times or say where it ran: everything else is
+#: the same wherever and in whatever order its points run.
+TIMING_KEYS = frozenset({"client_cpu_ms", "server_cpu_ms", "seconds", "placement", "client_ms_median", "speed",
+                         "per_server_frame_ms", "encode_ms_median", "decode_ms_median"})
+
+
+def without_timings(result):
+    """``result`` (JSON-like) without the :data:`TIMING_KEYS` fields, at any depth."""
+    if isinstance(result, dict):
+        return {k: without_timings(v) for k, v in result.items() if k not in TIMING_KEYS}
+    if isinstance(result, list):
+        return [without_timings(v) for v in result]
+    return result
+
+
+def same_numbers(a, b) -> bool:
+    """Whether two results of a sweep agree in every number but the timings (NaN, e.g. a mean over
+    no pixels, equal to NaN; compared as their JSON)."""
+    import json
+
+    return json.dumps(without_timings(a), sort_keys=True) == json.dumps(without_timings(b), sort_keys=True)
 
 
 def import_ray():
@@ -143,17 +177,19 @@ def import_ray():
 
 
 def run_points(points: list[Point], placement: Placement = Placement(), bar=None,
-               on_result: Callable[[int, Any], None] | None = None) -> list:
+               on_result: Callable[[int, Any], None] | None = None, ran: dict | None = None) -> list:
     """Every point's result, in the order of ``points``. ``bar``: a tqdm updated by each finished
-    point's ``ticks``; ``on_result(index, result)`` as each finishes (e.g. to write partial results)."""
+    point's ``ticks``; ``on_result(index, result)`` as each finishes (e.g. to write partial results);
+    ``ran``: a dict given the workers used and the GL renderers they drew with."""
+    ran = {} if ran is None else ran
     if not points:
         return []
     if not placement.uses_ray:
-        return _run_here(points, bar, on_result)
-    return _run_on_ray(points, placement, bar, on_result)
+        return _run_here(points, bar, on_result, ran)
+    return _run_on_ray(points, placement, bar, on_result, ran)
 
 
-def _run_here(points, bar, on_result) -> list:
+def _run_here(points, bar, on_result, ran) -> list:
     worker = Worker(score_processes=1)
     out = []
     try:
@@ -163,6 +199,7 @@ def _run_here(points, bar, on_result) -> list:
                 bar.update(p.ticks)
             if on_result is not None:
                 on_result(i, out[-1])
+        ran.update(workers=1, gl_renderers=[r for r in [worker.gl_renderer()] if r])
     finally:
         worker.close()
     return out
@@ -177,7 +214,7 @@ def _ray_worker_count(ray, placement: Placement) -> int:
     return max(1, int(resources.get("CPU", 1)))
 
 
-def _run_on_ray(points, placement: Placement, bar, on_result) -> list:
+def _run_on_ray(points, placement: Placement, bar, on_result, ran) -> list:
     ray = import_ray()
     started = False
     if not ray.is_initialized():
@@ -196,7 +233,7 @@ def _run_on_ray(points, placement: Placement, bar, on_result) -> list:
     try:
         count = min(_ray_worker_count(ray, placement), len(points))
         actor_class = ray.remote(num_cpus=1, num_gpus=placement.gpus_per_worker)(Worker)
-        actors = [actor_class.remote(0) for _ in range(count)]
+        actors = [actor_class.remote(0, 1) for _ in range(count)]
         order = sorted(range(len(points)), key=lambda i: -points[i].cost)
         results: list = [None] * len(points)
         running: dict = {}
@@ -218,6 +255,8 @@ def _run_on_ray(points, placement: Placement, bar, on_result) -> list:
                 bar.update(points[i].ticks)
             if on_result is not None:
                 on_result(i, results[i])
+        renderers = ray.get([actor.gl_renderer.remote() for actor in actors])
+        ran.update(workers=count, gl_renderers=sorted({r for r in renderers if r}))
         log.info("%d points on %d Ray workers", len(points), count)
         return results
     finally:

@@ -193,6 +193,16 @@ def placement_of(args):
     return placement
 
 
+def cmd_bench_cluster(args) -> int:
+    from .cluster_bench import print_cluster_table, run_cluster_bench
+
+    r = run_cluster_bench(knobs=args.knobs, windows=args.windows, window_s=args.window_seconds, stride=args.stride,
+                          out_size=args.size, workers=args.workers, out_dir=args.out)
+    print_cluster_table(r)
+    print(f"written: {args.out}/cluster.json")
+    return 0 if all(run["same_numbers_as_in_process"] for run in r["runs"]) else 1
+
+
 def cmd_bench_trade(args) -> int:
     from .trade import KNOBS, print_trade_tables, run_trade_bench
 

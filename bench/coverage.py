@@ -122,7 +122,8 @@ def run_coverage_bench(scene_spec="room", windows=None, latency_ms=128.0, rate_h
 
             bar = tqdm(total=sum(counts.values()), unit="frame", desc="coverage", file=sys.stderr, leave=False,
                        disable=None)  # None: no bar when stderr is not a terminal
-        per_window = dict(zip(counts, run_points(points, placement, bar)))
+        ran = {}
+        per_window = dict(zip(counts, run_points(points, placement, bar, ran=ran)))
     finally:
         if bar is not None:
             bar.close()
@@ -132,7 +133,7 @@ def run_coverage_bench(scene_spec="room", windows=None, latency_ms=128.0, rate_h
     result = {"scene": scene.name, "windows": windows_json(windows, "reporting"), "latency_ms": latency_ms,
               "rate_hz": rate_hz, "stride": stride, "view_size": list(view_size), "output_size": list(out_size),
               "offset": list(offset_pose.as_array()), "tolerance": COVERAGE_TOLERANCE, "means": overall,
-              "placement": placement.to_json(), "per_window": per_window}
+              "placement": placement.to_json(ran), "per_window": per_window}
     write_result(out_dir, "coverage.json", result)
     from .plots import plot_coverage
 

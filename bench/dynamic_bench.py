@@ -383,7 +383,8 @@ def run_dynamic_bench(scenes=DEFAULT_SCENES, windows=DEFAULT_WINDOWS, latencies=
                    desc="bench dynamic", file=sys.stderr, leave=False, disable=None)
     t0 = time.perf_counter()
     try:
-        parts = iter(run_points([p for points in planned.values() for p in points], placement, bar))
+        ran = {}
+        parts = iter(run_points([p for points in planned.values() for p in points], placement, bar, ran=ran))
         per_scene = {scene.name: _scene_result(scene, latencies, [next(parts) for _ in planned[spec]])
                      for spec, scene in loaded.items()}
     finally:
@@ -397,7 +398,7 @@ def run_dynamic_bench(scenes=DEFAULT_SCENES, windows=DEFAULT_WINDOWS, latencies=
               "event_probes": "synthetic: a fixed head pose at the scene's viewer origin looking at the object, "
                               f"{EVENT_BEFORE:g} s before to {EVENT_AFTER:g} s after its first reversal or stop "
                               "after 1.5 s",
-              "placement": placement.to_json(), "scenes": per_scene, "seconds": time.perf_counter() - t0}
+              "placement": placement.to_json(ran), "scenes": per_scene, "seconds": time.perf_counter() - t0}
     write_result(out_dir, "dynamic.json", result)
     import os
 

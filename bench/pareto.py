@@ -347,7 +347,8 @@ def run_pareto_bench(scenes=("room",), methods=None, windows=EVALUATION_WINDOWS,
         bar = tqdm(total=total, unit="frame", desc="bench pareto", file=sys.stderr, leave=False, disable=None)
     t0 = time.perf_counter()
     try:
-        parts = iter(run_points([p for _, _, points in planned.values() for p in points], placement, bar))
+        ran = {}
+        parts = iter(run_points([p for _, _, points in planned.values() for p in points], placement, bar, ran=ran))
         per_scene = {}
         for spec, scene in loaded.items():
             scene_variants, samples, points = planned[spec]
@@ -358,7 +359,7 @@ def run_pareto_bench(scenes=("room",), methods=None, windows=EVALUATION_WINDOWS,
         if bar is not None:
             bar.close()
     result = {"latency_ms": latency_ms, "rate_hz": rate_hz, "server_fps": 10.0, "depth_codec": depth_codec,
-              "windows": windows_json(windows, "reporting"), "placement": placement.to_json(), "scenes": per_scene,
+              "windows": windows_json(windows, "reporting"), "placement": placement.to_json(ran), "scenes": per_scene,
               "seconds": time.perf_counter() - t0}
     write_result(out_dir, "pareto.json", result)
     from .plots import plot_pareto

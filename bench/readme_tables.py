@@ -323,12 +323,27 @@ def live(r: dict) -> list[str]:
                    "page: image thread %"], rows)
 
 
+def cluster(r: dict) -> list[str]:
+    """``pibr bench cluster``: one trade sweep in this process and on 1 and 2 Ray workers."""
+    rows = []
+    for run in r["runs"]:
+        p = run["placement"]
+        where = "this process (default)" if p["mode"] == "in-process" else f"Ray, {p['workers']} worker" + (
+            "s" if p["workers"] > 1 else "")
+        one, here = run.get("speedup_over_one_worker"), run.get("speedup_over_in_process")
+        rows.append([where, str(run["points"]), f"{run['seconds']:.0f}", "—" if one is None else f"{one:.2f}×",
+                     "—" if here is None else f"{here:.2f}×", "yes" if run["same_numbers_as_in_process"] else "NO"])
+    return _table(["where the points run", "points", "seconds", "speed-up over 1 worker", "over this process",
+                   "same numbers"], rows)
+
+
 RENDERERS = {"realtime": realtime, "levels": levels, "upsampling": upsampling, "pareto": pareto,
              "pareto-windows": pareto_windows, "coverage": coverage, "dynamic": dynamic, "ibr": ibr,
              "split": split, "server-projection": server_projection, "server-edges": server_edges,
              "codec-matched": codec_matched, "codec-end-to-end": codec_end_to_end, "lod-target": lod_target,
              "stereo": stereo, "stereo-server": stereo_server, "predict": predict,
-             "predict-quality": predict_quality, "network": network, "live": live}
+             "predict-quality": predict_quality, "network": network, "live": live,
+             "cluster": cluster}
 
 
 # -- the README ---------------------------------------------------------------------------------------------------

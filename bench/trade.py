@@ -432,7 +432,8 @@ def run_trade_bench(scenes=("room",), knobs=tuple(KNOBS), windows=EVALUATION_WIN
     result = {"knobs": list(knobs), "defaults": {"stream": base.to_json(), "client": defaults},
               "methods": {v.label: v.to_json() for v in methods}, "rate_hz": rate_hz, "stride": stride,
               "output": list(out_size), "flip_every": flip_every, "seed": seed,
-              "windows": windows_json(windows, purpose), "placement": placement.to_json(), "scenes": {}}
+              "windows": windows_json(windows, purpose), "placement": placement.to_json(),
+              "points": len(sweep_points), "scenes": {}}
     parts: dict = {}
 
     def gather(final: bool) -> None:
@@ -461,12 +462,14 @@ def run_trade_bench(scenes=("room",), knobs=tuple(KNOBS), windows=EVALUATION_WIN
         # what is measured so far, for a long run stopped early
         write_result(out_dir, "trade.json", result | {"complete": False, "seconds": time.perf_counter() - t0})
 
+    ran = {}
     try:
-        run_points(sweep_points, placement, bar, on_result)
+        run_points(sweep_points, placement, bar, on_result, ran)
     finally:
         if bar is not None:
             bar.close()
     gather(True)
+    result["placement"] = placement.to_json(ran)
     result["seconds"] = time.perf_counter() - t0
     result["complete"] = True
     write_result(out_dir, "trade.json", result)

@@ -2,13 +2,12 @@
 
 The Ray tests need the optional extra (pip install '.[cluster]'); they skip without it unless
 PIBR_REQUIRE_RAY=1 (as .ci/run sets)."""
-import json
 import os
 import sys
 
 import pytest
 
-from pibr.bench.cluster import Placement, Point, Worker, import_ray, run_points
+from pibr.bench.cluster import Placement, Point, Worker, import_ray, run_points, same_numbers
 from pibr.bench.windows import Window
 from pibr.protocol.errors import ConfigError
 
@@ -71,20 +70,12 @@ def test_cli_placement_options(monkeypatch, capsys):
     assert main(["bench", "dynamic", "--ray-address", "auto"]) == 2
 
 
-def _same_numbers(a, b) -> bool:
-    """Equal results but for measured times (NaN, e.g. a mean over no moving pixels, equal to NaN)."""
-    return json.dumps(_without_timings(a), sort_keys=True) == json.dumps(_without_timings(b), sort_keys=True)
-
-
-def _without_timings(x):
-    """A result with the fields that are measured times (and where it ran) left out."""
-    timing = ("client_cpu_ms", "server_cpu_ms", "seconds", "placement", "client_ms_median", "speed",
-              "per_server_frame_ms", "encode_ms_median", "decode_ms_median")
-    if isinstance(x, dict):
-        return {k: _without_timings(v) for k, v in x.items() if k not in timing}
-    if isinstance(x, list):
-        return [_without_timings(v) for v in x]
-    return x
+def test_same_numbers_ignores_timings_only():
+    a = {"seconds": 3.0, "rows": [{"dssim": 0.1, "client_cpu_ms": 5.0, "moving": float("nan")}]}
+    assert same_numbers(a, {"seconds": 9.0, "rows": [{"dssim": 0.1, "client_cpu_ms": 7.0, "moving": float("nan")}]})
+    assert not same_numbers(a, {"seconds": 3.0, "rows": [{"dssim": 0.1000001, "client_cpu_ms": 5.0,
+                                                          "moving": float("nan")}]})
+    assert not same_numbers(a, {"seconds": 3.0, "rows": [{"dssim": 0.1, "client_cpu_ms": 5.0, "moving": 0.0}]})
 
 
 @pytest.fixture(scope="module")
@@ -128,7 +119,9 @@ def test_trade_on_two_ray_workers_gives_the_serial_numbers(ray_two_cpus, tmp_pat
     ray = run_trade_bench(out_dir=str(tmp_path / "ray"), placement=Placement(workers=2), **kw)
     assert here["placement"]["mode"] == "in-process" and ray["placement"] == {**ray["placement"], "mode": "ray",
                                                                               "workers": 2}
-    assert _same_numbers(here, ray)
+    assert same_numbers(here, ray)
+    # each says what it drew with: this process's context, and each of the two workers' own
+    assert len(here["placement"]["gl_renderers"]) == 1 and ray["placement"]["gl_renderers"]
     rows = here["scenes"]["room"]["sweeps"]["bitrate"]
     assert len(rows) == 2 and rows[0]["methods"]["proxy"]["frames"] > 0
 
@@ -149,5 +142,5 @@ def test_pareto_coverage_and_dynamic_on_ray_give_the_serial_numbers(ray_two_cpus
                                      event_stride=16))):
         here = run(out_dir=str(tmp_path / "here"), progress=False, **kw)
         ray = run(out_dir=str(tmp_path / "ray"), progress=False, placement=Placement(workers=2), **kw)
-        assert _same_numbers(here, ray), run.__name__
+        assert same_numbers(here, ray), run.__name__
         assert ray["placement"]["mode"] == "ray"
