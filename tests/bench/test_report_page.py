@@ -99,6 +99,18 @@ def test_benchmark_tables_are_the_readmes_renderers(tmp_path):
     assert {p["variant"] for p in points} == set(pareto["scenes"]["room"]["variants"])
 
 
+def test_every_readme_table_of_a_benchmarks_own_file_is_in_its_report(tmp_path):
+    from pibr.bench.report import BENCH_TABLES
+
+    shown = {r for renderers in BENCH_TABLES.values() for r in renderers}
+    # tables of files no single bench run writes under that name: upsampling-edge/-h264.json (one run
+    # per depth codec, renamed), lod-target.json (five runs merged), server-edges (bench_server.json
+    # of another command line, whose own table is server-projection's)
+    assert set(readme_tables.RENDERERS) - shown == {"upsampling", "lod-target", "server-edges"}
+    shutil.copy(os.path.join(ROOT, "docs", "results", "cluster.json"), tmp_path / "cluster.json")
+    assert "<td>Ray, 2 workers</td>" in build_report(str(tmp_path))
+
+
 def test_a_benchmark_file_of_another_shape_gets_a_note_not_a_crash(tmp_path):
     (tmp_path / "pareto.json").write_text(json.dumps({"scenes": {"room": {"variants": {}}}}))
     page = build_report(str(tmp_path))
