@@ -205,6 +205,22 @@ def _run_here(points, bar, on_result, ran) -> list:
     return out
 
 
+def _check_reachable(address: str, timeout_s: float = 5.0) -> None:
+    """A ConfigError now, rather than Ray retrying for minutes, when nothing listens at HOST:PORT
+    (``ray://HOST:PORT`` or ``HOST:PORT``; ``auto`` and other forms are left to Ray)."""
+    import socket
+
+    hostport = address.removeprefix("ray://")
+    host, _, port = hostport.rpartition(":")
+    if not host or not port.isdigit():
+        return
+    try:
+        socket.create_connection((host.strip("[]"), int(port)), timeout=timeout_s).close()
+    except OSError as exc:
+        raise ConfigError(f"--ray-address {address}: nothing answers at {host}:{port} ({exc}); start a cluster "
+                          "with `ray start --head` there, or give its address (HEAD:6379, or ray://HEAD:10001)") from exc
+
+
 def _ray_worker_count(ray, placement: Placement) -> int:
     if placement.workers is not None:
         return placement.workers
@@ -217,6 +233,8 @@ def _ray_worker_count(ray, placement: Placement) -> int:
 def _run_on_ray(points, placement: Placement, bar, on_result, ran) -> list:
     ray = import_ray()
     started = False
+    if placement.ray_address is not None:
+        _check_reachable(placement.ray_address)
     if not ray.is_initialized():
         kwargs = dict(include_dashboard=False, logging_level=logging.WARNING)
         if placement.ray_address is None:

@@ -56,6 +56,15 @@ def test_without_ray_the_error_names_the_extra(monkeypatch):
         run_points([Point(_square, {"x": 1})], Placement(workers=2))
 
 
+def test_a_ray_address_where_nothing_listens_is_refused_at_once():
+    pytest.importorskip("ray")
+    from pibr.bench.processes import free_port
+
+    for address in (f"127.0.0.1:{free_port()}", f"ray://127.0.0.1:{free_port()}"):
+        with pytest.raises(ConfigError, match=f"--ray-address {address}: nothing answers at 127.0.0.1"):
+            run_points([Point(_square, {"x": 1})], Placement(ray_address=address))
+
+
 def test_cli_placement_options(monkeypatch, capsys):
     from pibr.cli import main
 
