@@ -221,6 +221,19 @@ def _check_reachable(address: str, timeout_s: float = 5.0) -> None:
                           "with `ray start --head` there, or give its address (HEAD:6379, or ray://HEAD:10001)") from exc
 
 
+def _check_resources(resources: dict, count: int, gpus_per_worker: float) -> None:
+    """A ConfigError when not even one worker fits on the cluster (it would wait forever); a
+    warning when only some do (the rest start as the cluster grows or others finish)."""
+    cpus, gpus = resources.get("CPU", 0), resources.get("GPU", 0)
+    if cpus < 1 or gpus < gpus_per_worker:
+        raise ConfigError(f"a worker asks Ray for 1 CPU and {gpus_per_worker:g} GPU(s), and the cluster has "
+                          f"{cpus:g} CPU(s) and {gpus:g} GPU(s): start machines with GPUs "
+                          "(ray start --num-gpus 1) or leave --gpus-per-worker out")
+    if count > cpus or count * gpus_per_worker > gpus:
+        log.warning("%d workers ask for %d CPUs and %g GPUs; the cluster has %g and %g: some wait for room",
+                    count, count, count * gpus_per_worker, cpus, gpus)
+
+
 def _ray_worker_count(ray, placement: Placement) -> int:
     if placement.workers is not None:
         return placement.workers
@@ -250,6 +263,7 @@ def _run_on_ray(points, placement: Placement, bar, on_result, ran) -> list:
     actors = []
     try:
         count = min(_ray_worker_count(ray, placement), len(points))
+        _check_resources(ray.cluster_resources(), count, placement.gpus_per_worker)
         actor_class = ray.remote(num_cpus=1, num_gpus=placement.gpus_per_worker)(Worker)
         actors = [actor_class.remote(0, 1) for _ in range(count)]
         order = sorted(range(len(points)), key=lambda i: -points[i].cost)

@@ -65,6 +65,17 @@ def test_a_ray_address_where_nothing_listens_is_refused_at_once():
             run_points([Point(_square, {"x": 1})], Placement(ray_address=address))
 
 
+def test_workers_the_cluster_cannot_hold_are_refused_or_warned(caplog):
+    from pibr.bench.cluster import _check_resources
+
+    with pytest.raises(ConfigError, match=r"1 CPU and 1 GPU\(s\), and the cluster has 2 CPU\(s\) and 0 GPU"):
+        _check_resources({"CPU": 2.0}, 2, 1.0)
+    _check_resources({"CPU": 2.0}, 2, 0.0)
+    assert not caplog.records
+    _check_resources({"CPU": 2.0, "GPU": 1.0}, 2, 1.0)
+    assert "some wait for room" in caplog.text
+
+
 def test_cli_placement_options(monkeypatch, capsys):
     from pibr.cli import main
 
