@@ -73,10 +73,28 @@ def _frames(path: str):
             yield frame.to_ndarray(format="rgb24")
 
 
-def _stack_rows(rows, scale: int) -> np.ndarray:
-    out = np.concatenate([np.concatenate(r, axis=1) for r in rows], axis=0)
-    if scale > 1:
-        out = out[::scale, ::scale]
+def _side_by_side(pairs, scale: int) -> np.ndarray:
+    """One video frame: per (shown (H, W, 3), ground truth (H, W, 3)) pair a row
+    ``shown | ground truth | error image``, every ``scale``-th pixel of every ``scale``-th row of
+    the whole, cropped to even sides. Each tile is subsampled before the error image is made,
+    at the phase its offset in the whole gives, so the frame equals subsampling the full-size
+    mosaic while touching a 1/scale² share of the pixels."""
+    rows = []
+    top = 0
+    for shown, ref in pairs:
+        h, w = ref.shape[:2]
+        y0 = -top % scale
+        tiles, left = [], 0
+        for kind in range(3):
+            x0 = -left % scale
+            if kind == 2:
+                tiles.append(error_image(ref[y0::scale, x0::scale], shown[y0::scale, x0::scale]))
+            else:
+                tiles.append((shown, ref)[kind][y0::scale, x0::scale])
+            left += w
+        rows.append(np.concatenate(tiles, axis=1))
+        top += h
+    out = np.concatenate(rows, axis=0)
     h, w = out.shape[:2]
     return np.ascontiguousarray(out[: h - h % 2, : w - w % 2])
 
@@ -176,7 +194,7 @@ def evaluate_run(run_dir: str, scene_spec: str | None = None, flip_every: int = 
                     raise ConfigError(f"{m}.lossless.mkv frames are {img.shape}, expected {ref.shape}")
                 displayed[m] = img
                 if writer is not None:
-                    rows.append([img, ref, error_image(ref, img)])
+                    rows.append((img, ref))
             # one task per eye and tick: its ground truth's share of SSIM is computed once for every method
             for eye in eyes:
                 names = [m for m in methods if recordings[m]["eye"] == eye]
@@ -192,7 +210,7 @@ def evaluate_run(run_dir: str, scene_spec: str | None = None, flip_every: int = 
                     consistency[m].append(stereo_consistency(displayed[left], displayed[right], truth["left"],
                                                              truth["right"], pairs))
             if writer is not None:
-                writer.write(_stack_rows(rows, 2))
+                writer.write(_side_by_side(rows, 2))
             settle(block=False)
             if bar is not None:
                 bar.update(1)

@@ -22,8 +22,14 @@ def _check_pair(ref: np.ndarray, test: np.ndarray) -> None:
 
 def psnr(ref: np.ndarray, test: np.ndarray) -> float:
     """PSNR in dB of uint8 (H, W, 3) images; PSNR_CAP when they are identical."""
+    from .metric_kernels import squared_error_sum
+
     _check_pair(ref, test)
-    mse = np.mean((ref.astype(np.float64) - test.astype(np.float64)) ** 2)
+    if ref.dtype == np.uint8 and test.dtype == np.uint8:
+        # np.mean((ref - test) ** 2) in float64, to the bit: a sum of integer squares is exact
+        mse = squared_error_sum(np.ascontiguousarray(ref), np.ascontiguousarray(test)) / ref.size
+    else:
+        mse = np.mean((ref.astype(np.float64) - test.astype(np.float64)) ** 2)
     if mse <= 0:
         return PSNR_CAP
     return min(PSNR_CAP, 10.0 * math.log10(255.0 ** 2 / mse))
@@ -54,33 +60,26 @@ class SsimReference:
     recomputing them."""
 
     def __init__(self, ref: np.ndarray):
-        from scipy.ndimage import uniform_filter
+        from .metric_kernels import reference_channel
 
-        if ref.ndim != 3 or ref.shape[2] != 3 or min(ref.shape[:2]) < SSIM_WIN:
-            raise ValueError(f"need an (H, W, 3) image of at least {SSIM_WIN}x{SSIM_WIN}, got {ref.shape}")
+        if ref.ndim != 3 or ref.shape[2] != 3 or min(ref.shape[:2]) < SSIM_WIN or ref.dtype != np.uint8:
+            raise ValueError(f"need an (H, W, 3) uint8 image of at least {SSIM_WIN}x{SSIM_WIN}, got {ref.shape} "
+                             f"{ref.dtype}")
         self.ref = ref
-        self._channels = []
-        for c in range(3):
-            x = ref[..., c].astype(np.float64)
-            ux = uniform_filter(x, size=SSIM_WIN)
-            uxx = uniform_filter(x * x, size=SSIM_WIN)
-            self._channels.append((x, ux, ux ** 2, _SSIM_COV_NORM * (uxx - ux * ux)))
+        ref = np.ascontiguousarray(ref)
+        self._channels = [reference_channel(ref, c, SSIM_WIN, _SSIM_COV_NORM) for c in range(3)]
 
     def ssim(self, test: np.ndarray) -> float:
-        from scipy.ndimage import uniform_filter
+        from .metric_kernels import ssim_map
 
         _check_pair(self.ref, test)
+        if test.dtype != np.uint8:
+            raise ValueError(f"need a uint8 image, got {test.dtype}")
+        test = np.ascontiguousarray(test)
         pad = (SSIM_WIN - 1) // 2
         values = np.empty(3, np.float64)
         for c, (x, ux, ux2, vx) in enumerate(self._channels):
-            y = test[..., c].astype(np.float64)
-            uy = uniform_filter(y, size=SSIM_WIN)
-            uyy = uniform_filter(y * y, size=SSIM_WIN)
-            uxy = uniform_filter(x * y, size=SSIM_WIN)
-            vy = _SSIM_COV_NORM * (uyy - uy * uy)
-            vxy = _SSIM_COV_NORM * (uxy - ux * uy)
-            a1, a2, b1, b2 = 2 * ux * uy + _SSIM_C1, 2 * vxy + _SSIM_C2, ux2 + uy ** 2 + _SSIM_C1, vx + vy + _SSIM_C2
-            s = (a1 * a2) / (b1 * b2)
+            s = ssim_map(test, c, x, ux, ux2, vx, SSIM_WIN, _SSIM_COV_NORM, _SSIM_C1, _SSIM_C2)
             values[c] = s[pad:s.shape[0] - pad, pad:s.shape[1] - pad].mean(dtype=np.float64)
         return float(values.mean())
 
@@ -122,9 +121,7 @@ def pixels_per_degree(width: int, fov_deg: float) -> float:
 
 def frame_metrics(ref: np.ndarray, test: np.ndarray, ppd: float, with_flip: bool = True) -> dict:
     """All per-frame metrics of one displayed image (FLIP is NaN when skipped)."""
-    s = ssim(ref, test)
-    return {"psnr": psnr(ref, test), "ssim": s, "dssim": dssim(s),
-            "flip": flip(ref, test, ppd) if with_flip else float("nan")}
+    return tick_metrics(ref, [test], ppd, with_flip)[0]
 
 
 @functools.lru_cache(maxsize=4)
@@ -140,8 +137,12 @@ def _error_colours(gain: float) -> np.ndarray:
 
 def error_image(ref: np.ndarray, test: np.ndarray, gain: float = 4.0) -> np.ndarray:
     """(H, W, 3) uint8 heat map of the per-pixel colour difference (magma), for videos."""
-    total = np.abs(ref.astype(np.int16) - test.astype(np.int16)).sum(axis=2, dtype=np.int16)
-    return _error_colours(float(gain))[total]
+    from .metric_kernels import colour_by_difference
+
+    _check_pair(ref, test)
+    if ref.dtype != np.uint8 or test.dtype != np.uint8:
+        raise ValueError(f"need uint8 images, got {ref.dtype} and {test.dtype}")
+    return colour_by_difference(ref, test, _error_colours(float(gain)))
 
 
 def nearly_uniform(image: np.ndarray, fraction: float = 0.95, tolerance: int = 2) -> bool:

@@ -102,18 +102,24 @@ def test_shared_reference_ssim_is_scikit_images_to_the_bit(seed):
     assert 0.2 < reference.ssim(test) < 0.95
 
 
-def test_tick_metrics_are_frame_metrics_of_each_image():
+def test_tick_metrics_are_the_libraries_metrics_of_each_image():
+    """tick_metrics and frame_metrics (compiled SSIM and PSNR, the reference's share computed
+    once) equal scikit-image's SSIM, numpy's PSNR and flip-evaluator's FLIP of each image."""
     from pibr.bench.metrics import tick_metrics
 
     ref, test = _scene_like_pair(3)
     images = [test, np.roll(test, 5, axis=0), ref]
     for with_flip in (True, False):
         got = tick_metrics(ref, images, 30.0, with_flip)
-        want = [frame_metrics(ref, img, 30.0, with_flip) for img in images]
-        for g, w in zip(got, want):
-            assert g.keys() == w.keys()
+        single = [frame_metrics(ref, img, 30.0, with_flip) for img in images]
+        want = [{"psnr": psnr(ref, img), "ssim": ssim(ref, img), "dssim": dssim(ssim(ref, img)),
+                 "flip": flip(ref, img, 30.0) if with_flip else math.nan} for img in images]
+        for g, one, w in zip(got, single, want):
+            assert g.keys() == one.keys() == w.keys()
             for k in g:
-                assert g[k] == w[k] or (math.isnan(g[k]) and math.isnan(w[k])), k
+                assert g[k] == one[k] == w[k] or (k == "flip" and not with_flip and math.isnan(g[k])
+                                                  and math.isnan(one[k])), k
+        assert got[0]["ssim"] < 0.95 and got[2]["ssim"] == 1.0
 
 
 def test_error_image_is_the_magma_of_the_mean_difference():
@@ -124,3 +130,40 @@ def test_error_image_is_the_magma_of_the_mean_difference():
     lut = (colormaps["magma"](np.linspace(0, 1, 256))[:, :3] * 255).astype(np.uint8)
     for gain in (1.0, 4.0):
         assert np.array_equal(error_image(ref, test, gain), lut[np.clip(diff * gain * 255, 0, 255).astype(np.uint8)])
+
+
+@pytest.mark.parametrize("shape", [(64, 96, 3), (35, 51, 3), (36, 49, 3)])
+@pytest.mark.parametrize("scale", [1, 2, 3])
+def test_side_by_side_frame_is_the_full_mosaic_subsampled(shape, scale):
+    """The video frame is made from subsampled tiles; it must equal subsampling the full-size
+    mosaic (shown | truth | error per row), at every phase odd sizes give the tiles."""
+    from pibr.bench.evaluate import _side_by_side
+
+    pairs = [(_img(seed, shape), _img(seed + 10, shape)) for seed in range(3)]
+    mosaic = np.concatenate([np.concatenate([shown, ref, error_image(ref, shown)], axis=1) for shown, ref in pairs],
+                            axis=0)[::scale, ::scale]
+    h, w = mosaic.shape[:2]
+    want = mosaic[: h - h % 2, : w - w % 2]
+    got = _side_by_side(pairs, scale)
+    assert got.flags.c_contiguous
+    assert np.array_equal(got, want)
+
+
+@pytest.mark.parametrize("shape", [(7, 7, 3), (8, 13, 3), (61, 37, 3)])
+def test_compiled_ssim_and_psnr_are_the_libraries_numbers_at_any_size(shape):
+    """SSIM's compiled box filters (reflected borders on short lines too) and PSNR's exact sum
+    give scikit-image's and numpy's bits, on sizes down to SSIM's window."""
+    from skimage.metrics import structural_similarity
+
+    from pibr.bench.metrics import SsimReference
+
+    for seed in range(4):
+        ref = _img(seed, shape)
+        reference = SsimReference(ref)
+        near = np.clip(ref.astype(np.int16) + np.random.default_rng(seed).integers(-9, 10, shape), 0, 255)
+        for test in (near.astype(np.uint8), _img(seed + 50, shape), ref):
+            assert reference.ssim(test) == float(structural_similarity(ref, test, channel_axis=2, data_range=255))
+            mse = np.mean((ref.astype(np.float64) - test.astype(np.float64)) ** 2)
+            assert psnr(ref, test) == (PSNR_CAP if mse == 0 else min(PSNR_CAP, 10 * math.log10(255.0 ** 2 / mse)))
+    with pytest.raises(ValueError, match="uint8"):
+        SsimReference(ref.astype(np.float32))
