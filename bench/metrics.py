@@ -1,8 +1,8 @@
 """Image-quality metrics against ground truth.
 
 PSNR (dB, capped at PSNR_CAP so identical images give a finite, comparable number),
-SSIM and DSSIM = (1 - SSIM) / 2 (scikit-image, on all three channels), FLIP (NVIDIA's
-flip-evaluator, LDR, with the display's pixels per degree) and the fraction of pixels no
+SSIM and DSSIM = (1 - SSIM) / 2 (scikit-image's, on all three channels), FLIP (NVIDIA
+flip-evaluator's LDR-FLIP with the display's pixels per degree) and the fraction of pixels no
 transmitted view covered (reported by the client).
 """
 from __future__ import annotations
@@ -86,13 +86,16 @@ class SsimReference:
 
 def tick_metrics(ref: np.ndarray, images: list, ppd: float, with_flip: bool = True) -> list[dict]:
     """:func:`frame_metrics` of each of ``images`` against one ``ref`` (the same numbers), the
-    reference's share of SSIM computed once."""
+    reference's shares of SSIM and FLIP computed once."""
+    from .flip_metric import FlipReference
+
     reference = SsimReference(ref)
+    flip_reference = FlipReference(ref, ppd) if with_flip and images else None
     out = []
     for test in images:
         s = reference.ssim(test)
         out.append({"psnr": psnr(ref, test), "ssim": s, "dssim": dssim(s),
-                    "flip": flip(ref, test, ppd) if with_flip else float("nan")})
+                    "flip": flip_reference.mean(test) if flip_reference is not None else float("nan")})
     return out
 
 
@@ -100,18 +103,13 @@ def dssim(ssim_value: float) -> float:
     return (1.0 - ssim_value) / 2.0
 
 
-def flip(ref: np.ndarray, test: np.ndarray, pixels_per_degree: float = 67.0, with_map: bool = False):
-    """Mean FLIP error in [0, 1] (lower is better); with ``with_map`` also the (H, W) error map."""
-    import flip_evaluator
+def flip(ref: np.ndarray, test: np.ndarray, pixels_per_degree: float = 67.0) -> float:
+    """Mean LDR-FLIP error in [0, 1] (lower is better) of (H, W, 3) uint8 sRGB images: NVIDIA
+    flip-evaluator's number, computed by bench/flip_metric.py (its maps too: FlipReference)."""
+    from .flip_metric import FlipReference
 
     _check_pair(ref, test)
-    r = ref.astype(np.float32) / 255.0
-    t = test.astype(np.float32) / 255.0
-    error_map, mean, _ = flip_evaluator.evaluate(r, t, "LDR", inputsRGB=True, applyMagma=False,
-                                                 computeMeanError=True, parameters={"ppd": float(pixels_per_degree)})
-    if with_map:
-        return float(mean), np.asarray(error_map).reshape(ref.shape[:2] + (-1,))[:, :, 0]
-    return float(mean)
+    return FlipReference(ref, pixels_per_degree).mean(test)
 
 
 def pixels_per_degree(width: int, fov_deg: float) -> float:
