@@ -69,6 +69,42 @@ def test_server_relay_client_processes(tmp_path):
     assert all(0 < float(r["flip"]) < 1 for r in rows[::6])
     for name in ("quality.png", "side_by_side.mp4", "metrics_frames.csv"):
         assert os.path.getsize(os.path.join(out, name)) > 1000
+    _scores_are_the_libraries(out, rows, "rotation")
+
+
+def _scores_are_the_libraries(run_dir, rows, method):
+    """The scores evaluate wrote for ``method`` (compiled SSIM, PSNR and FLIP, a tick's ground truth
+    shared by its methods) equal scikit-image's SSIM, numpy's PSNR and flip-evaluator's FLIP of the
+    same recorded images against the same ground truth, to the bit."""
+    import numpy as np
+    from skimage.metrics import structural_similarity
+
+    from pibr.bench.evaluate import _frames, read_session
+    from pibr.bench.groundtruth import GroundTruth
+    from pibr.bench.metrics import pixels_per_degree
+    from pibr.protocol.pose import Pose
+    from pibr.scenes.registry import load_scene
+
+    from .bench.test_flip_metric import library_flip
+
+    client = read_session(run_dir)["client"]
+    records = read_records(os.path.join(run_dir, f"{method}.records.csv"))
+    gt = GroundTruth(load_scene("room"), client["width"], client["height"], client["fov_deg"])
+    ppd = pixels_per_degree(client["width"], client["fov_deg"])
+    frames = _frames(os.path.join(run_dir, f"{method}.lossless.mkv"))
+    try:
+        for i, (rec, row, shown) in enumerate(zip(records, rows, frames)):
+            if i % 3:
+                continue
+            pose = Pose.make([rec["px"], rec["py"], rec["pz"]], [rec["qw"], rec["qx"], rec["qy"], rec["qz"]])
+            truth = gt.render(pose, rec["scene_t"])
+            mse = np.mean((truth.astype(np.float64) - shown.astype(np.float64)) ** 2)
+            assert float(row["psnr"]) == min(100.0, 10 * math.log10(255.0 ** 2 / mse))
+            assert float(row["ssim"]) == float(structural_similarity(truth, shown, channel_axis=2, data_range=255))
+            if row["flip"]:
+                assert float(row["flip"]) == library_flip(truth, shown, ppd)[1]
+    finally:
+        gt.close()
 
 
 def test_two_eyes_over_real_processes(tmp_path):
