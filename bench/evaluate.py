@@ -18,11 +18,13 @@ disagree beyond what the ground truth's two eyes do).
     quality.png          quality and frame age over time
     side_by_side.mp4     per method one row: method | ground truth | error image
 
-Metrics run in worker processes while this process renders ground truth and decodes.
+Metrics run in worker processes while this process renders ground truth and decodes, and the
+geometric holes of each eye in a process of their own.
 """
 from __future__ import annotations
 
 import concurrent.futures
+import contextlib
 import csv
 import logging
 import math
@@ -130,7 +132,8 @@ def evaluate_run(run_dir: str, scene_spec: str | None = None, flip_every: int = 
     streams = {m: _frames(os.path.join(run_dir, f"{m}.lossless.mkv")) for m in methods}
     shown = dict.fromkeys(methods)   # each method's image on screen
     gt = GroundTruth(scene, width, height, fov)
-    transmitted = {eye: TransmittedViews(scene, info["session"], (width, height), fov) for eye in eyes}
+    transmitted = ({eye: TransmittedViews(scene, info["session"], (width, height), fov) for eye in eyes}
+                   if workers == 0 else {})
     pairs_of = _stereo_pairs(recordings)   # method -> (left recording, right recording)
     consistency = {m: [] for m in pairs_of}
     rays = None
@@ -145,6 +148,19 @@ def evaluate_run(run_dir: str, scene_spec: str | None = None, flip_every: int = 
     # locked forever if the parent used them before.
     pool = (concurrent.futures.ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"))
             if workers > 0 else None)
+    # The geometric holes need only the records: per eye one task, in a process of its own (with
+    # its own GL context) while this one renders ground truth and the pool scores.
+    # (multiprocessing's Pool: on an error it can be stopped at once, not waited for.)
+    holes_pool = None
+    if workers > 0:
+        with _environment(OPENBLAS_NUM_THREADS="1"):   # see geometric_holes
+            holes_pool = multiprocessing.get_context("spawn").Pool(len(eyes))
+    holes_of = {}
+    if holes_pool is not None:
+        spec = scene_spec or info["session"]["scene"]["name"]
+        for eye in eyes:
+            holes_of[eye] = holes_pool.apply_async(geometric_holes, (spec, info["session"], records[first_of[eye]][:n],
+                                                                     (width, height), fov))
     writer = None
     if side_by_side:
         from .video_writer import VideoWriter
@@ -174,7 +190,8 @@ def evaluate_run(run_dir: str, scene_spec: str | None = None, flip_every: int = 
                 truth[eye] = gt.render(pose, rec["scene_t"])
                 if pairs_of:
                     truth_distance[eye] = gt.distance()
-                geometric[eye].append(transmitted[eye].holes(pose, rec))
+                if holes_pool is None:
+                    geometric[eye].append(transmitted[eye].holes(pose, rec))
             uniform += nearly_uniform(truth[eyes[0]])
             rows = []
             displayed = {}
@@ -215,6 +232,10 @@ def evaluate_run(run_dir: str, scene_spec: str | None = None, flip_every: int = 
             if bar is not None:
                 bar.update(1)
         settle(block=True)
+        for eye, task in holes_of.items():
+            geometric[eye] = task.get()
+        if holes_pool is not None:
+            holes_pool.close()
     finally:
         if bar is not None:
             bar.close()
@@ -223,6 +244,9 @@ def evaluate_run(run_dir: str, scene_spec: str | None = None, flip_every: int = 
             t.close()
         if pool is not None:
             pool.shutdown(cancel_futures=True)
+        if holes_pool is not None:
+            holes_pool.terminate()   # after close(): the finished workers; after an error: stop them
+            holes_pool.join()
         if writer is not None:
             writer.close()
 
@@ -291,6 +315,36 @@ def _stereo_pairs(recordings: dict) -> dict:
     for name, r in recordings.items():
         eyes.setdefault(r.get("method", name), {})[r["eye"]] = name
     return {m: (e["left"], e["right"]) for m, e in eyes.items() if "left" in e and "right" in e}
+
+
+@contextlib.contextmanager
+def _environment(**values):
+    """Environment variables set for the processes started inside (spawned children read them)."""
+    old = {k: os.environ.get(k) for k in values}
+    os.environ.update(values)
+    try:
+        yield
+    finally:
+        for k, v in old.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
+
+
+def geometric_holes(scene_spec: str, session: dict, records: list, out_size, fov_deg: float) -> list[dict]:
+    """:meth:`TransmittedViews.holes` of every tick of one eye's ``records`` (its poses and frames),
+    in this process: a task for a worker of its own. Its worker runs with one BLAS thread: the
+    (n, 3) @ (3, 3) products of the coverage test gain nothing from more, and idle BLAS threads
+    spin, taking CPU from the other workers (measured: half of this test's CPU time)."""
+    from pibr.scenes.registry import load_scene
+
+    views = TransmittedViews(load_scene(scene_spec), session, out_size, fov_deg)
+    try:
+        return [views.holes(Pose.make([r["px"], r["py"], r["pz"]], [r["qw"], r["qx"], r["qy"], r["qz"]]), r)
+                for r in records]
+    finally:
+        views.close()
 
 
 class TransmittedViews:
