@@ -7,7 +7,10 @@ import numpy as np
 
 
 class VideoWriter:
-    def __init__(self, path: str, rate_hz: float, crf: int = 23):
+    def __init__(self, path: str, rate_hz: float, crf: int = 23, preset: str = "superfast"):
+        """``preset``: x264's; superfast, measured on the demo's side-by-side video (1440x810, crf 23),
+        costs 23 CPU-ms a frame against veryfast's 38 for a file 30 % larger (the video is for watching;
+        scoring time is what the demo waits for)."""
         import av
 
         self._av = av
@@ -15,7 +18,7 @@ class VideoWriter:
         self._container = av.open(path, "w")
         self._stream = self._container.add_stream("libx264", rate=fractions.Fraction(rate_hz).limit_denominator(1000))
         self._stream.pix_fmt = "yuv420p"
-        self._stream.options = {"preset": "veryfast", "crf": str(crf)}
+        self._stream.options = {"preset": preset, "crf": str(crf)}
         self._size = None
         self.frames = 0
 

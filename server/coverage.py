@@ -17,9 +17,10 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numba import njit
 
 from pibr.protocol.pose import Pose
-from pibr.protocol.projection import FORWARD
+from pibr.protocol.projection import EPS, FORWARD
 
 #: Relative distance tolerance of the coverage test (as depth peeling's, see renderer.py).
 COVERAGE_TOLERANCE = 0.03
@@ -32,28 +33,65 @@ def project_to_view(points: np.ndarray, view_pose: Pose):
     return np.stack([tx, ty], axis=1), r, local[:, 2] <= 0.0
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _project(px, py, pz):
+    """FORWARD (protocol/projection.py) of one camera-space point -> (t'_x, t'_y, r), the same
+    float64 operations numpy performs on arrays (tests/server/test_coverage.py: to the bit)."""
+    m = max(max(abs(px), abs(py)), max(abs(pz), EPS))
+    qx = px / m
+    qy = py / m
+    qz = pz / m
+    qn = math.sqrt(qx * qx + qy * qy + qz * qz)
+    r = m * qn
+    ty = min(max(qy / max(qn, EPS), -1.0), 1.0)
+    tx = min(max(qx / max(math.sqrt(qx * qx + qz * qz), EPS), -1.0), 1.0)
+    return tx, ty, r
+
+
+@njit(cache=True, nogil=True)
+def _matches(local, distance, tolerance):
+    """(n,) bool: camera-space points local (n, 3) of a view that its distance map (h, w) shows."""
+    h, w = distance.shape
+    out = np.zeros(local.shape[0], np.bool_)
+    for k in range(local.shape[0]):
+        if not local[k, 2] <= 0.0:
+            continue
+        tx, ty, r = _project(local[k, 0], local[k, 1], local[k, 2])
+        x0 = np.int64(math.floor((tx + 1.0) * 0.5 * w - 0.5))
+        y0 = np.int64(math.floor((1.0 - ty) * 0.5 * h - 0.5))
+        for dx, dy in ((0, 0), (1, 0), (0, 1), (1, 1)):
+            d = distance[min(max(y0 + dy, 0), h - 1), min(max(x0 + dx, 0), w - 1)]
+            if d > 0 and abs(d - r) < tolerance * r:
+                out[k] = True
+                break
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _sky(local, distance):
+    """(n,) bool: camera-space directions local (n, 3) along which the view shows sky."""
+    h, w = distance.shape
+    out = np.zeros(local.shape[0], np.bool_)
+    for k in range(local.shape[0]):
+        if not local[k, 2] <= 0.0:
+            continue
+        tx, ty, _ = _project(local[k, 0], local[k, 1], local[k, 2])
+        x = min(max(np.int64((tx + 1.0) * 0.5 * w), 0), w - 1)
+        y = min(max(np.int64((1.0 - ty) * 0.5 * h), 0), h - 1)
+        out[k] = distance[y, x] == 0
+    return out
+
+
 def matches_view(points, view_pose: Pose, distance: np.ndarray, tolerance: float) -> np.ndarray:
     """(n,) True where the view's distance map (h, w), row 0 on top, shows the point."""
-    h, w = distance.shape
-    t, r, front = project_to_view(points, view_pose)
-    tx = (t[:, 0] + 1.0) * 0.5 * w - 0.5
-    ty = (1.0 - t[:, 1]) * 0.5 * h - 0.5
-    x0, y0 = np.floor(tx).astype(np.int64), np.floor(ty).astype(np.int64)
-    hit = np.zeros(len(points), bool)
-    for dx, dy in ((0, 0), (1, 0), (0, 1), (1, 1)):
-        d = distance[np.clip(y0 + dy, 0, h - 1), np.clip(x0 + dx, 0, w - 1)]
-        hit |= (d > 0) & (np.abs(d - r) < tolerance * r)
-    return hit & front
+    local = (points - view_pose.p) @ view_pose.rotation()
+    return _matches(np.ascontiguousarray(local, np.float64), distance, float(tolerance))
 
 
 def sky_in_view(directions: np.ndarray, view_pose: Pose, distance: np.ndarray) -> np.ndarray:
     """(n,) True where the view shows sky along world directions (n, 3)."""
-    h, w = distance.shape
     local = directions @ view_pose.rotation()
-    tx, ty, _ = FORWARD.numpy(px=local[:, 0], py=local[:, 1], pz=local[:, 2])
-    x = np.clip(((tx + 1.0) * 0.5 * w).astype(np.int64), 0, w - 1)
-    y = np.clip(((1.0 - ty) * 0.5 * h).astype(np.int64), 0, h - 1)
-    return (local[:, 2] <= 0.0) & (distance[y, x] == 0)
+    return _sky(np.ascontiguousarray(local, np.float64), distance)
 
 
 def camera_rays(width: int, height: int, fov_deg: float) -> np.ndarray:
@@ -115,7 +153,8 @@ class CoverageProbe:
         self.peel_tolerance = PEEL_TOLERANCE
         self._own_renderer = renderer is None
         with self._current():
-            self.renderer = Renderer(self.ctx, scene, projection) if renderer is None else renderer
+            # its own renderer draws distances only (the probe reads nothing else): the same bits
+            self.renderer = Renderer(self.ctx, scene, projection, shade=False) if renderer is None else renderer
             self.primary = RenderTarget(self.ctx, *view_size)
             self.extra = RenderTarget(self.ctx, view_size[0] // 2, view_size[1] // 2)
             self.gt = RenderTarget(self.ctx, *out_size)

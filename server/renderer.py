@@ -189,7 +189,9 @@ class Renderer:
                  max_edge_angle_deg: float = MAX_EDGE_ANGLE_DEG, tess_max_level: int = 64,
                  tess_max_screen_edge: float = 48.0, wide: bool = True, cull: bool = True,
                  lod: bool = True, cube_scale: float = 0.75, wide_trilinear: bool = False,
-                 specialise: bool = True):
+                 specialise: bool = True, shade: bool = True):
+        """``shade``: False draws distances (and motion) only, every colour black: the fragment
+        shader skips lighting and textures, the distances are the same bits (coverage probes)."""
         if projection not in PROJECTIONS:
             raise ValueError(f"projection must be one of {', '.join(PROJECTIONS)}, got {projection!r}")
         self.ctx, self.scene, self.projection = ctx, scene, projection
@@ -206,8 +208,9 @@ class Renderer:
         self.specialise = specialise
         self.tess_max_screen_edge = tess_max_screen_edge
         shading = shaders.shading_glsl(scene.lights)
-        self._fragment = {name: shaders.FRAGMENT % {"shading": shading, "defines": defines + "@SWITCHES@",
-                                             "projection": PROJECTION_GLSL}
+        unshaded = "" if shade else "#define DISTANCE_ONLY\n"
+        self._fragment = {name: shaders.FRAGMENT % {"shading": shading, "defines": unshaded + defines + "@SWITCHES@",
+                                                    "projection": PROJECTION_GLSL}
                           for name, defines in (("plain", ""), ("peel", "#define PEEL\n"),
                                                 ("mark", "#define PEEL\n#define PEEL_MARK\n"))}
         self._fragment["motion"] = shaders.MOTION_FRAGMENT % {"projection": PROJECTION_GLSL}

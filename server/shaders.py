@@ -105,7 +105,11 @@ void main() {
 #elif defined(PEEL)
     if (seen_by_primary(v_cam)) discard;
 #endif
+#ifdef DISTANCE_ONLY
+    f_color = vec4(0.0, 0.0, 0.0, 1.0);   // coverage probes read distances only
+#else
     f_color = vec4(shade(v_world, v_normal, v_uv, v_color), 1.0);
+#endif
     f_dist = length(v_cam);
 }
 """
