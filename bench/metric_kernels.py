@@ -2,7 +2,7 @@
 
 Scoring a run computes SSIM for every method on every tick, and scikit-image's SSIM is many full
 passes over float64 images (three box filters per channel, a dozen element-wise operations).
-These kernels do the same arithmetic in one or two passes: each value is computed by the same
+These kernels do the same arithmetic row by row in one pass: each value is computed by the same
 IEEE operations in the same order, so the results are the same bits
 (tests/bench/test_metrics.py checks them against scikit-image and numpy).
 
@@ -30,104 +30,111 @@ def _reflect(i, n):
 
 
 @njit(cache=True, nogil=True)
-def _box_columns(sums, out, win):
-    """out (h, w) float64 = the running window sums ``sums`` (h, w) float64 of integer-valued
-    rows filtered along axis 0, divided by ``win`` (the sums are exact, so only the division rounds)."""
-    h, w = out.shape
-    half = win // 2
-    acc = np.zeros(w, np.float64)
-    for k in range(-half, half + 1):
-        r = _reflect(k, h)
-        for x in range(w):
-            acc[x] += sums[r, x]
-    for x in range(w):
-        out[0, x] = acc[x] / win
-    for y in range(1, h):
-        add = _reflect(y + half, h)
-        drop = _reflect(y - half - 1, h)
-        for x in range(w):
-            acc[x] += sums[add, x] - sums[drop, x]
-            out[y, x] = acc[x] / win
-
-
-@njit(cache=True, nogil=True)
-def _box_rows(a, out, win):
-    """out (h, w) = a (h, w) float64 filtered along axis 1 exactly as scipy's running sum does."""
-    h, w = a.shape
-    half = win // 2
-    for y in range(h):
-        tmp = 0.0
-        for k in range(-half, half + 1):
-            tmp += a[y, _reflect(k, w)]
-        out[y, 0] = tmp / win
-        for x in range(1, w):
-            tmp += a[y, _reflect(x + half, w)] - a[y, _reflect(x - half - 1, w)]
-            out[y, x] = tmp / win
-
-
-@njit(cache=True, nogil=True)
-def box_filter(a, win):
-    """scipy.ndimage.uniform_filter(a, win) of integer-valued a (h, w) float64 (h, w >= win)."""
-    tmp = np.empty_like(a)
-    out = np.empty_like(a)
-    _box_columns(a, tmp, win)
-    _box_rows(tmp, out, win)
+def channel_plane(img, c):
+    """(h, w) int32: channel ``c`` of img (h, w, 3) uint8."""
+    h, w = img.shape[:2]
+    out = np.empty((h, w), np.int32)
+    for j in range(h):
+        for i in range(w):
+            out[j, i] = img[j, i, c]
     return out
 
 
 @njit(cache=True, nogil=True)
-def reference_channel(ref, c, win, cov_norm):
-    """One channel ``c`` of a ground truth (h, w, 3) uint8: its float64 values x, local mean ux,
-    ux ** 2 and local variance (as scikit-image's SSIM computes them)."""
-    h, w = ref.shape[:2]
-    x = np.empty((h, w), np.float64)
-    xx = np.empty((h, w), np.float64)
-    for j in range(h):
+def _filtered_rows(y, x, win, sums, ext, means, row):
+    """Row ``row`` (taken in order from 0) of scipy's ``uniform_filter(., win)`` of y, y * y and
+    y * x (integer planes (h, w) int32) into means (3, w) float64. ``sums`` (3, w) int32 carries
+    the column window sums from row to row, ``ext`` (3, w + win - 1) float64 is scratch.
+
+    scipy filters along axis 0, then axis 1, each line a running sum over its reflect-extended
+    line (the first window summed from 0.0, then ``sum += new - old``) divided by ``win``. Along
+    axis 0 the sums of integers are exact, so a window sum of integers divided by ``win`` is
+    bit for bit scipy's; along axis 1 the running float64 sum is replayed in its order."""
+    h, w = y.shape
+    half = win // 2
+    if row == 0:
+        sums[:] = 0
+        for d in range(-half, half + 1):
+            r = _reflect(d, h)
+            for i in range(w):
+                a = y[r, i]
+                sums[0, i] += a
+                sums[1, i] += a * a
+                sums[2, i] += a * x[r, i]
+    else:
+        add = _reflect(row + half, h)
+        drop = _reflect(row - half - 1, h)
         for i in range(w):
-            v = np.float64(ref[j, i, c])
-            x[j, i] = v
-            xx[j, i] = v * v
-    ux = box_filter(x, win)
-    uxx = box_filter(xx, win)
+            a = y[add, i]
+            d = y[drop, i]
+            sums[0, i] += a - d
+            sums[1, i] += a * a - d * d
+            sums[2, i] += a * x[add, i] - d * x[drop, i]
+    for e in range(w + 2 * half):
+        i = _reflect(e - half, w)
+        for k in range(3):
+            ext[k, e] = sums[k, i] / win
+    t0 = 0.0
+    t1 = 0.0
+    t2 = 0.0
+    for e in range(win):
+        t0 += ext[0, e]
+        t1 += ext[1, e]
+        t2 += ext[2, e]
+    for i in range(w):
+        if i > 0:   # three independent chains, each in scipy's order
+            t0 += ext[0, i + win - 1] - ext[0, i - 1]
+            t1 += ext[1, i + win - 1] - ext[1, i - 1]
+            t2 += ext[2, i + win - 1] - ext[2, i - 1]
+        means[0, i] = t0 / win
+        means[1, i] = t1 / win
+        means[2, i] = t2 / win
+
+
+@njit(cache=True, nogil=True)
+def reference_channel(ref, c, win, cov_norm):
+    """One channel ``c`` of a ground truth (h, w, 3) uint8: its (h, w) int32 plane, and as (h, w)
+    float64 its local mean ux, ux ** 2 and local variance (as scikit-image's SSIM computes them)."""
+    h, w = ref.shape[:2]
+    x = channel_plane(ref, c)
+    ux = np.empty((h, w), np.float64)
     ux2 = np.empty((h, w), np.float64)
     vx = np.empty((h, w), np.float64)
-    for j in range(h):
+    sums = np.empty((3, w), np.int32)
+    ext = np.empty((3, w + win - 1), np.float64)
+    means = np.empty((3, w), np.float64)
+    for row in range(h):
+        _filtered_rows(x, x, win, sums, ext, means, row)
         for i in range(w):
-            u = ux[j, i]
-            ux2[j, i] = u * u
-            vx[j, i] = cov_norm * (uxx[j, i] - u * u)
+            u = means[0, i]
+            ux[row, i] = u
+            ux2[row, i] = u * u
+            vx[row, i] = cov_norm * (means[1, i] - u * u)
     return x, ux, ux2, vx
 
 
 @njit(cache=True, nogil=True)
 def ssim_map(test, c, x, ux, ux2, vx, win, cov_norm, c1, c2):
     """(h, w) float64: the SSIM map of channel ``c`` of test (h, w, 3) uint8 against a reference
-    channel's x, ux, ux ** 2 and variance vx, before cropping."""
+    channel's int32 plane x, ux, ux ** 2 and variance vx, before cropping."""
     h, w = x.shape
-    y = np.empty((h, w), np.float64)
-    yy = np.empty((h, w), np.float64)
-    xy = np.empty((h, w), np.float64)
-    for j in range(h):
-        for i in range(w):
-            v = np.float64(test[j, i, c])
-            y[j, i] = v
-            yy[j, i] = v * v
-            xy[j, i] = x[j, i] * v
-    uy = box_filter(y, win)
-    uyy = box_filter(yy, win)
-    uxy = box_filter(xy, win)
+    y = channel_plane(test, c)
     s = np.empty((h, w), np.float64)
-    for j in range(h):
+    sums = np.empty((3, w), np.int32)
+    ext = np.empty((3, w + win - 1), np.float64)
+    means = np.empty((3, w), np.float64)
+    for row in range(h):
+        _filtered_rows(y, x, win, sums, ext, means, row)
         for i in range(w):
-            a = ux[j, i]
-            b = uy[j, i]
-            vy = cov_norm * (uyy[j, i] - b * b)
-            vxy = cov_norm * (uxy[j, i] - a * b)
+            a = ux[row, i]
+            b = means[0, i]
+            vy = cov_norm * (means[1, i] - b * b)
+            vxy = cov_norm * (means[2, i] - a * b)
             a1 = 2 * a * b + c1
             a2 = 2 * vxy + c2
-            b1 = ux2[j, i] + b * b + c1
-            b2 = vx[j, i] + vy + c2
-            s[j, i] = (a1 * a2) / (b1 * b2)
+            b1 = ux2[row, i] + b * b + c1
+            b2 = vx[row, i] + vy + c2
+            s[row, i] = (a1 * a2) / (b1 * b2)
     return s
 
 
