@@ -39,10 +39,125 @@ from pibr.protocol import bounded_json
 from pibr.protocol.errors import ConfigError, JSONError
 from pibr.protocol.pose import Pose
 
-from .metrics import error_image, nearly_uniform, pixels_per_degree, tick_metrics
+from .metrics import nearly_uniform, pixels_per_degree, tick_metrics
 from .results import write_result
 
 log = logging.getLogger(__name__)
+
+
+def _shown_images(run_dir: str, methods: list, records: dict, n: int):
+    """Per tick, each method's image on screen ({method: (H, W, 3) uint8, or None before its
+    first}), decoded from its lossless recording: a tick missed keeps the previous image."""
+    streams = {m: _frames(os.path.join(run_dir, f"{m}.lossless.mkv")) for m in methods}
+    shown = dict.fromkeys(methods)
+    try:
+        for i in range(n):
+            for m in methods:
+                if records[m][i]["missed"]:
+                    continue
+                try:
+                    shown[m] = next(streams[m])
+                except StopIteration:
+                    fresh = sum(1 for r in records[m] if not r["missed"])
+                    raise ConfigError(f"{m}.lossless.mkv ends at tick {i}, but {m}.records.csv has {fresh} "
+                                      f"ticks displayed afresh (one frame each)") from None
+            yield dict(shown)
+    finally:
+        for stream in streams.values():
+            stream.close()
+
+
+class _Ahead:
+    """Iterate a generator in a thread of its own, at most ``depth`` items ahead; its error is
+    raised where the item would have been."""
+
+    _END = object()
+
+    def __init__(self, items, depth: int):
+        import queue
+        import threading
+
+        self._items, self._queue, self._stop = items, queue.Queue(depth), threading.Event()
+        self._thread = threading.Thread(target=self._run, name="evaluate-decode", daemon=True)
+        self._thread.start()
+
+    def _put(self, item) -> bool:
+        """Queue ``item`` unless the consumer has stopped; whether it was queued."""
+        import queue
+
+        while not self._stop.is_set():
+            try:
+                self._queue.put(item, timeout=0.2)
+                return True
+            except queue.Full:
+                continue
+        return False
+
+    def _run(self):
+        try:
+            for item in self._items:
+                if not self._put(item):
+                    return
+            self._put(self._END)
+        except BaseException as exc:   # handed to the consumer, never lost
+            self._put(exc)
+        finally:
+            self._items.close()
+
+    def __iter__(self):
+        return self
+
+    def __next__(self):
+        item = self._queue.get()
+        if item is self._END:
+            raise StopIteration
+        if isinstance(item, BaseException):
+            raise item
+        return item
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join()
+
+
+class _Behind:
+    """A video writer fed through a queue of at most ``depth`` frames and a thread of its own;
+    an encoding error is raised by the next write or by close."""
+
+    def __init__(self, writer, depth: int):
+        import queue
+        import threading
+
+        self._writer, self._queue, self._error, self._reported = writer, queue.Queue(depth), None, False
+        self._thread = threading.Thread(target=self._run, name="evaluate-encode", daemon=True)
+        self._thread.start()
+
+    def _run(self):
+        while True:
+            frame = self._queue.get()
+            if frame is None:
+                return
+            if self._error is None:
+                try:
+                    self._writer.write(frame)
+                except BaseException as exc:   # raised in the caller's thread
+                    self._error = exc
+
+    def write(self, frame: np.ndarray) -> None:
+        if self._error is not None:
+            self._reported = True
+            raise self._error
+        self._queue.put(frame)
+
+    def close(self) -> None:
+        """Finish the frames queued and close the writer (also after an error); raises an
+        encoding error that no write has raised yet."""
+        self._queue.put(None)
+        self._thread.join()
+        self._writer.close()
+        if self._error is not None and not self._reported:
+            self._reported = True
+            raise self._error
 
 
 def read_session(run_dir: str) -> dict:
@@ -79,29 +194,22 @@ def _frames(path: str):
 
 
 def _side_by_side(pairs, scale: int) -> np.ndarray:
-    """One video frame: per (shown (H, W, 3), ground truth (H, W, 3)) pair a row
+    """One video frame: per (shown (H, W, 3), ground truth (H, W, 3)) uint8 pair a row
     ``shown | ground truth | error image``, every ``scale``-th pixel of every ``scale``-th row of
-    the whole, cropped to even sides. Each tile is subsampled before the error image is made,
-    at the phase its offset in the whole gives, so the frame equals subsampling the full-size
-    mosaic while touching a 1/scale² share of the pixels."""
-    rows = []
-    top = 0
-    for shown, ref in pairs:
-        h, w = ref.shape[:2]
-        y0 = -top % scale
-        tiles, left = [], 0
-        for kind in range(3):
-            x0 = -left % scale
-            if kind == 2:
-                tiles.append(error_image(ref[y0::scale, x0::scale], shown[y0::scale, x0::scale]))
-            else:
-                tiles.append((shown, ref)[kind][y0::scale, x0::scale])
-            left += w
-        rows.append(np.concatenate(tiles, axis=1))
-        top += h
-    out = np.concatenate(rows, axis=0)
-    h, w = out.shape[:2]
-    return np.ascontiguousarray(out[: h - h % 2, : w - w % 2])
+    that mosaic, cropped to even sides. Only the pixels kept are read (and their error colours
+    computed): a 1/scale² share."""
+    from .metric_kernels import mosaic_rows
+    from .metrics import _error_colours
+
+    h, w = pairs[0][1].shape[:2]
+    height, width = -(-len(pairs) * h // scale), -(-3 * w // scale)
+    out = np.empty((height - height % 2, width - width % 2, 3), np.uint8)
+    colours = _error_colours(4.0)
+    for r, (shown, ref) in enumerate(pairs):
+        if shown.shape != ref.shape or ref.shape[:2] != (h, w) or shown.dtype != np.uint8 or ref.dtype != np.uint8:
+            raise ValueError(f"need (H, W, 3) uint8 pairs of one size, got {shown.shape} and {ref.shape}")
+        mosaic_rows(out, r * h, shown, ref, scale, colours)
+    return out
 
 
 def evaluate_run(run_dir: str, scene_spec: str | None = None, flip_every: int = 1, workers: int = 2,
@@ -132,8 +240,8 @@ def evaluate_run(run_dir: str, scene_spec: str | None = None, flip_every: int = 
     if n == 0:
         raise ConfigError(f"{run_dir}: the recording has no displayed frames")
     ppd = pixels_per_degree(width, fov)
-    streams = {m: _frames(os.path.join(run_dir, f"{m}.lossless.mkv")) for m in methods}
-    shown = dict.fromkeys(methods)   # each method's image on screen
+    # Decoding the recordings (PyAV lets go of the GIL) runs ahead in a thread of its own.
+    shown_images = _Ahead(_shown_images(run_dir, methods, records, n), depth=3)
     gt = GroundTruth(scene, width, height, fov)
     transmitted = ({eye: TransmittedViews(scene, info["session"], (width, height), fov) for eye in eyes}
                    if workers == 0 else {})
@@ -147,9 +255,10 @@ def evaluate_run(run_dir: str, scene_spec: str | None = None, flip_every: int = 
     uses_extra = {m: bool((info.get("methods") or {}).get(m, {}).get("uses_extra_view", False)) for m in methods}
     geometric = {eye: [] for eye in eyes}   # per eye, per tick: {"primary": fraction, "both": fraction}
     uniform = 0      # ticks whose ground truth is nearly one colour
-    # 'spawn', not fork: FLIP and SSIM use thread pools (OpenMP) that a forked child can find
-    # locked forever if the parent used them before.
-    pool = (concurrent.futures.ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"))
+    # 'spawn', not fork: this process runs threads (decoding, encoding, llvmpipe's) that a forked
+    # child could find holding locks forever.
+    pool = (concurrent.futures.ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
+                                                   initializer=keep_freed_memory)
             if workers > 0 else None)
     # The geometric holes need only the records: per eye one task, in a process of its own (with
     # its own GL context) while this one renders ground truth and the pool scores.
@@ -157,7 +266,7 @@ def evaluate_run(run_dir: str, scene_spec: str | None = None, flip_every: int = 
     holes_pool = None
     if workers > 0:
         with _environment(OPENBLAS_NUM_THREADS="1"):   # see geometric_holes
-            holes_pool = multiprocessing.get_context("spawn").Pool(len(eyes))
+            holes_pool = multiprocessing.get_context("spawn").Pool(len(eyes), initializer=keep_freed_memory)
     holes_of = {}
     if holes_pool is not None:
         spec = scene_spec or info["session"]["scene"]["name"]
@@ -168,7 +277,8 @@ def evaluate_run(run_dir: str, scene_spec: str | None = None, flip_every: int = 
     if side_by_side:
         from .video_writer import VideoWriter
 
-        writer = VideoWriter(os.path.join(run_dir, "side_by_side.mp4"), client["rate_hz"])
+        # encoded in a thread of its own (PyAV lets go of the GIL while x264 works)
+        writer = _Behind(VideoWriter(os.path.join(run_dir, "side_by_side.mp4"), client["rate_hz"]), depth=3)
     bar = None
     if progress:
         from tqdm import tqdm
@@ -199,17 +309,10 @@ def evaluate_run(run_dir: str, scene_spec: str | None = None, flip_every: int = 
             rows = []
             displayed = {}
             with_flip = flip_every > 0 and i % flip_every == 0
+            images_now = next(shown_images)
             for m in methods:
                 ref = truth[recordings[m]["eye"]]
-                if records[m][i]["missed"]:   # the display kept the previous image (blank before any)
-                    img = shown[m] if shown[m] is not None else np.zeros_like(ref)
-                else:
-                    try:
-                        img = shown[m] = next(streams[m])
-                    except StopIteration:
-                        fresh = sum(1 for r in records[m] if not r["missed"])
-                        raise ConfigError(f"{m}.lossless.mkv ends at tick {i}, but {m}.records.csv has {fresh} "
-                                          f"ticks displayed afresh (one frame each)") from None
+                img = images_now[m] if images_now[m] is not None else np.zeros_like(ref)   # blank before any
                 if img.shape != ref.shape:
                     raise ConfigError(f"{m}.lossless.mkv frames are {img.shape}, expected {ref.shape}")
                 displayed[m] = img
@@ -240,6 +343,7 @@ def evaluate_run(run_dir: str, scene_spec: str | None = None, flip_every: int = 
         if holes_pool is not None:
             holes_pool.close()
     finally:
+        shown_images.close()
         if bar is not None:
             bar.close()
         gt.close()
@@ -318,6 +422,23 @@ def _stereo_pairs(recordings: dict) -> dict:
     for name, r in recordings.items():
         eyes.setdefault(r.get("method", name), {})[r["eye"]] = name
     return {m: (e["left"], e["right"]) for m, e in eyes.items() if "left" in e and "right" in e}
+
+
+def keep_freed_memory() -> None:
+    """Let this process reuse the memory it frees instead of handing it back to the system (glibc;
+    elsewhere nothing): the metric kernels allocate and free tens of MB per image, and memory
+    mapped afresh is paid for again in page faults."""
+    import ctypes
+    import ctypes.util
+
+    try:
+        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
+        mallopt = libc.mallopt
+    except (OSError, AttributeError):
+        return
+    M_TRIM_THRESHOLD, M_MMAP_THRESHOLD = -1, -3
+    mallopt(M_MMAP_THRESHOLD, 1 << 30)    # large blocks from the heap, not fresh mappings
+    mallopt(M_TRIM_THRESHOLD, 1 << 30)    # and the heap not trimmed after each
 
 
 @contextlib.contextmanager

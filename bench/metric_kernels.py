@@ -164,3 +164,47 @@ def colour_by_difference(ref, test, colours):
             for c in range(3):
                 out[j, i, c] = colours[total, c]
     return out
+
+
+@njit(cache=True, nogil=True)
+def count_near(pixels, centre, tolerance):
+    """How many of pixels (n, 3) uint8 lie within ``tolerance`` of centre (3,) float64 in every
+    channel (numpy's ``all(abs(pixels - centre) <= tolerance)`` counted)."""
+    count = 0
+    for k in range(pixels.shape[0]):
+        near = True
+        for c in range(3):
+            if not abs(np.float64(pixels[k, c]) - centre[c]) <= tolerance:
+                near = False
+                break
+        count += near
+    return count
+
+
+@njit(cache=True, nogil=True)
+def mosaic_rows(out, top, shown, ref, scale, colours):
+    """Into out (H', W', 3) uint8, the kept pixels (every ``scale``-th of every ``scale``-th row) of
+    one mosaic row starting at mosaic row ``top``: shown | ref | the ``colours`` (766, 3) of their
+    summed absolute channel differences (the error image), each (h, w, 3) uint8."""
+    h, w = ref.shape[:2]
+    first = -(-top // scale)
+    for oy in range(first, out.shape[0]):
+        my = oy * scale - top
+        if my >= h:
+            break
+        for ox in range(out.shape[1]):
+            mx = ox * scale
+            tile = mx // w
+            x = mx - tile * w
+            if tile == 0:
+                for c in range(3):
+                    out[oy, ox, c] = shown[my, x, c]
+            elif tile == 1:
+                for c in range(3):
+                    out[oy, ox, c] = ref[my, x, c]
+            else:
+                total = 0
+                for c in range(3):
+                    total += abs(np.int32(ref[my, x, c]) - np.int32(shown[my, x, c]))
+                for c in range(3):
+                    out[oy, ox, c] = colours[total, c]

@@ -147,9 +147,13 @@ def nearly_uniform(image: np.ndarray, fraction: float = 0.95, tolerance: int = 2
     """True when more than ``fraction`` of an (H, W, 3) uint8 image is one colour (within
     ``tolerance`` levels per channel): all sky, or a wall filling the view. Every method scores
     near-perfectly on such a frame, so a score over many of them says little."""
-    flat = image.reshape(-1, 3).astype(np.int16)
-    mode = np.median(flat[:: max(1, len(flat) // 4096)], axis=0)
-    same = np.all(np.abs(flat - mode) <= tolerance, axis=1)
+    flat = image.reshape(-1, 3)
+    mode = np.median(flat[:: max(1, len(flat) // 4096)].astype(np.int16), axis=0)
+    if flat.dtype == np.uint8:
+        from .metric_kernels import count_near
+
+        return bool(count_near(flat, mode, float(tolerance)) / len(flat) > fraction)
+    same = np.all(np.abs(flat.astype(np.int16) - mode) <= tolerance, axis=1)
     return bool(same.mean() > fraction)
 
 

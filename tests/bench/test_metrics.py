@@ -169,3 +169,21 @@ def test_compiled_ssim_and_psnr_are_the_libraries_numbers_at_any_size(shape):
             assert psnr(ref, test) == (PSNR_CAP if mse == 0 else min(PSNR_CAP, 10 * math.log10(255.0 ** 2 / mse)))
     with pytest.raises(ValueError, match="uint8"):
         SsimReference(ref.astype(np.float32))
+
+
+def test_nearly_uniform_counts_as_numpy_does():
+    """The compiled count equals numpy's element-wise test, at the fraction's edge too."""
+    from pibr.bench.metrics import nearly_uniform
+
+    rng = np.random.default_rng(5)
+    for share in (0.90, 0.949, 0.951, 0.99):
+        img = np.full((60, 80, 3), 120, np.uint8)
+        img += rng.integers(-2, 3, img.shape).astype(np.uint8)          # within the tolerance
+        off = rng.random(img.shape[:2]) > share
+        img[off] = rng.integers(0, 256, (int(off.sum()), 3), dtype=np.uint8)
+        flat = img.reshape(-1, 3).astype(np.int16)
+        mode = np.median(flat[:: max(1, len(flat) // 4096)], axis=0)
+        want = bool(np.all(np.abs(flat - mode) <= 2, axis=1).mean() > 0.95)
+        assert nearly_uniform(img) == want
+        assert nearly_uniform(img[:, ::-1]) == want   # any strides
+    assert nearly_uniform(np.full((8, 8, 3), 9, np.uint8)) and not nearly_uniform(_img(3))
