@@ -493,7 +493,7 @@ class TransmittedViews:
 
     def holes(self, pose: Pose, rec: dict) -> dict:
         """{"primary": fraction, "both": fraction} for one tick's record (1.0 before any frame)."""
-        from pibr.server.coverage import uncovered
+        from pibr.server.coverage import uncovered_by_views
 
         if rec["frame_id"] < 0:
             return {"primary": 1.0, "both": 1.0}
@@ -508,10 +508,9 @@ class TransmittedViews:
             self._frame = (rec["frame_id"], views)
         views = self._frame[1]
         points, sky, dirs = self.probe.display_points(pose, rec["scene_t"])
-        out = {"primary": float(uncovered(points, sky, dirs, views[:1]).mean())}
-        out["both"] = (float(uncovered(points, sky, dirs, views, peeled_marked=self.probe.mark_peeled).mean())
-                       if len(views) > 1 else out["primary"])
-        return out
+        # the primary's mask is where testing both views starts: it is tested once
+        masks = uncovered_by_views(points, sky, dirs, views, peeled_marked=self.probe.mark_peeled)
+        return {"primary": float(masks[0].mean()), "both": float(masks[-1].mean())}
 
     def close(self) -> None:
         self.probe.close()

@@ -187,24 +187,26 @@ def mosaic_rows(out, top, shown, ref, scale, colours):
     one mosaic row starting at mosaic row ``top``: shown | ref | the ``colours`` (766, 3) of their
     summed absolute channel differences (the error image), each (h, w, 3) uint8."""
     h, w = ref.shape[:2]
+    width = out.shape[1]
     first = -(-top // scale)
     for oy in range(first, out.shape[0]):
         my = oy * scale - top
         if my >= h:
             break
-        for ox in range(out.shape[1]):
-            mx = ox * scale
-            tile = mx // w
-            x = mx - tile * w
-            if tile == 0:
-                for c in range(3):
-                    out[oy, ox, c] = shown[my, x, c]
-            elif tile == 1:
-                for c in range(3):
-                    out[oy, ox, c] = ref[my, x, c]
-            else:
-                total = 0
-                for c in range(3):
-                    total += abs(np.int32(ref[my, x, c]) - np.int32(shown[my, x, c]))
-                for c in range(3):
-                    out[oy, ox, c] = colours[total, c]
+        for tile in range(3):
+            start = -(-(tile * w) // scale)            # the first kept column in this tile
+            stop = min(width, -(-((tile + 1) * w) // scale))
+            for ox in range(start, stop):
+                x = ox * scale - tile * w
+                if tile == 0:
+                    for c in range(3):
+                        out[oy, ox, c] = shown[my, x, c]
+                elif tile == 1:
+                    for c in range(3):
+                        out[oy, ox, c] = ref[my, x, c]
+                else:
+                    total = 0
+                    for c in range(3):
+                        total += abs(np.int32(ref[my, x, c]) - np.int32(shown[my, x, c]))
+                    for c in range(3):
+                        out[oy, ox, c] = colours[total, c]

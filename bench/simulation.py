@@ -16,7 +16,7 @@ import numpy as np
 
 from pibr.protocol.messages import Hello, OutputConfig, PayloadKind
 
-from pibr.server.coverage import displayed_points, uncovered
+from pibr.server.coverage import displayed_points, uncovered_by_views
 
 from .metrics import dssim, nearly_uniform, psnr, ssim
 
@@ -405,10 +405,7 @@ def geometric_holes(rays, pose, gt_distance, frame, distances, peeled_marked: bo
     """Geometric hole fraction of the displayed view for the primary view alone and for both."""
     points, sky, dirs = displayed_points(rays, pose, gt_distance)
     views = [(frame.primary_pose, distances["primary"], False)]
-    out = {"primary": float(uncovered(points, sky, dirs, views).mean())}
     if "extra" in distances and frame.extra_pose is not None:
         views.append((frame.extra_pose, distances["extra"], True))
-        out["both"] = float(uncovered(points, sky, dirs, views, peeled_marked=peeled_marked).mean())
-    else:
-        out["both"] = out["primary"]
-    return out
+    masks = uncovered_by_views(points, sky, dirs, views, peeled_marked=peeled_marked)   # the primary tested once
+    return {"primary": float(masks[0].mean()), "both": float(masks[-1].mean())}

@@ -124,15 +124,24 @@ def uncovered(points, sky, dirs, views, tolerance: float = COVERAGE_TOLERANCE,
     vouches for sky where it stores sky (distance 0); a depth-peeled view only if it marks the
     pixels it peeled away apart (``peeled_marked``: a negative distance, protocol/depth.py
     PEELED), else its 0 may be a surface the primary shows."""
+    return uncovered_by_views(points, sky, dirs, views, tolerance, peeled_marked)[-1]
+
+
+def uncovered_by_views(points, sky, dirs, views, tolerance: float = COVERAGE_TOLERANCE,
+                       peeled_marked: bool = True) -> list:
+    """:func:`uncovered` by the first view, the first two, ... : one (n,) mask per view, each
+    pixel tested against a view only while no earlier view covers it."""
     covered = np.zeros(len(points), bool)
     geo = ~sky
+    out = []
     for pose, dist, peeled in views:
         todo = geo & ~covered
         covered[todo] = matches_view(points[todo], pose, dist, tolerance)
         if not peeled or peeled_marked:
             s = sky & ~covered
             covered[s] = sky_in_view(dirs[s], pose, dist)
-    return ~covered
+        out.append(~covered)
+    return out
 
 
 class CoverageProbe:

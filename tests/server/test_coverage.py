@@ -117,3 +117,24 @@ def test_a_probe_draws_the_distances_of_a_shading_renderer(scene_name):
                 t.release()
     finally:
         ctx.release()
+
+
+def test_uncovered_by_views_is_uncovered_of_each_prefix():
+    """Each view's mask equals uncovered() of the views up to it (the primary's mask is where
+    testing both starts), with and without marked peeling."""
+    rng = np.random.default_rng(11)
+    views = []
+    for k in range(3):
+        d = rng.uniform(0.5, 8.0, (40, 60)).astype(np.float32)
+        d[rng.random(d.shape) < 0.3] = 0.0
+        views.append((Pose.make(rng.normal(size=3) * 0.2, rng.normal(size=4)), d, k > 0))
+    dirs = rng.normal(size=(2000, 3))
+    dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+    r = rng.uniform(0.5, 8.0, 2000)
+    sky = rng.random(2000) < 0.2
+    points = dirs * r[:, None]
+    for marked in (True, False):
+        masks = coverage.uncovered_by_views(points, sky, dirs, views, peeled_marked=marked)
+        for k in range(3):
+            assert np.array_equal(masks[k], coverage.uncovered(points, sky, dirs, views[:k + 1], peeled_marked=marked))
+        assert masks[0].sum() > masks[2].sum() > 0
