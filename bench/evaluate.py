@@ -278,7 +278,7 @@ def evaluate_run(run_dir: str, scene_spec: str | None = None, flip_every: int = 
         from .video_writer import VideoWriter
 
         # encoded in a thread of its own (PyAV lets go of the GIL while x264 works)
-        writer = _Behind(VideoWriter(os.path.join(run_dir, "side_by_side.mp4"), client["rate_hz"]), depth=3)
+        writer = _Behind(VideoWriter(os.path.join(run_dir, "side_by_side.mp4"), client["rate_hz"], threads=1), depth=3)
     bar = None
     if progress:
         from tqdm import tqdm
