@@ -541,6 +541,22 @@ def register(sub) -> None:
     _out(cl)
     cl.set_defaults(func=commands.cmd_bench_cluster)
 
+    sc = bs.add_parser("scoring", help="the demo's session streamed, then scored: both phases' seconds, and "
+                                       "each scoring stage beside the libraries it reproduces",
+                       description="Streams the demo's session (room, 6 s of pred6dof-1 from 30 s, 960x540, 128 ms) "
+                                   "and scores it as pibr demo does: wall and CPU seconds of each phase. Then "
+                                   "times each scoring stage over the first ticks, pibr's compiled SSIM, PSNR and "
+                                   "FLIP beside scikit-image, numpy and flip-evaluator (pip install 'pibr[test]'), "
+                                   "and checks every value is theirs to the bit. Writes scoring.json.")
+    sc.add_argument("--duration", type=arguments.positive, default=6.0, help="seconds of trace (default 6)")
+    _output_size(sc)
+    sc.add_argument("--flip-every", type=arguments.non_negative_int, default=4,
+                    help="FLIP on every Nth tick, as the demo (default 4)")
+    sc.add_argument("--profile-ticks", type=arguments.positive_int, default=24,
+                    help="ticks timed stage by stage (default 24)")
+    _out(sc)
+    sc.set_defaults(func=commands.cmd_bench_scoring)
+
     rt = bs.add_parser("realtime", help="server, relay and client processes on the wall clock: fps, missed "
                                         "deadlines, frame age, CPU; and the cost per session",
                        description="Runs each method with each depth codec as separate server, relay and client "

@@ -203,6 +203,16 @@ def cmd_bench_cluster(args) -> int:
     return 0 if all(run["same_numbers_as_in_process"] for run in r["runs"]) else 1
 
 
+def cmd_bench_scoring(args) -> int:
+    from .scoring_bench import print_scoring_table, run_scoring_bench
+
+    r = run_scoring_bench(out_dir=args.out, duration_s=args.duration, size=args.size, flip_every=args.flip_every,
+                          profile_ticks=args.profile_ticks)
+    print_scoring_table(r)
+    print(f"written: {args.out}/scoring.json")
+    return 0 if r["identical_to_libraries"] else 1
+
+
 def cmd_bench_trade(args) -> int:
     from .trade import KNOBS, print_trade_tables, run_trade_bench
 

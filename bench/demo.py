@@ -31,6 +31,22 @@ def check_inputs(scene: str, trace: str, start_s: float, duration_s: float) -> N
     create_context().release()
 
 
+def stream(out_dir: str, scene: str, trace: str, start_s: float, duration_s: float, rate_hz: float, size,
+           latency_ms: float, methods, clock: str, server_args=(), anchor: str = "start", client_args=(),
+           on_progress=None) -> dict:
+    """The demo's streaming: server, relay (half the round trip each way) and client as processes
+    on loopback, the client recording into ``out_dir``. -> run_pipeline's timings."""
+    half = latency_ms / 2.0
+    return run_pipeline(
+        out_dir,
+        server_args=["--scene", scene, *server_args],
+        relay_args=["--up-ms", str(half), "--down-ms", str(half)],
+        client_args=["--trace", trace, "--start", str(start_s), "--duration", str(duration_s),
+                     "--rate", str(rate_hz), "--size", f"{size[0]}x{size[1]}", "--clock", clock,
+                     "--anchor", anchor, "--method", ",".join(methods), *client_args],
+        on_progress=on_progress)
+
+
 def run_demo(out_dir: str = "out", scene: str = "room", trace: str = "pred6dof-1", start_s: float = 30.0,
              duration_s: float = 6.0, rate_hz: float = 30.0, size=(960, 540), latency_ms: float = 128.0,
              methods=DEFAULT_METHODS, clock: str = "virtual", flip_every: int = 4, server_args=(),
@@ -49,17 +65,9 @@ def run_demo(out_dir: str = "out", scene: str = "room", trace: str = "pred6dof-1
         bar.n = done
         bar.refresh()
 
-    half = latency_ms / 2.0
     try:
-        timings = run_pipeline(
-            out_dir,
-            server_args=["--scene", scene, *server_args],
-            relay_args=["--up-ms", str(half), "--down-ms", str(half)],
-            client_args=["--trace", trace, "--start", str(start_s), "--duration", str(duration_s),
-                         "--rate", str(rate_hz), "--size", f"{size[0]}x{size[1]}", "--clock", clock,
-                         "--anchor", anchor,
-                         "--method", ",".join(methods), *client_args],
-            on_progress=on_progress)
+        timings = stream(out_dir, scene, trace, start_s, duration_s, rate_hz, size, latency_ms, methods, clock,
+                         server_args, anchor, client_args, on_progress)
     finally:
         bar.close()
     t_stream = time.perf_counter()

@@ -50,21 +50,21 @@ _LAB_TERM = F(4.0) / F(29.0)
 _ONE_THIRD = F(1.0) / F(3.0)
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def _clamp01(v):
     """FLIP's Min(Max(v, 0), 1) macros, signed zeros and all."""
     v = v if v > np.float32(0.0) else np.float32(0.0)
     return np.float32(1.0) if v > np.float32(1.0) else v
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _srgb_to_linear(s, gamma):
     if s <= np.float32(0.04045):
         return s / np.float32(12.92)
     return math.pow((s + np.float32(0.055)) / np.float32(1.055), gamma)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def srgb_table(gamma):
     """(256,) float32: the clamped linear value of each 8-bit sRGB level, as FLIP decodes v / 255
     (``gamma``: 2.4)."""
@@ -75,7 +75,7 @@ def srgb_table(gamma):
     return out
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _lab(v, inv, third):
     v = v * inv
     if v > _DELTA_CUBE:
@@ -83,7 +83,7 @@ def _lab(v, inv, third):
     return _LAB_FACTOR * v + _LAB_TERM
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def to_ycxcz(img, table, m):
     """(h, w, 3) uint8 sRGB -> (h, w, 3) float32 YCxCz (FLIP's linear RGB -> XYZ -> YCxCz)."""
     h, w = img.shape[:2]
@@ -102,7 +102,7 @@ def to_ycxcz(img, table, m):
     return out
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def filtered_lab(ycc, ycx_w, cz_w, to_xyz, to_rgb, third):
     """(h, w, 3) float32 YCxCz -> (h, w, 3) float32 Hunt-adjusted CIELab of its spatially filtered
     image (FLIP's separable filters: x first, clamped borders; then back to clamped linear RGB;
@@ -154,7 +154,7 @@ def filtered_lab(ycc, ycx_w, cz_w, to_xyz, to_rgb, third):
     return out
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def features(ycc, fw):
     """(h, w, 2) float32: per pixel the edge and point detectors' magnitudes on the achromatic
     channel of YCxCz (h, w, 3) float32, normalised to [0, 1] (FLIP's separable feature filters)."""
@@ -195,7 +195,7 @@ def features(ycc, fw):
     return out
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def error_map(ref_lab, ref_feat, test_lab, test_feat, cmax, pccmax, norm, qc, qf):
     """(h, w) float32 FLIP error of a test against its reference, and its mean (FLIP's serial
     float32 sum over rows, divided by the pixel count). The exponents ``qc`` and ``qf`` come as
@@ -224,17 +224,17 @@ def error_map(ref_lab, ref_feat, test_lab, test_feat, cmax, pccmax, norm, qc, qf
     return out, total / np.float32(h * w)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _gaussian(x2, a, b):
     return a * math.sqrt(PI / b) * math.exp(-(PI * PI) * x2 / b)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _gaussian_sqrt(x2, a, b):
     return math.sqrt(a * math.sqrt(PI / b)) * math.exp(-(PI * PI) * x2 / b)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def spatial_filters(ppd):
     """((2r+1, 2) YCx weights (Y, Cx), (2r+1, 2) Cz weights (its two Gaussians)), normalised as FLIP does."""
     max_b = np.float32(0.04)   # the largest of the b constants
@@ -269,7 +269,7 @@ def spatial_filters(ppd):
     return ycx, cz
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def feature_filter(ppd):
     """(2r+1, 3) float32: Gaussian, its first and second derivatives, normalised as FLIP does."""
     sd = np.float32(0.5) * GW * ppd
@@ -305,7 +305,7 @@ def feature_filter(ppd):
     return out
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _hunt_lab_of_linear(r, g, b, to_xyz, third):
     """Linear RGB -> XYZ -> CIELab, a and b Hunt-adjusted (FLIP's order of operations)."""
     fx = _lab(to_xyz[0, 0] * r + to_xyz[0, 1] * g + to_xyz[0, 2] * b, INV_ILLUMINANT[0], third)
@@ -316,7 +316,7 @@ def _hunt_lab_of_linear(r, g, b, to_xyz, third):
         np.float32(0.01) * lum * (np.float32(200.0) * (fy - fz))
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def max_distance(to_xyz, third, qc):
     """FLIP's cmax: the compressed HyAB distance of Hunt-adjusted green and blue."""
     gl, ga, gb = _hunt_lab_of_linear(np.float32(0.0), np.float32(1.0), np.float32(0.0), to_xyz, third)

@@ -19,7 +19,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def _reflect(i, n):
     """Index into a line of ``n`` (>= half the window) of position ``i`` on its reflect-extended line."""
     if i < 0:
@@ -29,7 +29,7 @@ def _reflect(i, n):
     return i
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def channel_plane(img, c):
     """(h, w) int32: channel ``c`` of img (h, w, 3) uint8."""
     h, w = img.shape[:2]
@@ -40,7 +40,7 @@ def channel_plane(img, c):
     return out
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _filtered_rows(y, x, win, sums, ext, means, row):
     """Row ``row`` (taken in order from 0) of scipy's ``uniform_filter(., win)`` of y, y * y and
     y * x (integer planes (h, w) int32) into means (3, w) float64. ``sums`` (3, w) int32 carries
@@ -91,7 +91,7 @@ def _filtered_rows(y, x, win, sums, ext, means, row):
         means[2, i] = t2 / win
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def reference_channel(ref, c, win, cov_norm):
     """One channel ``c`` of a ground truth (h, w, 3) uint8: its (h, w) int32 plane, and as (h, w)
     float64 its local mean ux, ux ** 2 and local variance (as scikit-image's SSIM computes them)."""
@@ -113,7 +113,7 @@ def reference_channel(ref, c, win, cov_norm):
     return x, ux, ux2, vx
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def ssim_map(test, c, x, ux, ux2, vx, win, cov_norm, c1, c2):
     """(h, w) float64: the SSIM map of channel ``c`` of test (h, w, 3) uint8 against a reference
     channel's int32 plane x, ux, ux ** 2 and variance vx, before cropping."""
@@ -138,7 +138,7 @@ def ssim_map(test, c, x, ux, ux2, vx, win, cov_norm, c1, c2):
     return s
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def squared_error_sum(ref, test):
     """The exact sum of squared differences of two uint8 arrays of one shape, as a float64."""
     a = ref.ravel()
@@ -150,7 +150,7 @@ def squared_error_sum(ref, test):
     return np.float64(total)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def colour_by_difference(ref, test, colours):
     """(h, w, 3) uint8: per pixel of two (h, w, 3) uint8 images (any strides) the row of
     ``colours`` (766, 3) uint8 at the sum of the three channels' absolute differences."""
@@ -166,7 +166,7 @@ def colour_by_difference(ref, test, colours):
     return out
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def count_near(pixels, centre, tolerance):
     """How many of pixels (n, 3) uint8 lie within ``tolerance`` of centre (3,) float64 in every
     channel (numpy's ``all(abs(pixels - centre) <= tolerance)`` counted)."""
@@ -181,7 +181,7 @@ def count_near(pixels, centre, tolerance):
     return count
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def mosaic_rows(out, top, shown, ref, scale, colours):
     """Into out (H', W', 3) uint8, the kept pixels (every ``scale``-th of every ``scale``-th row) of
     one mosaic row starting at mosaic row ``top``: shown | ref | the ``colours`` (766, 3) of their

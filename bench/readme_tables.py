@@ -337,13 +337,29 @@ def cluster(r: dict) -> list[str]:
                    "same numbers"], rows)
 
 
+def scoring(r: dict) -> list[str]:
+    """``pibr bench scoring``: the demo's session streamed, then scored (wall and CPU seconds)."""
+    rows = [[phase, f"{r[key]['seconds']:.1f}", f"{r[key]['cpu_seconds']:.0f}"]
+            for phase, key in (("streaming (server, relay, client)", "streaming"),
+                               ("scoring (ground truth, metrics, holes, video)", "scoring"))]
+    rows.append(["scoring / streaming", f"{r['scoring_over_streaming']:.2f}", ""])
+    return _table(["phase", "seconds", "CPU seconds"], rows)
+
+
+def scoring_stages(r: dict) -> list[str]:
+    """``pibr bench scoring``: each stage's CPU ms per tick, pibr's beside the library's."""
+    rows = [[st["stage"], f"{st['ms_per_tick']:.1f}",
+             "—" if st["library_ms_per_tick"] is None else f"{st['library_ms_per_tick']:.1f}"] for st in r["stages"]]
+    return _table(["stage", "pibr, CPU ms a tick", "the library's, same run"], rows)
+
+
 RENDERERS = {"realtime": realtime, "levels": levels, "upsampling": upsampling, "pareto": pareto,
              "pareto-windows": pareto_windows, "coverage": coverage, "dynamic": dynamic, "ibr": ibr,
              "split": split, "server-projection": server_projection, "server-edges": server_edges,
              "codec-matched": codec_matched, "codec-end-to-end": codec_end_to_end, "lod-target": lod_target,
              "stereo": stereo, "stereo-server": stereo_server, "predict": predict,
              "predict-quality": predict_quality, "network": network, "live": live,
-             "cluster": cluster}
+             "cluster": cluster, "scoring": scoring, "scoring-stages": scoring_stages}
 
 
 # -- the README ---------------------------------------------------------------------------------------------------

@@ -40,6 +40,7 @@ BENCH_TABLES = {
     "codec.json": ("codec-matched", "codec-end-to-end"), "stereo.json": ("stereo", "stereo-server"),
     "predict.json": ("predict", "predict-quality"), "network.json": ("network",),
     "bench_server.json": ("server-projection",), "live.json": ("live",), "cluster.json": ("cluster",),
+    "scoring.json": ("scoring", "scoring-stages"),
 }
 #: Other JSON a benchmark writes: shown folded, without a table.
 BENCH_FILES = ("trade.json", "codec_speed.json", "proxy_speed.json", "bench_client.json", "lod.json",

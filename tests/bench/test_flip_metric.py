@@ -26,7 +26,8 @@ def _scene_like(seed, shape):
 
 @pytest.mark.parametrize("shape,ppd", [((64, 96, 3), 30.0), ((135, 240, 3), 8.377580409572783),
                                        ((37, 51, 3), 67.0), ((9, 5, 3), 67.0), ((120, 80, 3), 3.0),
-                                       ((48, 64, 3), 20.5)])
+                                       ((48, 64, 3), 20.5), ((36, 64, 3), 0.5585053606381855),
+                                       ((18, 32, 3), 0.2)])
 def test_maps_and_means_are_flip_evaluators_to_the_bit(shape, ppd):
     rng = np.random.default_rng(len(shape) + int(ppd))
     ref, shifted = _scene_like(int(ppd), shape)
@@ -36,7 +37,8 @@ def test_maps_and_means_are_flip_evaluators_to_the_bit(shape, ppd):
         want_map, want_mean = library_flip(ref, test, ppd)
         got_map, got_mean = reference.map_and_mean(test)
         assert got_map.dtype == np.float32 and got_map.shape == shape[:2]
-        assert np.array_equal(got_map, want_map), f"{int((got_map != want_map).sum())} pixels differ"
+        # at a few pixels per degree FLIP's filter weights hold a 0/0 (a NaN its Max() then drops)
+        assert np.array_equal(got_map, want_map, equal_nan=True), f"{int((got_map != want_map).sum())} pixels differ"
         assert got_mean == want_mean
     assert reference.mean(ref) == 0.0 and reference.mean(shifted) > 0.01
 
