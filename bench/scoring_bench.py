@@ -6,7 +6,8 @@ then scores it as ``pibr demo`` does (``evaluate_run``: ground truth, SSIM, PSNR
 seconds of both phases, measured in one invocation.
 
 Then, in this process, the first ``profile_ticks`` ticks once more stage by stage, in CPU
-milliseconds per tick (threads included: llvmpipe's, x264's): pibr's compiled metrics beside the
+milliseconds per tick (one stage at a time, on one thread; the time of the threads a stage starts,
+llvmpipe's, is included): pibr's compiled metrics beside the
 libraries whose numbers they reproduce (scikit-image's SSIM, numpy's PSNR, NVIDIA flip-evaluator's
 FLIP when it is installed, as with ``pip install 'pibr[test]'``), timed in the same run, and
 whether every value is the library's to the bit.
@@ -72,7 +73,7 @@ def profile_stages(run_dir: str, scene_spec: str, ticks: int, flip_every: int):
     from pibr.protocol.pose import Pose
     from pibr.scenes.registry import load_scene
 
-    from .evaluate import TransmittedViews, _Ahead, _shown_images, _side_by_side, read_session
+    from .evaluate import TransmittedViews, _shown_images, _side_by_side, read_session
     from .flip_metric import FlipReference
     from .groundtruth import GroundTruth
     from .metrics import SsimReference, pixels_per_degree, psnr
@@ -95,7 +96,7 @@ def profile_stages(run_dir: str, scene_spec: str, ticks: int, flip_every: int):
     counted = {"ssim": 0, "flip": 0}
     gt = GroundTruth(scene, width, height, fov)
     views = TransmittedViews(scene, info["session"], (width, height), fov)
-    shown = _Ahead(_shown_images(run_dir, methods, records, ticks), depth=2)
+    shown = _shown_images(run_dir, methods, records, ticks)   # on this thread: CPU time is the process's
     writer_path = os.path.join(run_dir, "profile.mp4")
     writer = VideoWriter(writer_path, client["rate_hz"], threads=1)
 
