@@ -151,22 +151,6 @@ def squared_error_sum(ref, test):
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def colour_by_difference(ref, test, colours):
-    """(h, w, 3) uint8: per pixel of two (h, w, 3) uint8 images (any strides) the row of
-    ``colours`` (766, 3) uint8 at the sum of the three channels' absolute differences."""
-    h, w = ref.shape[:2]
-    out = np.empty((h, w, 3), np.uint8)
-    for j in range(h):
-        for i in range(w):
-            total = 0
-            for c in range(3):
-                total += abs(np.int32(ref[j, i, c]) - np.int32(test[j, i, c]))
-            for c in range(3):
-                out[j, i, c] = colours[total, c]
-    return out
-
-
-@njit(cache=True, nogil=True, error_model="numpy")
 def count_near(pixels, centre, tolerance):
     """How many of pixels (n, 3) uint8 lie within ``tolerance`` of centre (3,) float64 in every
     channel (numpy's ``all(abs(pixels - centre) <= tolerance)`` counted)."""

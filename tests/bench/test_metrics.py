@@ -105,6 +105,8 @@ def test_shared_reference_ssim_is_scikit_images_to_the_bit(seed):
 def test_tick_metrics_are_the_libraries_metrics_of_each_image():
     """tick_metrics and frame_metrics (compiled SSIM and PSNR, the reference's share computed
     once) equal scikit-image's SSIM, numpy's PSNR and flip-evaluator's FLIP of each image."""
+    from skimage.metrics import structural_similarity
+
     from pibr.bench.metrics import tick_metrics
 
     from .test_flip_metric import library_flip
@@ -114,8 +116,10 @@ def test_tick_metrics_are_the_libraries_metrics_of_each_image():
     for with_flip in (True, False):
         got = tick_metrics(ref, images, 30.0, with_flip)
         single = [frame_metrics(ref, img, 30.0, with_flip) for img in images]
-        want = [{"psnr": psnr(ref, img), "ssim": ssim(ref, img), "dssim": dssim(ssim(ref, img)),
-                 "flip": library_flip(ref, img, 30.0)[1] if with_flip else math.nan} for img in images]
+        libraries = [float(structural_similarity(ref, img, channel_axis=2, data_range=255)) for img in images]
+        want = [{"psnr": psnr(ref, img), "ssim": s, "dssim": dssim(s),
+                 "flip": library_flip(ref, img, 30.0)[1] if with_flip else math.nan}
+                for img, s in zip(images, libraries)]
         for g, one, w in zip(got, single, want):
             assert g.keys() == one.keys() == w.keys()
             for k in g:
@@ -167,6 +171,7 @@ def test_compiled_ssim_and_psnr_are_the_libraries_numbers_at_any_size(shape):
             assert reference.ssim(test) == float(structural_similarity(ref, test, channel_axis=2, data_range=255))
             mse = np.mean((ref.astype(np.float64) - test.astype(np.float64)) ** 2)
             assert psnr(ref, test) == (PSNR_CAP if mse == 0 else min(PSNR_CAP, 10 * math.log10(255.0 ** 2 / mse)))
+        assert ssim(ref, near.astype(np.uint8)) == reference.ssim(near.astype(np.uint8))
     with pytest.raises(ValueError, match="uint8"):
         SsimReference(ref.astype(np.float32))
 
