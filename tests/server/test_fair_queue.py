@@ -35,12 +35,13 @@ async def test_a_newcomer_goes_next_not_behind_every_busy_session():
 
 
 async def test_busy_sessions_share_the_worker_by_the_time_their_jobs_take():
-    """Measured by a clock each job advances by its cost: 'b' takes twice as long per job as 'a'
-    and 'c', so while all three are busy it gets half as many turns."""
+    """Measured by a clock each job advances by its cost (seconds, each within the lead bound):
+    'b' takes twice as long per job as 'a' and 'c', so while all three are busy it gets half as
+    many turns."""
     now = [0.0]
     queue = FairQueue(1, clock=lambda: now[0])
     log: list = []
-    cost = {"a": 1.0, "b": 2.0, "c": 1.0}
+    cost = {"a": 0.25, "b": 0.5, "c": 0.25}
 
     async def job(key):
         log.append(key)
@@ -54,6 +55,38 @@ async def test_busy_sessions_share_the_worker_by_the_time_their_jobs_take():
     await asyncio.gather(*(session(k, 20) for k in "abc"))
     # Equal time while all are busy: a and c twice per b; then b alone finishes its jobs.
     assert "".join(log) == "abcacb" + "acacb" * 9 + "b" * 9
+
+
+@pytest.mark.parametrize("max_lead, second_turn", [(1.0, 9), (float("inf"), 81)])
+async def test_one_long_job_holds_its_session_back_by_at_most_the_lead_bound(max_lead, second_turn):
+    """'a' starts with a 10 s job (a calibration, or the server's first frame compiling its
+    shaders), then 'a', 'b' and 'c' each want 0.25 s jobs. Long-run fair queueing would keep 'a'
+    waiting until 'b' and 'c' had used 10 s each (40 jobs apiece: the realtime bench's client that
+    got no frame for 30 s); the bound lets it in after a second of theirs (4 jobs apiece). The
+    unbounded case is the queue's behaviour without the bound, kept to show what it prevents."""
+    now = [0.0]
+    queue = FairQueue(1, clock=lambda: now[0], max_lead=max_lead)
+    log: list = []
+
+    async def job(key, cost):
+        log.append(key)
+        await asyncio.sleep(0)
+        now[0] += cost
+
+    async def session(key, first_cost):
+        await queue.run(key, lambda: job(key, first_cost))
+        for _ in range(49):
+            await queue.run(key, lambda: job(key, 0.25))
+
+    await asyncio.gather(session("a", 10.0), session("b", 0.25), session("c", 0.25))
+    assert log[0] == "a"
+    assert log.index("a", 1) == second_turn
+    assert set(log[1:second_turn]) == {"b", "c"}
+
+
+def test_the_lead_bound_must_be_positive():
+    with pytest.raises(ValueError, match="lead bound"):
+        FairQueue(1, max_lead=0.0)
 
 
 async def test_slots_bound_concurrency_and_a_cancelled_wait_passes_its_turn_on():
