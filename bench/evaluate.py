@@ -48,7 +48,10 @@ log = logging.getLogger(__name__)
 def _shown_images(run_dir: str, methods: list, records: dict, n: int):
     """Per tick, each method's image on screen ({method: (H, W, 3) uint8, or None before its
     first}), decoded from its lossless recording: a tick missed keeps the previous image."""
-    streams = {m: _frames(os.path.join(run_dir, f"{m}.lossless.mkv")) for m in methods}
+    from pibr.client.recorder import lossless_recording
+
+    paths = {m: lossless_recording(run_dir, m) for m in methods}
+    streams = {m: _frames(paths[m]) for m in methods}
     shown = dict.fromkeys(methods)
     try:
         for i in range(n):
@@ -59,7 +62,7 @@ def _shown_images(run_dir: str, methods: list, records: dict, n: int):
                     shown[m] = next(streams[m])
                 except StopIteration:
                     fresh = sum(1 for r in records[m] if not r["missed"])
-                    raise ConfigError(f"{m}.lossless.mkv ends at tick {i}, but {m}.records.csv has {fresh} "
+                    raise ConfigError(f"{os.path.basename(paths[m])} ends at tick {i}, but {m}.records.csv has {fresh} "
                                       f"ticks displayed afresh (one frame each)") from None
             yield dict(shown)
     finally:
@@ -189,7 +192,16 @@ def _frames(path: str):
         # One decoding thread: the recordings are decoded beside other work on every core, and
         # slice threads cost 15 % more CPU time per frame here.
         container.streams.video[0].thread_count = 1
-        for frame in container.decode(video=0):
+        decoded = 0
+        frames = container.decode(video=0)
+        while True:
+            try:
+                frame = next(frames)
+            except StopIteration:
+                return
+            except av.error.FFmpegError as exc:   # e.g. a file cut short by a killed client
+                raise ConfigError(f"recording {path}: cannot decode past frame {decoded}: {exc}") from None
+            decoded += 1
             yield frame.to_ndarray(format="rgb24")
 
 
@@ -314,7 +326,7 @@ def evaluate_run(run_dir: str, scene_spec: str | None = None, flip_every: int = 
                 ref = truth[recordings[m]["eye"]]
                 img = images_now[m] if images_now[m] is not None else np.zeros_like(ref)   # blank before any
                 if img.shape != ref.shape:
-                    raise ConfigError(f"{m}.lossless.mkv frames are {img.shape}, expected {ref.shape}")
+                    raise ConfigError(f"{m}'s lossless recording has {img.shape} frames, expected {ref.shape}")
                 displayed[m] = img
                 if writer is not None:
                     rows.append((img, ref))

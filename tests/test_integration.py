@@ -91,7 +91,7 @@ def _scores_are_the_libraries(run_dir, rows, method):
     records = read_records(os.path.join(run_dir, f"{method}.records.csv"))
     gt = GroundTruth(load_scene("room"), client["width"], client["height"], client["fov_deg"])
     ppd = pixels_per_degree(client["width"], client["fov_deg"])
-    frames = _frames(os.path.join(run_dir, f"{method}.lossless.mkv"))
+    frames = _frames(os.path.join(run_dir, f"{method}.lossless.avi"))
     try:
         for i, (rec, row, shown) in enumerate(zip(records, rows, frames)):
             if i % 3:
@@ -118,7 +118,7 @@ def test_two_eyes_over_real_processes(tmp_path):
                               "--size", "320x180", "--method", "rotation,proxy", "--stereo", "alternate",
                               "--ipd-mm", "70", "--anaglyph"], timeout=600)
     for m in ("rotation", "proxy"):
-        for name in (f"{m}.stereo.mp4", f"{m}.anaglyph.mp4", f"{m}.left.mp4", f"{m}.right.lossless.mkv"):
+        for name in (f"{m}.stereo.mp4", f"{m}.anaglyph.mp4", f"{m}.left.mp4", f"{m}.right.lossless.avi"):
             assert os.path.getsize(os.path.join(out, name)) > 1000
     left = read_records(os.path.join(out, "proxy.left.records.csv"))
     right = read_records(os.path.join(out, "proxy.right.records.csv"))

@@ -1,12 +1,13 @@
 """evaluate's decoding thread and encoding thread: the images each tick showed, in order, and
 errors raised where they belong, never lost."""
+import os
 import threading
 
 import numpy as np
 import pytest
 
 from pibr.bench.evaluate import _Ahead, _Behind, _shown_images
-from pibr.client.recorder import MethodRecorder
+from pibr.client.recorder import MethodRecorder, lossless_recording
 from pibr.protocol.errors import ConfigError
 
 
@@ -40,6 +41,65 @@ def test_a_recording_shorter_than_its_records_is_named_by_the_consumer(tmp_path)
     with pytest.raises(ConfigError, match="ends at tick 2"):
         next(ahead)
     ahead.close()
+
+
+def test_the_lossless_recording_holds_every_shown_image_to_the_bit(tmp_path):
+    """Ut Video (client/recorder.py): noisy images of odd content, every bit back, in tick order."""
+    rng = np.random.default_rng(3)
+    images = [rng.integers(0, 256, (18, 34, 3), dtype=np.uint8) for _ in range(5)]
+    images[2][:, :17] = 255          # flat areas beside noise
+    rec = MethodRecorder(str(tmp_path), "m", 34, 18, 30.0, records=False)
+    rows = []
+    for i in range(7):
+        rows.append({"tick": i, "missed": int(i in (1, 4))})
+        if i in (1, 4):
+            rec.repeat(rows[-1])
+        else:
+            rec.submit(images[len([r for r in rows if not r["missed"]]) - 1], rows[-1])
+    rec.close()
+    assert os.path.exists(tmp_path / "m.lossless.avi")
+    shown = [s["m"] for s in _shown_images(str(tmp_path), ["m"], {"m": rows}, 7)]
+    expected = [images[0], images[0], images[1], images[2], images[2], images[3], images[4]]
+    assert all(np.array_equal(a, b) for a, b in zip(shown, expected))
+
+
+def test_a_legacy_h264_lossless_recording_is_still_read(tmp_path):
+    """Recordings made before Ut Video hold M.lossless.mkv (x264 4:4:4 at qp 0): evaluate reads them."""
+    import av
+
+    rng = np.random.default_rng(4)
+    images = [rng.integers(0, 256, (16, 32, 3), dtype=np.uint8) for _ in range(3)]
+    with av.open(str(tmp_path / "m.lossless.mkv"), "w") as container:
+        stream = container.add_stream("libx264rgb", rate=30)
+        stream.width, stream.height, stream.pix_fmt = 32, 16, "rgb24"
+        stream.options = {"preset": "ultrafast", "qp": "0"}
+        for i, image in enumerate(images):
+            frame = av.VideoFrame.from_ndarray(image, format="rgb24")
+            frame.pts = i
+            for packet in stream.encode(frame):
+                container.mux(packet)
+        for packet in stream.encode():
+            container.mux(packet)
+    assert lossless_recording(str(tmp_path), "m").endswith("m.lossless.mkv")
+    rows = {"m": [{"tick": i, "missed": 0} for i in range(3)]}
+    shown = [s["m"] for s in _shown_images(str(tmp_path), ["m"], rows, 3)]
+    assert all(np.array_equal(a, b) for a, b in zip(shown, images))
+
+
+def test_a_recording_cut_short_is_named_with_the_frame_it_breaks_at(tmp_path):
+    """A file cut in the middle of a frame (a client killed while writing): a clear error naming
+    the file and how far it decodes, not an FFmpeg traceback."""
+    rng = np.random.default_rng(5)
+    rec = MethodRecorder(str(tmp_path), "m", 32, 16, 30.0, records=False)
+    for i in range(6):
+        rec.submit(rng.integers(0, 256, (16, 32, 3), dtype=np.uint8), {"tick": i, "missed": 0})
+    rec.close()
+    path = tmp_path / "m.lossless.avi"
+    data = path.read_bytes()
+    path.write_bytes(data[:len(data) // 2])
+    rows = {"m": [{"tick": i, "missed": 0} for i in range(6)]}
+    with pytest.raises(ConfigError, match=r"m\.lossless\.avi: cannot decode past frame [1-5]"):
+        list(_shown_images(str(tmp_path), ["m"], rows, 6))
 
 
 def test_closing_early_stops_the_thread_and_closes_the_items():

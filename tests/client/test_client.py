@@ -44,8 +44,8 @@ async def test_virtual_clock_is_bit_identical(relay_endpoint, tmp_path):
     r2 = await run_client(_cfg(host, port, tmp_path / "b"))
     assert r1.ticks == r2.ticks == 30
     for m in ("none", "rotation"):
-        a = _frames(tmp_path / "a" / f"{m}.lossless.mkv")
-        b = _frames(tmp_path / "b" / f"{m}.lossless.mkv")
+        a = _frames(tmp_path / "a" / f"{m}.lossless.avi")
+        b = _frames(tmp_path / "b" / f"{m}.lossless.avi")
         assert len(a) == len(b) == 30
         assert all(np.array_equal(x, y) for x, y in zip(a, b))
         ra = read_records(tmp_path / "a" / f"{m}.records.csv")
@@ -66,8 +66,8 @@ async def test_virtual_clock_is_bit_identical(relay_endpoint, tmp_path):
 async def test_rotation_follows_the_head_and_none_does_not(relay_endpoint, tmp_path):
     host, port = relay_endpoint
     await run_client(_cfg(host, port, tmp_path, duration_s=0.5))
-    none = _frames(tmp_path / "none.lossless.mkv")
-    rot = _frames(tmp_path / "rotation.lossless.mkv")
+    none = _frames(tmp_path / "none.lossless.avi")
+    rot = _frames(tmp_path / "rotation.lossless.avi")
     rows = read_records(tmp_path / "none.records.csv")
     # Between server frames 'none' shows the same picture; 'rotation' moves with the head.
     same_frame = [i for i in range(1, len(rows)) if rows[i]["frame_id"] == rows[i - 1]["frame_id"]]
@@ -102,7 +102,7 @@ async def test_real_clock_records_every_tick_even_when_the_preroll_overruns(rela
     assert [r["tick"] for r in rows] == list(range(result.ticks)) and result.ticks == 200
     # One video frame per tick displayed afresh; a missed tick holds the previous one.
     shown = [r for r in rows if not r["missed"]]
-    assert len(_frames(tmp_path / "rotation.lossless.mkv")) == len(shown)
+    assert len(_frames(tmp_path / "rotation.lossless.avi")) == len(shown)
     # Checked against the measured time, not the client's own counter: while a tick was being
     # displayed for client_ms, every deadline in that time passed, so at least that many ticks
     # after it must be recorded as missed.
@@ -157,8 +157,8 @@ async def test_proxies_over_the_wire_and_edge_depth_are_deterministic(tmp_path):
     info = json.load(open(tmp_path / "a" / "session.json"))
     assert info["session"]["depth_codec"] == "edge" and info["session"]["motion"] is True
     assert info["session"]["atlas"]["rects"].keys() == {"primary.color", "extra.color"}
-    a = _frames(tmp_path / "a" / "proxy.lossless.mkv")
-    b = _frames(tmp_path / "b" / "proxy.lossless.mkv")
+    a = _frames(tmp_path / "a" / "proxy.lossless.avi")
+    b = _frames(tmp_path / "b" / "proxy.lossless.avi")
     assert len(a) == 15 and all(np.array_equal(x, y) for x, y in zip(a, b))
     rows = read_records(tmp_path / "a" / "proxy.records.csv")
     assert all(r["frame_id"] >= 0 for r in rows) and np.mean([r["hole_fraction"] for r in rows]) < 0.2
@@ -187,7 +187,7 @@ async def test_every_method_runs_in_the_client(relay_endpoint, tmp_path):
     last = {}
     for m in names:
         rows = read_records(tmp_path / f"{m}.records.csv")
-        frames = _frames(tmp_path / f"{m}.lossless.mkv")
+        frames = _frames(tmp_path / f"{m}.lossless.avi")
         assert len(rows) == len(frames) == 6, m
         assert rows[-1]["frame_id"] >= 0 and rows[-1]["hole_fraction"] < 0.2, m
         last[m] = frames[-1].astype(int)
@@ -247,8 +247,8 @@ async def test_virtual_clock_levels_come_from_the_cost_table_alone(relay_endpoin
     assert all(r["predicted_ms"] == 20.0 and r["budget_ms"] == pytest.approx(1000 / 30 - 1) for r in runs[0])
     strip = lambda rows: [{k: v for k, v in r.items() if k != "client_ms"} for r in rows]
     assert strip(runs[0]) == strip(runs[1])
-    assert all(np.array_equal(x, y) for x, y in zip(_frames(tmp_path / "a" / "rotation.lossless.mkv"),
-                                                    _frames(tmp_path / "b" / "rotation.lossless.mkv")))
+    assert all(np.array_equal(x, y) for x, y in zip(_frames(tmp_path / "a" / "rotation.lossless.avi"),
+                                                    _frames(tmp_path / "b" / "rotation.lossless.avi")))
     fast = _table(tmp_path, rotation_ms=(4.0, 3.0, 2.0))
     await run_client(_cfg(host, port, tmp_path / "c", methods=("rotation",), cost_table=fast))
     rows = read_records(tmp_path / "c" / "rotation.records.csv")
@@ -286,7 +286,7 @@ async def test_real_clock_calibrates_every_level_and_records_its_choices(relay_e
     # the server's rate control made every frame at one of the levels it announced, and said which
     levels = info["session"]["options"]["server_levels"]
     assert levels[0] == "full" and all(0 <= r["server_level"] < len(levels) for r in shown if r["frame_id"] >= 0)
-    assert len(_frames(tmp_path / "rotation.lossless.mkv")) == len(shown)   # encoded after the run
+    assert len(_frames(tmp_path / "rotation.lossless.avi")) == len(shown)   # encoded after the run
     assert not list(tmp_path.glob(".*.frames.raw"))                         # and the raw images removed
     await run_client(_cfg(host, port, tmp_path / "off", clock="real", duration_s=0.5, rate_hz=20.0,
                           methods=("rotation",), deadline="off"))
@@ -333,7 +333,7 @@ async def test_a_colour_scaled_session_shows_the_rebuilt_colour(tmp_path):
             task.cancel()
             await asyncio.gather(task, return_exceptions=True)
             await srv.close()
-        shown[scale] = _frames(tmp_path / str(scale) / "rotation.lossless.mkv")
+        shown[scale] = _frames(tmp_path / str(scale) / "rotation.lossless.avi")
     info = json.load(open(tmp_path / "0.5" / "session.json"))
     assert info["session"]["colour_scale"] == 0.5
     assert info["session"]["atlas"]["rects"]["primary.color"] == [0, 0, 96, 96]

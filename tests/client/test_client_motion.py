@@ -47,7 +47,7 @@ async def test_proxy_extrapolates_from_the_transforms_on_the_wire(dynamic_server
         assert len(moving) == 5 and sorted(client.poses.indices()) == moving   # every frame's transforms
         assert all(len(client.poses.track(i)) == 4 for i in moving)
         assert client.poses.newest_time == pytest.approx(0.9, abs=0.15)      # the last frames of the second
-        shown[motion] = _frames(tmp_path / motion / "proxy.lossless.mkv")
+        shown[motion] = _frames(tmp_path / motion / "proxy.lossless.avi")
         info = json.load(open(tmp_path / motion / "session.json"))
         assert info["session"]["motion"] is True and info["session"]["scene"]["dynamic"] is True
         assert info["client"]["options"] == {"motion": motion}
@@ -68,7 +68,7 @@ async def test_the_client_extrapolates_along_the_motion_flow_on_the_wire(dynamic
         assert result.frames_received >= 8
         assert (client._motion_decoder is not None) == (motion == "flow")
         assert (client._newest.flow is not None) == (motion == "flow")
-        shown[motion] = {m: _frames(tmp_path / motion / f"{m}.lossless.mkv") for m in ("rotation", "proxy")}
+        shown[motion] = {m: _frames(tmp_path / motion / f"{m}.lossless.avi") for m in ("rotation", "proxy")}
     for m in ("rotation", "proxy"):
         assert len(shown["static"][m]) == len(shown["flow"][m]) == 30
         differ = [not np.array_equal(a, b) for a, b in zip(shown["static"][m], shown["flow"][m])]
