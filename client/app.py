@@ -36,7 +36,9 @@ import numpy as np
 from pibr.common.gl import GLThread
 from pibr.common.quality import OFF, DeadlineController, read_cost_table
 from pibr.protocol.errors import ConfigError, MalformedMessage, UnexpectedMessage
-from pibr.protocol.messages import (ARRIVAL_AGE_MS, DELIVERED_KBPS, DISPLAY_AGE_MS, FRAMES_DECODED, STREAM_REPORT_MS,
+from pibr.protocol.messages import (ARRIVAL_AGE_MS, DELIVERED_KBPS, DISPLAY_AGE_MS, FRAMES_DECODED, LINK_KBPS,
+                                    NEWEST_FRAME, REPORT_SPAN_MS, STREAM_BASELINE_S, STREAM_QUEUE_HIGH_MS,
+                                    STREAM_REPORT_MS, STREAM_URGENT_GAP_MS,
                                     Clock, Frame, Hello, OutputConfig, PayloadKind, PoseMsg, Stats, decode_eye,
                                     decode_frame_level, decode_stream_rate)
 from pibr.protocol.pose import Pose
@@ -147,6 +149,12 @@ class Client:
         #: as (arrival less render us, wire bytes), the newest render time, when the last report went
         self._adapting = False
         self._stream_arrived: list = []
+        #: (arrival us, arrival less render us) of the frames of the last STREAM_BASELINE_S: the
+        #: least is the age of a frame that did not queue; the newest arrival, for the dispersion
+        self._stream_ages: deque = deque()
+        self._stream_urgent = False       # a frame arrived queued since the last report
+        self._link_bits_us = [0.0, 0.0]   # bits of the frames that arrived behind another, and their gaps (us)
+        self._newest_frame_id = -1
         self._newest_render_us: int | None = None
         self._stream_reported_us: int | None = None
         self._arrivals_us: list[int] = []
@@ -522,8 +530,29 @@ class Client:
         if self._stream_log is not None:
             self._stream_log.write(f"{t_s:.6f},{len(frames)},{sum(sizes)},{decode_ms:.3f},{fps:.3f},{kbps:.3f}\n")
         if self._adapting:   # what the next stream report tells the server (_report_stream)
-            self._stream_arrived.extend((arrival - f.render_t_us, size) for (f, arrival), size in zip(frames, sizes))
+            for (f, arrival), size in sorted(zip(frames, sizes), key=lambda item: item[0][1]):
+                self._stream_arrival(arrival, arrival - f.render_t_us, size)
+                self._newest_frame_id = max(self._newest_frame_id, f.frame_id)
             self._newest_render_us = max(f.render_t_us for f, _ in frames)
+
+    def _stream_arrival(self, arrival_us: int, age_us: int, size: int) -> None:
+        """One frame of an adapting stream arrived (``size`` wire bytes, ``age_us`` after it was
+        rendered), kept for the next report. If the frame before it arrived later than this one
+        could have unqueued (its render time plus the least age), the link was busy with this one
+        from then on: its bits over that gap measure the link. Past STREAM_QUEUE_HIGH_MS of
+        queueing the report goes at once (_report_stream)."""
+        ages = self._stream_ages
+        previous = ages[-1][0] if ages else None
+        ages.append((arrival_us, age_us))
+        while ages[0][0] < arrival_us - STREAM_BASELINE_S * 1e6:
+            ages.popleft()
+        least = min(a for _, a in ages)
+        if previous is not None and arrival_us > previous > arrival_us - age_us + least:
+            self._link_bits_us[0] += 8.0 * size
+            self._link_bits_us[1] += arrival_us - previous
+        if (age_us - least) / 1e3 > STREAM_QUEUE_HIGH_MS:
+            self._stream_urgent = True
+        self._stream_arrived.append((age_us, size))
 
     def _frame_slot(self, frame: Frame) -> str:
         """The slot a frame fills: its eye in a session with a slot per eye, else the centre's;
@@ -610,7 +639,7 @@ class Client:
         if not self._adapting or self._newest_render_us is None:
             return
         last = self._stream_reported_us
-        if last is not None and t_us - last < STREAM_REPORT_MS * 1e3:
+        if last is not None and t_us - last < (STREAM_URGENT_GAP_MS if self._stream_urgent else STREAM_REPORT_MS) * 1e3:
             return
         now = self._time_base_us + t_us     # the arrival times' clock
         arrived, self._stream_arrived = self._stream_arrived, []
@@ -620,8 +649,15 @@ class Client:
             age_ms = (now - self._newest_render_us) / 1e3
         span_ms = STREAM_REPORT_MS if last is None else (t_us - last) / 1e3
         kbps = 8.0 * sum(n for _, n in arrived) / span_ms
+        values = {ARRIVAL_AGE_MS: age_ms, DELIVERED_KBPS: kbps, REPORT_SPAN_MS: span_ms,
+                  NEWEST_FRAME: float(self._newest_frame_id)}
+        bits, gaps_us = self._link_bits_us
+        if gaps_us > 0:
+            values[LINK_KBPS] = 1e3 * bits / gaps_us
+        self._link_bits_us = [0.0, 0.0]
+        self._stream_urgent = False
         self._stream_reported_us = t_us
-        await self.conn.send(Stats({ARRIVAL_AGE_MS: age_ms, DELIVERED_KBPS: kbps}), vtime_us=vtime_us, flush=False)
+        await self.conn.send(Stats(values), vtime_us=vtime_us, flush=False)
 
     async def _report_age(self, tick: int, vtime_us: int) -> None:
         """Tell a server that predicts the head's pose how old the frames shown are (every

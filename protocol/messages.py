@@ -523,6 +523,22 @@ DISPLAY_AGE_MS = "display_age_ms"
 ARRIVAL_AGE_MS = "arrival_age_ms"
 DELIVERED_KBPS = "delivered_kbps"
 STREAM_REPORT_MS = 200.0
+#: The frames' queueing is their age at arrival less its least over the last STREAM_BASELINE_S
+#: seconds (both ends compute it so). Above STREAM_QUEUE_HIGH_MS the link carries less than the
+#: stream: the server lowers its rate, and the client reports at once instead of at the next
+#: STREAM_REPORT_MS (at most one report every STREAM_URGENT_GAP_MS).
+STREAM_BASELINE_S = 10.0
+STREAM_QUEUE_HIGH_MS = 100.0
+STREAM_URGENT_GAP_MS = 50.0
+#: ``Stats`` keys sent with ARRIVAL_AGE_MS and DELIVERED_KBPS (a server reading reports without
+#: them assumes STREAM_REPORT_MS and no estimate): the report's interval (ms); the link's rate
+#: (kbit/s) measured from the frames that arrived while the link was busy with them, each one's
+#: bits over the time since the frame before it arrived (packet-pair dispersion, a frame a pair;
+#: absent when none did); and the newest frame id arrived so far (the server counts what it sent
+#: after it as still on its way).
+REPORT_SPAN_MS = "report_span_ms"
+LINK_KBPS = "link_kbps"
+NEWEST_FRAME = "newest_frame"
 
 
 @dataclass(frozen=True)

@@ -2,16 +2,23 @@
 frame rate chosen from what the client reports, so that frames stay young rather than the link
 full (issue 28, item 2).
 
-The client reports every ``STREAM_REPORT_MS`` (protocol/messages.py): the median age at arrival
-of the frames that arrived since its last report (or, when none did, the newest frame's age now)
-and the bits they brought over the report's interval. The age less its least over the last
-:data:`BASELINE_S` seconds is the time frames spent queued (the propagation and the server's own
-delay cancel, and so does an offset between the two clocks). Each report:
+The client reports every ``STREAM_REPORT_MS`` (protocol/messages.py), and at once when a frame
+arrives queued more than :data:`QUEUE_HIGH_MS`: the median age at arrival of the frames that
+arrived since its last report (or, when none did, the newest frame's age now), the bits they
+brought over the report's interval, the link's rate measured from the frames that arrived while
+the link was busy with them (each one's bits over the time since the one before arrived), and the
+newest frame it has. The age less its least over the last :data:`BASELINE_S` seconds is the time
+frames spent queued (the propagation and the server's own delay cancel, and so does an offset
+between the two clocks). Each report:
 
 * queued more than :data:`QUEUE_HIGH_MS`: the link carries less than the stream. The colour's
   target goes to the link's rate, less a share that drains the queue within about a second
   (never under :data:`MIN_DRAIN_SHARE` of it; nothing delivered at all, an outage: half the
-  target). The link's rate is what arrived over the reports of the last
+  target). Once frames queue, the queue is the larger of what the arrived frames say and the frames still on their
+  way that should have arrived by the report (sent before it, less the least age, and after the
+  newest frame the client has: bytes in flight, as in TCP) over the link's rate; the frames
+  already sent at the old rate make the backlog, and they have not spoken yet. The link's rate
+  is the client's measure when the report has one, else what arrived over the reports of the last
   :data:`RECEIVED_WINDOW_S` that found frames queued: the link was busy all along them, while a
   single report sees whole frames (none, or one in 200 ms). Once a decrease was made, the next
   waits :data:`HOLD_S` and the queue's length (the frames already queued arrive old whatever the
@@ -35,12 +42,14 @@ from __future__ import annotations
 from collections import deque
 from dataclasses import dataclass
 
+from pibr.protocol.messages import STREAM_BASELINE_S, STREAM_QUEUE_HIGH_MS, STREAM_REPORT_MS
+
 #: Reason codes a frame's STREAM_RATE payload carries (index into REASONS).
 REASONS = ("start", "hold", "probe", "congested", "outage", "floor", "recovered")
 START, HOLD, PROBE, CONGESTED, OUTAGE, FLOOR, RECOVERED = range(len(REASONS))
 
-BASELINE_S = 10.0
-QUEUE_HIGH_MS = 100.0
+BASELINE_S = STREAM_BASELINE_S
+QUEUE_HIGH_MS = STREAM_QUEUE_HIGH_MS
 QUEUE_LOW_MS = 40.0
 PROBE_GAIN = 1.08
 RECEIVED_CAP = 1.5
@@ -49,6 +58,7 @@ MIN_DRAIN_SHARE = 0.3
 HOLD_S = 0.6
 FLOOR_SHARE = 0.1
 MAX_EVERY = 4
+MAX_SENT_KEPT = 256
 
 
 @dataclass(frozen=True)
@@ -72,7 +82,10 @@ class StreamAdaptation:
         self.floor_kbps = max(float(min_video_kbps), FLOOR_SHARE * self.max_kbps)
         self.choice = StreamChoice(self.max_kbps, 1, START)
         self._ages: deque = deque()       # (t, age ms) of the reports within BASELINE_S
-        self._received: deque = deque()   # (t, kbit/s arrived x every, frames queued?) within RECEIVED_WINDOW_S
+        self._received: deque = deque()   # (t, kbit arrived x every, span s, frames queued?) within RECEIVED_WINDOW_S
+        self._sent: deque = deque()       # (frame id, t sent, bits) not known to have arrived
+        #: what arrived over the last RECEIVED_WINDOW_S of reports, each weighed by its span (kbit/s)
+        self.received_kbps = 0.0
         self._last_decrease: tuple | None = None   # (t, hold s, the link's kbit/s) of the last decrease
         self._last_every_change = float("-inf")
         self.reports = 0
@@ -90,18 +103,49 @@ class StreamAdaptation:
             self._ages.popleft()
         return age_ms - min(a for _, a in self._ages)
 
-    def report(self, t: float, age_ms: float, delivered_kbps: float) -> StreamChoice:
-        """Take one report of the client (at ``t`` s) -> the choice for the frames that follow."""
+    def sent(self, frame_id: int, t: float, bits: int) -> None:
+        """A frame of ``bits`` went out at ``t`` s (for the bytes in flight)."""
+        self._sent.append((frame_id, t, bits))
+        if len(self._sent) > MAX_SENT_KEPT:
+            self._sent.popleft()
+
+    def overdue_bits(self, t: float, newest_frame: int) -> int:
+        """Bits of the frames sent after ``newest_frame`` (the newest the client has at ``t``) that
+        would have arrived by ``t`` had they not queued (sent more than the least age before it),
+        less the first of them: on the wire, not waiting (on a slow link a frame's own
+        transmission outlasts the least age, measured when the link was fast)."""
+        while self._sent and self._sent[0][0] <= newest_frame:
+            self._sent.popleft()
+        # (on the real clock the least age holds the two clocks' offset too: never below 0)
+        least_s = max(0.0, min(a for _, a in self._ages) / 1e3)
+        overdue = [bits for _, sent, bits in self._sent if sent < t - least_s]
+        return sum(overdue[1:])
+
+    def report(self, t: float, age_ms: float, delivered_kbps: float, span_ms: float = STREAM_REPORT_MS,
+               link_kbps: float | None = None, newest_frame: int | None = None) -> StreamChoice:
+        """Take one report of the client (at ``t`` s, over its last ``span_ms``; ``link_kbps``: its
+        measure of the link, if any; ``newest_frame``: the newest frame id it has) -> the choice for
+        the frames that follow."""
         queue = self.queue_ms(t, age_ms)
+        overdue = None if newest_frame is None else self.overdue_bits(t, newest_frame)
         kbps, every = self.choice.video_kbps, self.choice.every
-        self._received.append((t, delivered_kbps * every, queue > QUEUE_LOW_MS))
+        span = max(float(span_ms), 1.0) / 1e3
+        self._received.append((t, delivered_kbps * every * span, span, queue > QUEUE_LOW_MS))
         while self._received[0][0] <= t - RECEIVED_WINDOW_S:
             self._received.popleft()
-        received = sum(k for _, k, _ in self._received) / len(self._received)
-        # What the link carries: while frames queue it is busy all the time, so what arrived over
-        # those reports is its rate (one report alone sees whole frames: none, or one in 200 ms)
-        busy = [k for _, k, queued in self._received if queued]
-        capacity = sum(busy) / len(busy) if busy else delivered_kbps * every
+        received = sum(k for _, k, _, _ in self._received) / sum(s for _, _, s, _ in self._received)
+        self.received_kbps = received
+        # What the link carries: the client's measure, else what arrived over the reports that
+        # found frames queued (the link busy all along them; one report alone sees whole frames:
+        # none, or one in 200 ms)
+        busy = [(k, s) for _, k, s, queued in self._received if queued]
+        if link_kbps is not None and link_kbps > 0:
+            capacity = float(link_kbps)
+        else:
+            capacity = sum(k for k, _ in busy) / sum(s for _, s in busy) if busy else delivered_kbps * every
+        if overdue and capacity > 0 and queue > QUEUE_LOW_MS:
+            # frames queue: the backlog the frames already sent make is what they will wait
+            queue = max(queue, overdue / capacity)   # bits / (kbit/s) = ms
         reason = HOLD
         if queue > QUEUE_HIGH_MS:
             # After a decrease the frames already queued keep arriving old: wait for them to drain

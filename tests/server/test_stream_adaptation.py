@@ -82,6 +82,45 @@ def test_probes_stay_within_half_again_what_arrives():
     assert a.choice.video_kbps == pytest.approx(RECEIVED_CAP * 3000.0)
 
 
+def test_frames_sent_that_are_overdue_make_the_backlog_the_arrived_ones_do_not_yet_show():
+    """The link halves: the first frame arrives just past the queue threshold, but the frames sent
+    after it at the old rate are already late (sent longer ago than the least age, not arrived).
+    Their bits over the link's rate are the backlog: the colour drops at once as far as a queue of
+    that length asks, not as far as the first frame's 120 ms. Without the newest frame id the
+    report is read as before."""
+    def run(with_frames):
+        a = StreamAdaptation(16000.0)
+        t, frame = 0.0, 0
+        while t < 2.0 - 1e-9:                      # 10 fps, 1.6 Mbit a frame, each arrives 90 ms later
+            a.sent(frame, t, 1_600_000)
+            if t >= 0.1:
+                a.report(t, 90.0, 16000.0, newest_frame=frame - 1 if with_frames else None)
+            t, frame = round(t + 0.1, 6), frame + 1
+        for k in range(5):                         # the link drops to 8 Mbit/s at 2.0 s: five more go out
+            a.sent(frame + k, 2.0 + 0.1 * k, 1_600_000)
+        # at 2.4 s the client has frame 19 (sent at 1.9, 210 ms old): 20..23 are overdue
+        return a.report(2.4, 210.0, 8000.0, link_kbps=8000.0, newest_frame=frame - 1 if with_frames else None)
+
+    backlog, arrived_only = run(True), run(False)
+    assert backlog.reason == arrived_only.reason == CONGESTED
+    # overdue: frames 20, 21, 22, 23 (sent by 2.3 = 2.4 - 90 ms), 20 on the wire: the 4.8 Mbit
+    # behind it at 8 Mbit/s are 600 ms queued
+    assert backlog.video_kbps == pytest.approx(8000.0 * 0.3)          # the least share: drain at once
+    assert arrived_only.video_kbps == pytest.approx(8000.0 * (1 - 0.12 - 0.1))
+
+
+def test_the_clients_measure_of_the_link_is_its_rate_and_reports_weigh_by_their_span():
+    a = StreamAdaptation(8000.0)
+    t = _steady(a, 0.0, 2.0, kbps=8000.0)
+    c = a.report(t, 90.0 + 300.0, 6000.0, link_kbps=2500.0)   # 6 Mbit/s arrived, the link carries 2.5
+    assert c.reason == CONGESTED and c.video_kbps == pytest.approx(2500.0 * (1 - 0.3 - 0.1))
+    b = StreamAdaptation(16000.0)
+    t = _steady(b, 0.0, 2.0, kbps=2000.0)          # 2 Mbit/s arrives in reports of 200 ms
+    b.report(t + 0.1, 90.0, 40000.0, span_ms=50.0)  # one frame in a report sent early: a burst, not a rate
+    # the last second of reports, each weighed by its span (an average of rates would say 9.6 Mbit/s)
+    assert b.received_kbps == pytest.approx((0.8 * 2000.0 + 0.05 * 40000.0) / 0.85)
+
+
 def test_the_baseline_is_the_least_age_so_a_clock_offset_cancels():
     a, b = StreamAdaptation(8000.0), StreamAdaptation(8000.0)
     for i in range(40):
