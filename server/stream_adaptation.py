@@ -14,10 +14,11 @@ between the two clocks). Each report:
 * queued more than :data:`QUEUE_HIGH_MS`: the link carries less than the stream. The colour's
   target goes to the link's rate, less a share that drains the queue within about a second
   (never under :data:`MIN_DRAIN_SHARE` of it; nothing delivered at all, an outage: half the
-  target). Once frames queue, the queue is the larger of what the arrived frames say and the frames still on their
-  way that should have arrived by the report (sent before it, less the least age, and after the
-  newest frame the client has: bytes in flight, as in TCP) over the link's rate; the frames
-  already sent at the old rate make the backlog, and they have not spoken yet. The link's rate
+  target). Once frames queue, the queue is the larger of what the arrived frames say and the
+  frames still on their way that should have arrived by the report (sent before it, less the
+  least age, and after the newest frame the client has: bytes in flight, as in TCP; the first of
+  them is on the wire) over the link's rate; the frames already sent at the old rate make the
+  backlog, and they have not spoken yet. The link's rate
   is the client's measure when the report has one, else what arrived over the reports of the last
   :data:`RECEIVED_WINDOW_S` that found frames queued: the link was busy all along them, while a
   single report sees whole frames (none, or one in 200 ms). Once a decrease was made, the next
