@@ -193,16 +193,12 @@ def _frames(path: str):
         # slice threads cost 15 % more CPU time per frame here.
         container.streams.video[0].thread_count = 1
         decoded = 0
-        frames = container.decode(video=0)
-        while True:
-            try:
-                frame = next(frames)
-            except StopIteration:
-                return
-            except av.error.FFmpegError as exc:   # e.g. a file cut short by a killed client
-                raise ConfigError(f"recording {path}: cannot decode past frame {decoded}: {exc}") from None
-            decoded += 1
-            yield frame.to_ndarray(format="rgb24")
+        try:
+            for frame in container.decode(video=0):
+                yield frame.to_ndarray(format="rgb24")
+                decoded += 1
+        except av.error.FFmpegError as exc:   # e.g. a file cut short by a killed client
+            raise ConfigError(f"recording {path}: cannot decode past frame {decoded}: {exc}") from None
 
 
 def _side_by_side(pairs, scale: int) -> np.ndarray:

@@ -35,6 +35,7 @@ import numpy as np
 
 from pibr.common.gl import GLThread
 from pibr.common.quality import OFF, DeadlineController, read_cost_table
+from pibr.protocol.age_baseline import AgeBaseline
 from pibr.protocol.errors import ConfigError, MalformedMessage, UnexpectedMessage
 from pibr.protocol.messages import (ARRIVAL_AGE_MS, DELIVERED_KBPS, DISPLAY_AGE_MS, FRAMES_DECODED, LINK_KBPS,
                                     NEWEST_FRAME, REPORT_SPAN_MS, STREAM_BASELINE_S, STREAM_QUEUE_HIGH_MS,
@@ -149,9 +150,9 @@ class Client:
         #: as (arrival less render us, wire bytes), the newest render time, when the last report went
         self._adapting = False
         self._stream_arrived: list = []
-        #: (arrival us, arrival less render us) of the frames of the last STREAM_BASELINE_S: the
-        #: least is the age of a frame that did not queue; the newest arrival, for the dispersion
-        self._stream_ages: deque = deque()
+        #: ages at arrival (us) of the last STREAM_BASELINE_S, by arrival: the least is the age of
+        #: a frame that did not queue; the newest arrival, for the dispersion
+        self._stream_ages = AgeBaseline(STREAM_BASELINE_S * 1e6)
         self._stream_urgent = False       # a frame arrived queued since the last report
         self._link_bits_us = [0.0, 0.0]   # bits of the frames that arrived behind another, and their gaps (us)
         self._newest_frame_id = -1
@@ -542,15 +543,12 @@ class Client:
         from then on: its bits over that gap measure the link. Past STREAM_QUEUE_HIGH_MS of
         queueing the report goes at once (_report_stream)."""
         ages = self._stream_ages
-        previous = ages[-1][0] if ages else None
-        ages.append((arrival_us, age_us))
-        while ages[0][0] < arrival_us - STREAM_BASELINE_S * 1e6:
-            ages.popleft()
-        least = min(a for _, a in ages)
-        if previous is not None and arrival_us > previous > arrival_us - age_us + least:
+        previous = ages.newest_t
+        queued_us = ages.add(arrival_us, age_us)
+        if previous is not None and arrival_us > previous > arrival_us - age_us + ages.least:
             self._link_bits_us[0] += 8.0 * size
             self._link_bits_us[1] += arrival_us - previous
-        if (age_us - least) / 1e3 > STREAM_QUEUE_HIGH_MS:
+        if queued_us / 1e3 > STREAM_QUEUE_HIGH_MS:
             self._stream_urgent = True
         self._stream_arrived.append((age_us, size))
 

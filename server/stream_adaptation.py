@@ -43,6 +43,7 @@ from __future__ import annotations
 from collections import deque
 from dataclasses import dataclass
 
+from pibr.protocol.age_baseline import AgeBaseline
 from pibr.protocol.messages import STREAM_BASELINE_S, STREAM_QUEUE_HIGH_MS, STREAM_REPORT_MS
 
 #: Reason codes a frame's STREAM_RATE payload carries (index into REASONS).
@@ -82,7 +83,7 @@ class StreamAdaptation:
         self.max_kbps = float(max_video_kbps)
         self.floor_kbps = max(float(min_video_kbps), FLOOR_SHARE * self.max_kbps)
         self.choice = StreamChoice(self.max_kbps, 1, START)
-        self._ages: deque = deque()       # (t, age ms) of the reports within BASELINE_S
+        self._ages = AgeBaseline(BASELINE_S)   # the reports' ages (ms) over BASELINE_S
         self._received: deque = deque()   # (t, kbit arrived x every, span s, frames queued?) within RECEIVED_WINDOW_S
         self._sent: deque = deque()       # (frame id, t sent, bits) not known to have arrived
         #: what arrived over the last RECEIVED_WINDOW_S of reports, each weighed by its span (kbit/s)
@@ -99,10 +100,7 @@ class StreamAdaptation:
 
     def queue_ms(self, t: float, age_ms: float) -> float:
         """Record a report's age -> the time its frames spent queued (ms)."""
-        self._ages.append((t, age_ms))
-        while self._ages and self._ages[0][0] < t - BASELINE_S:
-            self._ages.popleft()
-        return age_ms - min(a for _, a in self._ages)
+        return self._ages.add(t, age_ms)
 
     def sent(self, frame_id: int, t: float, bits: int) -> None:
         """A frame of ``bits`` went out at ``t`` s (for the bytes in flight)."""
@@ -118,7 +116,7 @@ class StreamAdaptation:
         while self._sent and self._sent[0][0] <= newest_frame:
             self._sent.popleft()
         # (on the real clock the least age holds the two clocks' offset too: never below 0)
-        least_s = max(0.0, min(a for _, a in self._ages) / 1e3)
+        least_s = max(0.0, self._ages.least / 1e3)
         overdue = [bits for _, sent, bits in self._sent if sent < t - least_s]
         return sum(overdue[1:])
 

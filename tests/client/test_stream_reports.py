@@ -1,17 +1,17 @@
 """What a client of an adapting stream measures for its reports (client/app.py, issue 28): the
 link's rate from frames that arrived while the link was busy with them, and whether a frame
 arrived queued past the threshold (the report then goes at once)."""
-from collections import deque
 from types import SimpleNamespace
 
 import pytest
 
 from pibr.client.app import Client
-from pibr.protocol.messages import STREAM_QUEUE_HIGH_MS
+from pibr.protocol.age_baseline import AgeBaseline
+from pibr.protocol.messages import STREAM_BASELINE_S, STREAM_QUEUE_HIGH_MS
 
 
 def _client():
-    return SimpleNamespace(_stream_ages=deque(), _stream_urgent=False, _link_bits_us=[0.0, 0.0],
+    return SimpleNamespace(_stream_ages=AgeBaseline(STREAM_BASELINE_S * 1e6), _stream_urgent=False, _link_bits_us=[0.0, 0.0],
                            _stream_arrived=[])
 
 
