@@ -47,18 +47,31 @@ class Level:
 
 
 class _Estimate:
-    """Exponentially weighted mean and mean absolute deviation of a series."""
+    """Exponentially weighted mean and mean absolute deviation of a series; ``prior``, if given,
+    is where the mean starts (one outlying first measure then moves it a step, not all the way)."""
 
-    def __init__(self, alpha: float):
-        self.alpha, self.mean, self.dev, self.count = alpha, None, 0.0, 0
+    def __init__(self, alpha: float, prior: float | None = None):
+        self.alpha, self.prior, self.mean, self.dev, self.count = alpha, prior, prior, 0.0, 0
+        self.idle = 0      # updates since the last measure
 
     def add(self, x: float) -> None:
         self.count += 1
+        self.idle = 0
         if self.mean is None:
             self.mean = x
             return
         self.dev += self.alpha * (abs(x - self.mean) - self.dev)
         self.mean += self.alpha * (x - self.mean)
+
+    def forget(self, rate: float, after: int) -> None:
+        """One update without a measure: past ``after`` of them in a row the mean drifts back to
+        the prior and the deviation to nothing, by ``rate`` of the way each, so an estimate
+        nobody refreshes does not hold its last value for ever."""
+        self.idle += 1
+        if self.idle <= after or self.mean is None or self.prior is None:
+            return
+        self.mean += rate * (self.prior - self.mean)
+        self.dev -= rate * self.dev
 
     def high(self) -> float | None:
         """The mean plus twice the mean deviation: what the series usually stays under."""
@@ -80,7 +93,12 @@ class DeadlineController:
     says nothing of how fast ``proxy`` runs). A level is predicted at its base times the factor,
     so a level not drawn for a while follows what the drawn ones measure: when the machine gets
     busier or freer (another process, a frame upload) every level's prediction moves with it,
-    and a level once measured slow is tried again when the others say it would fit.
+    and a level once measured slow is tried again when the others say it would fit. A factor
+    starts at 1 (the base costs are this machine's), so one slow first tick (the clock starting,
+    the first frame's upload) moves it a step rather than setting it; and a factor not measured
+    for ``up_after`` ticks in a row (the method shows its fallback) drifts back to 1, a quarter
+    of ``alpha`` a tick, so the method is tried again after a spike rather than never: at worst
+    one tick over the budget every second or so where the base costs are too hopeful.
     """
 
     def __init__(self, levels: dict, interval_ms: float, costs: dict | None = None, adapt: bool = True,
@@ -92,7 +110,8 @@ class DeadlineController:
         self.up_after, self.up_headroom = up_after, up_headroom
         self._base = {m: [None] * len(ls) for m, ls in self.levels.items()}
         # method -> the method its levels draw (``proxy``, or the ``rotation`` fallback) -> speed factor
-        self._factor = {m: {lv.method: _Estimate(alpha) for lv in ls} for m, ls in self.levels.items()}
+        self._factor = {m: {lv.method: _Estimate(alpha, prior=1.0) for lv in ls} for m, ls in self.levels.items()}
+        self._forget_rate = alpha / 4
         self._overhead = _Estimate(alpha)
         if costs is not None:
             self.load_costs(costs)
@@ -180,6 +199,9 @@ class DeadlineController:
 
     def choose(self) -> dict:
         """-> method -> (level index, reason). Call once per tick, before drawing."""
+        for factors in self._factor.values():
+            for f in factors.values():     # the fallback's ticks leave the method's own factor unmeasured
+                f.forget(self._forget_rate, self.up_after)
         budget = self.budget_ms
         levels = dict(self.current)
         reason = {m: TOP if k == 0 else HELD for m, k in levels.items()}
@@ -193,7 +215,7 @@ class DeadlineController:
             if not movable:
                 break
             m = max(movable, key=lambda x: (self.predicted(x, levels[x]), x))
-            levels[m] += 1
+            levels[m] = self._below(m, levels[m])
             reason[m] = DOWN
             self._room[m] = 0
             total = self._total(levels)
@@ -207,7 +229,7 @@ class DeadlineController:
             for m, k in levels.items():
                 if k == 0 or reason[m] == DOWN:
                     continue
-                above = dict(levels, **{m: k - 1})
+                above = dict(levels, **{m: self._above(m, k)})
                 t = self._total(above)
                 if t is not None and t <= budget * self.up_headroom:
                     self._room[m] += 1
@@ -217,11 +239,33 @@ class DeadlineController:
             ready = sorted((d, m) for d, m in candidates if self._room[m] >= self.up_after)
             if ready:
                 m = ready[0][1]
-                levels[m] -= 1
+                levels[m] = self._above(m, levels[m])
                 reason[m] = UP
                 self._room[m] = 0
         self._commit(levels, reason)
         return {m: (levels[m], reason[m]) for m in levels}
+
+    def _dominated(self, method: str, level: int) -> bool:
+        """A level some better level is predicted to cost no more than (measured so: at 1/2 scale
+        the coarse proxies' overdraw costs more than the fine ones save): never worth drawing."""
+        cost = self.predicted(method, level)
+        return cost is not None and any((p := self.predicted(method, k)) is not None and p <= cost
+                                        for k in range(level))
+
+    def _below(self, method: str, level: int) -> int:
+        """The next level down from ``level`` that is not dominated (the last is always taken)."""
+        last = len(self.levels[method]) - 1
+        level += 1
+        while level < last and self._dominated(method, level):
+            level += 1
+        return level
+
+    def _above(self, method: str, level: int) -> int:
+        """The next level up from ``level`` that is not dominated (the top never is)."""
+        level -= 1
+        while level > 0 and self._dominated(method, level):
+            level -= 1
+        return level
 
     def _commit(self, levels: dict, reason: dict) -> None:
         self.current = dict(levels)

@@ -150,3 +150,55 @@ def test_the_fallback_says_nothing_of_how_fast_the_method_itself_runs():
         c.observe("proxy", len(PROXY) - 1, 16.0)      # the rotation fallback runs at half its speed
     assert c.predicted("proxy", len(PROXY) - 1) > 15.0
     assert c.predicted("proxy", len(PROXY) - 2) == pytest.approx(25.0)   # proxy's own levels keep their base
+
+
+def test_one_slow_first_tick_moves_the_estimate_a_step_not_all_the_way():
+    c = DeadlineController({"proxy": PROXY}, 1000 / 30)
+    for k, ms in enumerate([61, 48, 38, 24.6, 28, 15.6, 13, 5.4]):
+        c.calibrate("proxy", k, ms)
+    assert c.choose()["proxy"] == (3, DOWN)
+    c.observe("proxy", 3, 39.0)                      # the clock's first tick: 1.6x its calibration
+    assert c.predicted("proxy", 3) < 24.6 * 1.3
+    assert c.choose()["proxy"] == (3, HELD)
+
+
+def test_a_method_pushed_to_its_fallback_by_a_burst_is_tried_again():
+    c = DeadlineController({"proxy": PROXY}, 1000 / 30)
+    for k, ms in enumerate([61, 48, 38, 24, 20, 15.6, 13, 5.4]):
+        c.calibrate("proxy", k, ms)
+    last = len(PROXY) - 1
+    level = c.choose()["proxy"][0]
+    for _ in range(12):                              # a burst: the machine runs the proxy 3x slower
+        c.observe("proxy", level, 3 * c._base["proxy"][level])
+        level = c.choose()["proxy"][0]
+    assert level == last
+    back = None
+    for tick in range(300):                          # the burst is over: only the fallback is measured
+        level = c.choose()["proxy"][0]
+        if level != last:
+            back = tick
+            break
+        c.observe("proxy", level, 5.4)
+    assert back is not None and back < 150            # before: the proxy's factor stayed at 3x for ever
+    for _ in range(200):                             # and at its calibrated speed it climbs back
+        c.observe("proxy", level, c._base["proxy"][level])
+        level = c.choose()["proxy"][0]
+    assert level == 3
+
+
+def test_a_level_that_costs_more_than_a_better_one_is_skipped_both_ways():
+    c = DeadlineController({"proxy": PROXY}, 1000 / 30, margin_ms=1.0, up_after=5)
+    for k, ms in enumerate([61, 48, 38, 20, 22, 15, 12, 5]):   # 1/2 coarse (22) costs more than 1/2 fine (20)
+        c.calibrate("proxy", k, ms)
+    level = c.choose()["proxy"][0]
+    assert level == 3
+    seen = {level}
+    for _ in range(6):                               # twice as slow for a while: down, past 1/2 coarse
+        c.observe("proxy", level, 2.0 * c._base["proxy"][level])
+        level = c.choose()["proxy"][0]
+        seen.add(level)
+    for _ in range(300):                             # back to the calibrated speed: climbs to 1/2 again
+        c.observe("proxy", level, c._base["proxy"][level])
+        level = c.choose()["proxy"][0]
+        seen.add(level)
+    assert level == 3 and 5 in seen and 4 not in seen
