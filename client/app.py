@@ -34,6 +34,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from pibr.common.gl import GLThread
+from pibr.common.priority import lower_this_thread
 from pibr.common.quality import OFF, DeadlineController, read_cost_table
 from pibr.protocol.age_baseline import AgeBaseline
 from pibr.protocol.errors import ConfigError, MalformedMessage, UnexpectedMessage
@@ -119,7 +120,10 @@ class Client:
         self.conn: ClientConnection | None = None
         self.session = None
         self.gl: GLThread | None = None
-        self._decode_pool = concurrent.futures.ThreadPoolExecutor(max_workers=1, thread_name_prefix="pibr-decode")
+        # decoding uses the CPU the ticks leave (common/priority.py): the newest frame wins, and it
+        # must never slow the tick that shows the one before
+        self._decode_pool = concurrent.futures.ThreadPoolExecutor(max_workers=1, thread_name_prefix="pibr-decode",
+                                                                  initializer=lower_this_thread)
         self.recorders: dict[str, MethodRecorder] = {}   # recording name (method, or method.eye) -> recorder
         self._recorded: dict[str, tuple[str, str]] = {}  # recording name -> (method, eye)
         self.pair_recorders: dict[str, list] = {}        # method -> videos of both eyes (side by side, anaglyph)

@@ -39,6 +39,7 @@ from collections import deque
 
 import numpy as np
 
+from pibr.common.priority import lower_this_thread
 from pibr.common.quality import OFF
 
 POSE_FIELDS = ("px", "py", "pz", "qw", "qx", "qy", "qz")
@@ -110,7 +111,8 @@ class MethodRecorder:
             self._csv_file = open(os.path.join(out_dir, f"{method}.records.csv"), "w", newline="")
             self._csv = csv.DictWriter(self._csv_file, fieldnames=RECORD_FIELDS)
             self._csv.writeheader()
-        self._pool = concurrent.futures.ThreadPoolExecutor(max_workers=1, thread_name_prefix=f"rec-{method}")
+        self._pool = concurrent.futures.ThreadPoolExecutor(max_workers=1, thread_name_prefix=f"rec-{method}",
+                                                           initializer=lower_this_thread)
         self._pending: deque = deque()
         self.max_pending = max_pending
         self.frames = 0
