@@ -61,7 +61,7 @@ log = logging.getLogger(__name__)
 #: Sequence number of the poses a real-clock client sends while it warms up, before its clock.
 WARMUP_SEQ = (1 << 32) - 1
 #: Timed renders of every quality level before the wall clock starts (after one that compiles it).
-CALIBRATION_RENDERS = 3
+CALIBRATION_RENDERS = 5
 #: A server that predicts the head's pose hears the median age of the frames shown over this many
 #: ticks, every this many ticks (Stats DISPLAY_AGE_MS).
 AGE_REPORT_TICKS = 15
@@ -294,12 +294,13 @@ class Client:
         for slot, decoded in shown.items():
             if textures[slot].frame_id != decoded.frame.frame_id:
                 textures[slot].upload(decoded.image, decoded.frame, decoded.distances, decoded.flow)
-        costs = {}
-        for name in self.cfg.methods:
-            costs[name] = []
-            for level in range(len(self._levels[name])):
-                times = []
-                for k in range(renders + 1):
+        costs = {name: [[] for _ in self._levels[name]] for name in self.cfg.methods}
+        # Round after round of every level, not every draw of one level and then the next: what
+        # else runs meanwhile (a server sharing the cores, a frame decoding) then slows every
+        # level alike instead of making one look costlier than the level above it.
+        for k in range(renders + 1):
+            for name in self.cfg.methods:
+                for level in range(len(self._levels[name])):
                     spent = 0.0
                     for eye, pose in poses.items():
                         slot = self._slot(eye)
@@ -309,8 +310,7 @@ class Client:
                         ctx.finish()
                         spent += time.perf_counter() - t0
                     if k:
-                        times.append(spent * 1e3)
-                costs[name].append(times)
+                        costs[name][level].append(spent * 1e3)
         return costs
 
     def _gl_release(self, ctx):

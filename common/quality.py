@@ -215,7 +215,7 @@ class DeadlineController:
             if not movable:
                 break
             m = max(movable, key=lambda x: (self.predicted(x, levels[x]), x))
-            levels[m] = self._below(m, levels[m])
+            levels[m] += 1
             reason[m] = DOWN
             self._room[m] = 0
             total = self._total(levels)
@@ -229,7 +229,7 @@ class DeadlineController:
             for m, k in levels.items():
                 if k == 0 or reason[m] == DOWN:
                     continue
-                above = dict(levels, **{m: self._above(m, k)})
+                above = dict(levels, **{m: k - 1})
                 t = self._total(above)
                 if t is not None and t <= budget * self.up_headroom:
                     self._room[m] += 1
@@ -239,33 +239,11 @@ class DeadlineController:
             ready = sorted((d, m) for d, m in candidates if self._room[m] >= self.up_after)
             if ready:
                 m = ready[0][1]
-                levels[m] = self._above(m, levels[m])
+                levels[m] -= 1
                 reason[m] = UP
                 self._room[m] = 0
         self._commit(levels, reason)
         return {m: (levels[m], reason[m]) for m in levels}
-
-    def _dominated(self, method: str, level: int) -> bool:
-        """A level some better level is predicted to cost no more than (measured so: at 1/2 scale
-        the coarse proxies' overdraw costs more than the fine ones save): never worth drawing."""
-        cost = self.predicted(method, level)
-        return cost is not None and any((p := self.predicted(method, k)) is not None and p <= cost
-                                        for k in range(level))
-
-    def _below(self, method: str, level: int) -> int:
-        """The next level down from ``level`` that is not dominated (the last is always taken)."""
-        last = len(self.levels[method]) - 1
-        level += 1
-        while level < last and self._dominated(method, level):
-            level += 1
-        return level
-
-    def _above(self, method: str, level: int) -> int:
-        """The next level up from ``level`` that is not dominated (the top never is)."""
-        level -= 1
-        while level > 0 and self._dominated(method, level):
-            level -= 1
-        return level
 
     def _commit(self, levels: dict, reason: dict) -> None:
         self.current = dict(levels)
