@@ -25,6 +25,7 @@ from collections import deque
 
 import numpy as np
 
+from pibr.common.priority import lower_this_thread
 from pibr.protocol.errors import ConfigError
 
 log = logging.getLogger(__name__)
@@ -121,7 +122,9 @@ class LiveServer:
     async def start(self) -> int:
         import concurrent.futures
 
-        self._jpeg_pool = concurrent.futures.ThreadPoolExecutor(max_workers=1, thread_name_prefix="pibr-live")
+        # the page's images use the CPU the ticks leave (common/priority.py)
+        self._jpeg_pool = concurrent.futures.ThreadPoolExecutor(max_workers=1, thread_name_prefix="pibr-live",
+                                                                initializer=lower_this_thread)
         try:
             self._server = await asyncio.start_server(self._handle, self.host, self.port, limit=MAX_REQUEST_BYTES)
         except OSError as exc:
