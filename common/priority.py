@@ -17,7 +17,8 @@ import threading
 
 log = logging.getLogger(__name__)
 
-#: The niceness of background threads: ~1/9 of the CPU of a normal thread beside one that runs.
+#: The niceness of background threads: about a tenth of the CPU beside a normal thread that runs
+#: (Linux's weights: 110 against 1024).
 BACKGROUND_NICE = 10
 
 

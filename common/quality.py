@@ -98,7 +98,7 @@ class DeadlineController:
     the first frame's upload) moves it a step rather than setting it; and a factor not measured
     for ``up_after`` ticks in a row (the method shows its fallback) drifts back to 1, a quarter
     of ``alpha`` a tick, so the method is tried again after a spike rather than never: at worst
-    one tick over the budget every second or so where the base costs are too hopeful.
+    one tick over the budget every second or two where the base costs are too hopeful.
     """
 
     def __init__(self, levels: dict, interval_ms: float, costs: dict | None = None, adapt: bool = True,
@@ -265,7 +265,7 @@ class DeadlineController:
             }
         out["costs_ms"] = self.cost_table()
         overhead = self._overhead.high()
-        out["speed_factor"] = {m: {drawn: None if f.mean is None else round(f.high(), 4) for drawn, f in fs.items()}
+        out["speed_factor"] = {m: {drawn: None if f.count == 0 else round(f.high(), 4) for drawn, f in fs.items()}
                                for m, fs in self._factor.items()}
         out["overhead_ms"] = None if overhead is None else round(overhead, 3)
         return out

@@ -160,6 +160,8 @@ def test_one_slow_first_tick_moves_the_estimate_a_step_not_all_the_way():
     c.observe("proxy", 3, 39.0)                      # the clock's first tick: 1.6x its calibration
     assert c.predicted("proxy", 3) < 24.6 * 1.3
     assert c.choose()["proxy"] == (3, HELD)
+    factors = c.summary()["speed_factor"]["proxy"]
+    assert factors["rotation"] is None and factors["proxy"] > 1.0    # the fallback never measured: no factor
 
 
 def test_a_method_pushed_to_its_fallback_by_a_burst_is_tried_again():
