@@ -102,7 +102,9 @@ class BandwidthTrace:
             q2, rem = q2 - 1, per_period
         i = max(1, int(np.searchsorted(self._cum_bits, rem, side="left")))
         t = self.times_us[i - 1] + (rem - self._cum_bits[i - 1]) / (self.rates_kbps[i - 1] / 1e3)
-        return max(int(start_us), int(math.ceil((q + q2) * period + t)))
+        # the bits before ``s`` carry float rounding: a time a hair past a whole microsecond is that
+        # microsecond, not the next (a message must not leave 1 us late)
+        return max(int(start_us), int(math.ceil((q + q2) * period + t - 1e-6)))
 
     def summary(self, window_ms: float = 100.0) -> dict:
         """Statistics a user reads (``pibr link show``), of the rate averaged over ``window_ms``
