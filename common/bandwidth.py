@@ -13,8 +13,9 @@ Two file formats:
 Both become a piecewise-constant rate over one period (a millisecond's opportunities spread over
 that millisecond), so a message's serialisation ends where the bits delivered since it started
 reach its size (:meth:`BandwidthTrace.finish_us`); a rate of 0 is an outage. The built-in traces
-(:data:`BUILTIN`) are deterministic: steps down and up, an oscillation, a short outage, and a
-synthetic cellular-like link (log-normal rate with handover dips, seeded).
+(:data:`BUILTIN`) are deterministic: steps down and up, an oscillation, a short outage, a
+synthetic cellular-like link (log-normal rate with handover dips, seeded), and a steady link with
+room (what adapting costs when nothing needs it).
 """
 from __future__ import annotations
 
@@ -255,6 +256,10 @@ def _cellular() -> BandwidthTrace:
     return BandwidthTrace("cellular", np.arange(n + 1, dtype=np.int64) * 100_000, np.round(np.clip(kbps, 50, 60000)))
 
 
+def _steady() -> BandwidthTrace:
+    return BandwidthTrace("steady", np.array([0, 30_000_000]), np.array([40000.0]))
+
+
 #: name -> (what it is, how to make it)
 BUILTIN = {
     "steps": ("20, 8, 3, 8, 20 Mbit/s for 10 s each (50 s)", _steps),
@@ -263,6 +268,7 @@ BUILTIN = {
     "cellular": ("synthetic cellular: log-normal in 100 ms steps (mean 5.7, 10th percentile 2.7 Mbit/s), "
                  "five handover dips (60 s)",
                  _cellular),
+    "steady": ("40 Mbit/s throughout (30 s): a link with room, where adapting should cost nothing", _steady),
 }
 
 

@@ -108,7 +108,7 @@ def test_bandwidth_traces_are_shown_converted_and_refused_by_name(capsys, tmp_pa
     assert main(["relay", "--down-trace", str(tmp_path / "bad.csv")]) == 2
     assert "bad.csv, line 3: times must increase" in capsys.readouterr().err
     assert main(["relay", "--down-trace", "no-such-trace"]) == 2
-    assert "neither a file nor a built-in (steps, oscillation, outage, cellular)" in capsys.readouterr().err
+    assert "neither a file nor a built-in (steps, oscillation, outage, cellular, steady)" in capsys.readouterr().err
 
 
 def test_scenes_lists_builtins(capsys):
