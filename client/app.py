@@ -21,7 +21,6 @@ The client knows the scene only from the wire (``Welcome``; proxies when a metho
 from __future__ import annotations
 
 import asyncio
-import concurrent.futures
 import json
 import logging
 import math
@@ -34,7 +33,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from pibr.common.gl import GLThread
-from pibr.common.priority import lower_this_thread
+from pibr.common.priority import background_executor
 from pibr.common.quality import OFF, DeadlineController, read_cost_table
 from pibr.protocol.age_baseline import AgeBaseline
 from pibr.protocol.errors import ConfigError, MalformedMessage, UnexpectedMessage
@@ -122,8 +121,7 @@ class Client:
         self.gl: GLThread | None = None
         # decoding uses the CPU the ticks leave (common/priority.py): the newest frame wins, and it
         # must never slow the tick that shows the one before
-        self._decode_pool = concurrent.futures.ThreadPoolExecutor(max_workers=1, thread_name_prefix="pibr-decode",
-                                                                  initializer=lower_this_thread)
+        self._decode_pool = background_executor("pibr-decode")
         self.recorders: dict[str, MethodRecorder] = {}   # recording name (method, or method.eye) -> recorder
         self._recorded: dict[str, tuple[str, str]] = {}  # recording name -> (method, eye)
         self.pair_recorders: dict[str, list] = {}        # method -> videos of both eyes (side by side, anaglyph)

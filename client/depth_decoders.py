@@ -15,7 +15,7 @@ import concurrent.futures
 
 import numpy as np
 
-from pibr.common.priority import lower_this_thread
+from pibr.common.priority import background_executor
 from pibr.protocol.depth import DepthQuantizer
 from pibr.protocol.depth_codecs import DEPTH_CODECS
 from pibr.protocol.edgecodec.codec import DecodedSamples, EdgeDecoder, warp_samples
@@ -61,8 +61,7 @@ class EdgeDepthDecoder:
         self.motion = None
         # The views' streams are independent and their kernels release the GIL: the extra
         # view decodes on this helper thread while the caller's decodes the primary.
-        self._helper = (concurrent.futures.ThreadPoolExecutor(max_workers=1, thread_name_prefix="pibr-depth",
-                                                                   initializer=lower_this_thread)
+        self._helper = (background_executor("pibr-depth")
                         if "extra" in self.streams else None)
 
     def close(self) -> None:

@@ -25,7 +25,7 @@ from collections import deque
 
 import numpy as np
 
-from pibr.common.priority import lower_this_thread
+from pibr.common.priority import background_executor
 from pibr.protocol.errors import ConfigError
 
 log = logging.getLogger(__name__)
@@ -120,11 +120,8 @@ class LiveServer:
         self.thread_ms = 0.0
 
     async def start(self) -> int:
-        import concurrent.futures
-
         # the page's images use the CPU the ticks leave (common/priority.py)
-        self._jpeg_pool = concurrent.futures.ThreadPoolExecutor(max_workers=1, thread_name_prefix="pibr-live",
-                                                                initializer=lower_this_thread)
+        self._jpeg_pool = background_executor("pibr-live")
         try:
             self._server = await asyncio.start_server(self._handle, self.host, self.port, limit=MAX_REQUEST_BYTES)
         except OSError as exc:

@@ -31,7 +31,6 @@ then costs its clock a copy per tick, not two video encodes.
 """
 from __future__ import annotations
 
-import concurrent.futures
 import csv
 import fractions
 import os
@@ -39,7 +38,7 @@ from collections import deque
 
 import numpy as np
 
-from pibr.common.priority import lower_this_thread
+from pibr.common.priority import background_executor
 from pibr.common.quality import OFF
 
 POSE_FIELDS = ("px", "py", "pz", "qw", "qx", "qy", "qz")
@@ -111,8 +110,7 @@ class MethodRecorder:
             self._csv_file = open(os.path.join(out_dir, f"{method}.records.csv"), "w", newline="")
             self._csv = csv.DictWriter(self._csv_file, fieldnames=RECORD_FIELDS)
             self._csv.writeheader()
-        self._pool = concurrent.futures.ThreadPoolExecutor(max_workers=1, thread_name_prefix=f"rec-{method}",
-                                                           initializer=lower_this_thread)
+        self._pool = background_executor(f"rec-{method}")
         self._pending: deque = deque()
         self.max_pending = max_pending
         self.frames = 0

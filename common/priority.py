@@ -11,6 +11,7 @@ elsewhere nothing changes.
 """
 from __future__ import annotations
 
+import concurrent.futures
 import logging
 import os
 import threading
@@ -31,3 +32,9 @@ def lower_this_thread(nice: int = BACKGROUND_NICE) -> None:
         os.setpriority(os.PRIO_PROCESS, tid, os.getpriority(os.PRIO_PROCESS, tid) + nice)
     except OSError as exc:     # not allowed here: the thread keeps its priority
         log.debug("could not lower thread priority: %s", exc)
+
+
+def background_executor(name: str) -> concurrent.futures.ThreadPoolExecutor:
+    """One worker thread named ``name`` for background work, at the lowered priority."""
+    return concurrent.futures.ThreadPoolExecutor(max_workers=1, thread_name_prefix=name,
+                                                 initializer=lower_this_thread)
