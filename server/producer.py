@@ -22,6 +22,7 @@ from .object_poses import object_poses_payload
 from .packer import AtlasPacker, CpuAtlasPacker
 from .render_target import RenderTarget
 from .renderer import PEEL_TOLERANCE, Renderer, edge_angle_for_width
+from .view_upsample import ViewUpsampler
 
 
 @dataclass
@@ -76,6 +77,9 @@ class ProducedFrame:
 #: Upsamples a primary view rendered at a lower resolution into the full-size target: colour
 #: bilinearly, distance and motion from the nearest low pixel (a distance between two surfaces, or a
 #: moving flag between an object and what is behind it, would be neither), motion in full pixels.
+#: Used by the GL packer and on frames that peel the extra view against the primary; otherwise the
+#: small view is read back and brought to size on the CPU (view_upsample.py), several times cheaper
+#: on llvmpipe.
 _UPSAMPLE_FS = """
 #version 410
 uniform sampler2D u_color;
@@ -145,6 +149,10 @@ class FrameProducer:
                                                        spec.extra_size[0])
             renderer.prepare_edge_angle(self.extra_edge_deg)
         self._low = {}              # scale -> the primary view's smaller render target
+        self._low_reads = {}        # scale -> its readback buffers ((h, w, 4) uint8, (h, w) float32)
+        self._small_primary = None  # this frame's smaller primary target, brought to size on the CPU
+        self._upsampler = ViewUpsampler()
+        self._extra_packed = False  # the CPU packer's buffer holds the extra view's planes
         self._upsample = None       # (program, vbo, vao) of the upsampling pass, made when first needed
         self._extra_pose = None     # the extra view's pose in the atlas (frames that keep it)
         self._produced = 0          # frames made so far: the next frame's id unless the caller names it
@@ -161,6 +169,8 @@ class FrameProducer:
         self._produced = frame_id + 1
         t0 = time.perf_counter()
         primary_edge = level.edge_deg
+        self._small_primary = None
+        fresh_extra = self.extra is not None and (level.extra or self._extra_pose is None)
         if level.scale == 1.0:
             self.renderer.render_wide(self.primary, pose, t, self.spec.projection, motion_dt=self.spec.motion_dt,
                                       max_edge_deg=primary_edge)
@@ -168,8 +178,11 @@ class FrameProducer:
             low = self._low_target(level.scale)
             self.renderer.render_wide(low, pose, t, self.spec.projection, motion_dt=self.spec.motion_dt,
                                       max_edge_deg=primary_edge)
-            self._upsample_into_primary(low, level.scale)
-        fresh_extra = self.extra is not None and (level.extra or self._extra_pose is None)
+            if self.spec.gpu_pack or (fresh_extra and self.spec.peel):
+                # the extra view is peeled against the whole-size distance, as at full scale
+                self._upsample_into_primary(low, level.scale)
+            else:
+                self._small_primary = low     # brought to size after its readback (view_upsample.py)
         if fresh_extra:
             self._extra_pose = pose.compose(self.spec.extra_offset)
             peel = (self.primary, pose, self.spec.peel_tolerance) if self.spec.peel else None
@@ -196,7 +209,14 @@ class FrameProducer:
         motion, moving = None, None
         if self.spec.motion_dt is not None:
             t2 = time.perf_counter()
-            motion, moving = self.primary.read_moving_motion()
+            small = self._small_primary
+            if small is None:
+                motion, moving = self.primary.read_moving_motion()
+            else:
+                motion, moving = small.read_moving_motion()
+                motion = self._upsampler.nearest(motion, self.spec.primary_size)
+                motion /= np.float32(level.scale)       # in whole-size pixels
+                moving = self._upsampler.nearest(moving, self.spec.primary_size)
             readback_ms += (time.perf_counter() - t2) * 1e3
         poses = object_poses_payload(self.renderer.scene, t) if self.spec.object_poses else None
         return ProducedFrame(yuv, pose, extra_pose, t, (t1 - t0) * 1e3, readback_ms, pack_ms, distances,
@@ -209,6 +229,13 @@ class FrameProducer:
             target.color.filter = (self.ctx.LINEAR, self.ctx.LINEAR)
             self._low[scale] = target
         return self._low[scale]
+
+    def _small_reads(self, target: RenderTarget) -> tuple:
+        key = (target.width, target.height)
+        if key not in self._low_reads:
+            self._low_reads[key] = (np.empty((target.height, target.width, 4), np.uint8),
+                                    np.empty((target.height, target.width), np.float32))
+        return self._low_reads[key]
 
     def _upsample_into_primary(self, low: RenderTarget, scale: float) -> None:
         ctx = self.ctx
@@ -235,18 +262,33 @@ class FrameProducer:
     def _pack_on_cpu(self, t1: float, read_extra: bool, frame_id: int, keep_colour: bool) -> tuple:
         """One readback of each view's colour and distance, then the CPU packer; the distances
         and low-resolution colour the caller wants come from the same reads. ``read_extra``
-        False: the extra view was not rendered again, its last reads are packed again (at a
-        colour scale, its pixels of this frame's jitter: the client rebuilds it like any view)."""
+        False: the extra view was not rendered again; its planes stay in the packer's buffer as
+        they were packed (at a colour scale its last reads are packed again with this frame's
+        jitter: the client rebuilds it like any view)."""
         layout, colors, dists = self.spec.layout, {}, {}
         keep = self.spec.keep_distance
+        small = self._small_primary
         for name, (target, rgba, dist) in self._reads.items():
             fresh = name != "extra" or read_extra
+            with_distance = keep or layout.rect(name + ".depth") is not None
+            if name == "primary" and small is not None:
+                low_rgba, low_dist = self._small_reads(small)
+                colors[name + ".color"] = self._upsampler.colour(small.read_rgba_into(low_rgba), rgba)
+                if with_distance:
+                    dists[name + ".depth"] = self._upsampler.distance(small.read_distance_into(low_dist), dist)
+                continue
             colors[name + ".color"] = target.read_rgba_into(rgba) if fresh else rgba
-            if keep or layout.rect(name + ".depth") is not None:
+            if with_distance:
                 dists[name + ".depth"] = target.read_distance_into(dist) if fresh else dist
         t2 = time.perf_counter()
         jitter = colour_jitter(frame_id) if self.spec.colour_scale != 1.0 else None
-        yuv = self.packer.pack(colors, dists, jitter).copy()
+        if not read_extra and jitter is None and self._extra_packed:
+            # the packer's buffer still holds the kept extra view's planes
+            yuv = self.packer.pack({k: v for k, v in colors.items() if not k.startswith("extra.")},
+                                   {k: v for k, v in dists.items() if not k.startswith("extra.")}).copy()
+        else:
+            yuv = self.packer.pack(colors, dists, jitter).copy()
+            self._extra_packed = "extra" in self._reads
         t3 = time.perf_counter()
         distances = {name: dists[name + ".depth"].copy() for name in self._reads} if keep else {}
         low = None

@@ -79,6 +79,20 @@ def test_levels_make_frames_that_keep_the_extra_view_and_calibrate():
         b = half.yuv[py:py + ph, px:px + pw].astype(float)
         assert 0 < np.mean(np.abs(a - b)) < 12      # the same view, blurred by the upsampling
         assert half.moving is not None and half.moving.shape == (128, 128)   # motion upsampled too
+        # a frame that keeps the extra view reads the small view back and brings it to size on the
+        # CPU (view_upsample.py); one that peels a new extra view upsamples in GL: the same atlas
+        on_cpu = pipeline.produce(moved, 0.1, FrameLevel(extra=False, scale=0.5))
+        assert pipeline.producer._small_primary is not None
+        turned = pose.compose(Pose.make([0.3, 0.0, 0.0], [0.7071, 0.0, 0.7071, 0.0]))  # the pendulum in view
+        moving_gl = pipeline.produce(turned, 0.1, FrameLevel(extra=True, scale=0.5))
+        moving_cpu = pipeline.produce(turned, 0.1, FrameLevel(extra=False, scale=0.5))
+        c = on_cpu.yuv[py:py + ph, px:px + pw].astype(float)
+        assert np.max(np.abs(b - c)) <= 1 and np.mean(b != c) < 0.3    # llvmpipe filters in 8-bit steps
+        dx, dy, dw, dh = pipeline.spec.layout.rect("primary.depth")
+        assert np.array_equal(half.yuv[dy:dy + dh, dx:dx + dw], on_cpu.yuv[dy:dy + dh, dx:dx + dw])
+        assert np.array_equal(moving_gl.moving, moving_cpu.moving) and moving_gl.moving.any()
+        assert np.allclose(moving_gl.motion, moving_cpu.motion, atol=0.05)      # half floats on the GPU
+        assert np.abs(moving_cpu.motion).max() > 0.1
         rc = RateControl(server_levels(True), 10.0)
         costs = rc.calibrate(pipeline, pose, 0.0)
         assert len(costs) == len(rc.levels) and all(ms > 0 for ms in costs)
