@@ -441,8 +441,13 @@ class Session:
                     # This frame overran its interval: the next starts at once, not at the next
                     # slot of a fixed grid (which would skip a whole interval for a frame a few ms
                     # late and halve the rate of a server whose frames cost about an interval).
+                    # Up to one interval behind, the grid is kept, so frames that cost less make
+                    # up for one that cost more (the extra view rendered every few frames): the
+                    # rate holds whenever the mean cost fits, which is what the rate control
+                    # predicts (rate_control.py). Further behind, the grid starts again from now.
                     self.tick_overruns += 1
-                    due = now
+                    if now > due + interval:
+                        due = now
         finally:
             receiver.cancel()
             try:

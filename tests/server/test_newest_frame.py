@@ -4,6 +4,8 @@ an old pose); the next frame is rendered from the newest pose once there is room
 import asyncio
 import socket
 
+import numpy as np
+
 import pytest
 
 from pibr.protocol.connection import Connection
@@ -127,6 +129,43 @@ async def test_a_frame_over_its_interval_delays_the_next_without_skipping_a_slot
         assert expected_fps * 0.85 <= fps <= expected_fps * 1.05
         overran = frame_ms > 50.0
         assert (session.tick_overruns >= 14) if overran else (session.tick_overruns <= 2)
+        writer.close()
+    finally:
+        task.cancel()
+        await asyncio.gather(task, return_exceptions=True)
+        await srv.close()
+
+
+async def test_cheaper_frames_make_up_for_a_costly_one_so_the_mean_cost_sets_the_rate():
+    """Every 4th frame costs 80 ms at 20 fps (50 ms), the others 35: the mean (46 ms) fits, so the
+    rate holds at 20 fps (padding the cheap frames to the interval after each overrun gave 17.4)."""
+    srv = Server(ServerConfig(port=0, scene="sphere", view_size=(64, 64), fps=20.0, bitrate_kbps=2000,
+                              extra_view="off", rate_control="off"))
+    host, port = await srv.start()
+    task = asyncio.create_task(srv.serve_forever())
+    try:
+        reader, writer = await asyncio.open_connection(host, port)
+        conn = Connection()
+        conn.send(Hello(client="uneven", scene="sphere", clock="real", output=OutputConfig(64, 48, 90.0, 30.0)))
+        writer.write(conn.data_to_send())
+        while not srv.sessions:
+            await asyncio.sleep(0.01)
+        session = next(iter(srv.sessions.values()))
+        starts = []
+
+        async def uneven_tick(*args, **kwargs):
+            starts.append(asyncio.get_running_loop().time())
+            await asyncio.sleep(0.080 if len(starts) % 4 == 0 else 0.035)
+        session._send_tick = uneven_tick
+        conn.send(PoseMsg(0, 0, Pose.make((0, 1.6, 0))))
+        writer.write(conn.data_to_send())
+        while len(starts) < 25:
+            await asyncio.sleep(0.01)
+        fps = (len(starts) - 1) / (starts[-1] - starts[0])
+        assert 19.0 <= fps <= 21.0
+        assert session.tick_overruns >= 5     # every costly frame overran its own interval
+        gaps = np.diff(starts)
+        assert gaps.min() < 0.045             # a frame after a costly one started early, on the grid
         writer.close()
     finally:
         task.cancel()
