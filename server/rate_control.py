@@ -9,8 +9,10 @@ projection (fewer pre-tessellated triangles: 9 to 24 degrees instead of 6), and 
 rendered at 1/2 or 1/3 of its side and upsampled into the atlas (server/producer.py). Chosen by
 measurement (room, 1088^2 dual view, one core, 10 frames each): 283, 267, 197, 175, 137, 126 and
 99 ms a frame; 3/4 of the view at 12 degrees (190 ms) was not cheaper than the whole view at 12
-degrees (175 ms): on one core the vertex stage, not the pixels, is most of a frame. The x264
-preset is not a level: ``ultrafast`` is already its cheapest.
+degrees (175 ms): on one core the vertex stage, not the pixels, is most of a frame. Since a
+smaller primary is read back small and brought to size on the CPU (view_upsample.py), a session's
+calibration in ``pibr bench realtime --placement split`` gave 314, 196, 189, 141, 110, 96 and
+74 ms. The x264 preset is not a level: ``ultrafast`` is already its cheapest.
 
 The costs are calibrated when the session starts (every level made twice, the first not timed:
 it builds the level's tessellation; plus one H.264 encode on an encoder of its own, so the
