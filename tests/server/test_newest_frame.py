@@ -98,11 +98,9 @@ async def test_a_real_clock_client_that_sends_poses_but_reads_nothing_loses_its_
         await srv.close()
 
 
-@pytest.mark.parametrize("frame_ms, expected_fps", [(30.0, 20.0), (65.0, 1e3 / 65.0)])
-async def test_a_frame_over_its_interval_delays_the_next_without_skipping_a_slot(frame_ms, expected_fps):
-    """The wall clock's frames keep --fps when they fit, and when each costs a little more than an
-    interval the next starts at once: the rate is one per frame's cost, not one per two intervals
-    (a fixed grid skipped the slot a frame ran into, 10 fps for 65 ms frames asked at 20)."""
+async def _frame_starts(frame_s, count: int) -> tuple[list, object]:
+    """A wall-clock session at 20 fps whose every frame takes ``frame_s(n)`` seconds for its n-th
+    (1-based) and sends nothing -> (the loop times its first ``count`` frames started, the session)."""
     srv = Server(ServerConfig(port=0, scene="sphere", view_size=(64, 64), fps=20.0, bitrate_kbps=2000,
                               extra_view="off", rate_control="off"))
     host, port = await srv.start()
@@ -117,57 +115,39 @@ async def test_a_frame_over_its_interval_delays_the_next_without_skipping_a_slot
         session = next(iter(srv.sessions.values()))
         starts = []
 
-        async def costly_tick(*args, **kwargs):   # a frame that takes frame_ms and sends nothing
+        async def costly_tick(*args, **kwargs):
             starts.append(asyncio.get_running_loop().time())
-            await asyncio.sleep(frame_ms / 1e3)
+            await asyncio.sleep(frame_s(len(starts)))
         session._send_tick = costly_tick
         conn.send(PoseMsg(0, 0, Pose.make((0, 1.6, 0))))
         writer.write(conn.data_to_send())
-        while len(starts) < 16:
+        while len(starts) < count:
             await asyncio.sleep(0.01)
-        fps = (len(starts) - 1) / (starts[-1] - starts[0])
-        assert expected_fps * 0.85 <= fps <= expected_fps * 1.05
-        overran = frame_ms > 50.0
-        assert (session.tick_overruns >= 14) if overran else (session.tick_overruns <= 2)
         writer.close()
+        return starts[:count], session
     finally:
         task.cancel()
         await asyncio.gather(task, return_exceptions=True)
         await srv.close()
+
+
+@pytest.mark.parametrize("frame_ms, expected_fps", [(30.0, 20.0), (65.0, 1e3 / 65.0)])
+async def test_a_frame_over_its_interval_delays_the_next_without_skipping_a_slot(frame_ms, expected_fps):
+    """The wall clock's frames keep --fps when they fit, and when each costs a little more than an
+    interval the next starts at once: the rate is one per frame's cost, not one per two intervals
+    (a fixed grid skipped the slot a frame ran into, 10 fps for 65 ms frames asked at 20)."""
+    starts, session = await _frame_starts(lambda n: frame_ms / 1e3, 16)
+    fps = (len(starts) - 1) / (starts[-1] - starts[0])
+    assert expected_fps * 0.85 <= fps <= expected_fps * 1.05
+    overran = frame_ms > 50.0
+    assert (session.tick_overruns >= 14) if overran else (session.tick_overruns <= 2)
 
 
 async def test_cheaper_frames_make_up_for_a_costly_one_so_the_mean_cost_sets_the_rate():
     """Every 4th frame costs 80 ms at 20 fps (50 ms), the others 35: the mean (46 ms) fits, so the
-    rate holds at 20 fps (padding the cheap frames to the interval after each overrun gave 17.4)."""
-    srv = Server(ServerConfig(port=0, scene="sphere", view_size=(64, 64), fps=20.0, bitrate_kbps=2000,
-                              extra_view="off", rate_control="off"))
-    host, port = await srv.start()
-    task = asyncio.create_task(srv.serve_forever())
-    try:
-        reader, writer = await asyncio.open_connection(host, port)
-        conn = Connection()
-        conn.send(Hello(client="uneven", scene="sphere", clock="real", output=OutputConfig(64, 48, 90.0, 30.0)))
-        writer.write(conn.data_to_send())
-        while not srv.sessions:
-            await asyncio.sleep(0.01)
-        session = next(iter(srv.sessions.values()))
-        starts = []
-
-        async def uneven_tick(*args, **kwargs):
-            starts.append(asyncio.get_running_loop().time())
-            await asyncio.sleep(0.080 if len(starts) % 4 == 0 else 0.035)
-        session._send_tick = uneven_tick
-        conn.send(PoseMsg(0, 0, Pose.make((0, 1.6, 0))))
-        writer.write(conn.data_to_send())
-        while len(starts) < 25:
-            await asyncio.sleep(0.01)
-        fps = (len(starts) - 1) / (starts[-1] - starts[0])
-        assert 19.0 <= fps <= 21.0
-        assert session.tick_overruns >= 5     # every costly frame overran its own interval
-        gaps = np.diff(starts)
-        assert gaps.min() < 0.045             # a frame after a costly one started early, on the grid
-        writer.close()
-    finally:
-        task.cancel()
-        await asyncio.gather(task, return_exceptions=True)
-        await srv.close()
+    rate holds at 20 fps (padding the cheap frames to the interval after each overrun gave 17.3)."""
+    starts, session = await _frame_starts(lambda n: 0.080 if n % 4 == 0 else 0.035, 25)
+    fps = (len(starts) - 1) / (starts[-1] - starts[0])
+    assert 19.0 <= fps <= 21.0
+    assert session.tick_overruns >= 5     # every costly frame overran its own interval
+    assert np.diff(starts).min() < 0.045  # a frame after a costly one started early, on the grid
