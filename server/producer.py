@@ -149,7 +149,7 @@ class FrameProducer:
                                                        spec.extra_size[0])
             renderer.prepare_edge_angle(self.extra_edge_deg)
         self._low = {}              # scale -> the primary view's smaller render target
-        self._low_reads = {}        # scale -> its readback buffers ((h, w, 4) uint8, (h, w) float32)
+        self._low_reads = {}        # (w, h) of a smaller target -> its readback buffers ((h, w, 4) uint8, (h, w) float32)
         self._small_primary = None  # this frame's smaller primary target, brought to size on the CPU
         self._upsampler = ViewUpsampler()
         self._extra_packed = False  # the CPU packer's buffer holds the extra view's planes
@@ -182,7 +182,8 @@ class FrameProducer:
                 # the extra view is peeled against the whole-size distance, as at full scale
                 self._upsample_into_primary(low, level.scale)
             else:
-                self._small_primary = low     # brought to size after its readback (view_upsample.py)
+                self._small_primary = low     # brought to size after its readback (view_upsample.py; its
+                                              # time counts as the frame's readback)
         if fresh_extra:
             self._extra_pose = pose.compose(self.spec.extra_offset)
             peel = (self.primary, pose, self.spec.peel_tolerance) if self.spec.peel else None
