@@ -14,10 +14,10 @@ smaller primary is read back small and brought to size on the CPU (view_upsample
 calibration in ``pibr bench realtime --placement split`` gave 314, 196, 189, 141, 110, 96 and
 74 ms. The x264 preset is not a level: ``ultrafast`` is already its cheapest.
 
-The costs are calibrated when the session starts (every level made twice, the first not timed:
-it builds the level's tessellation; plus one H.264 encode on an encoder of its own, so the
-session's stream is untouched) and followed online from what each frame takes, its wait for the
-shared GL thread and encoder pool included: sessions share them in fair turns (fair_queue.py),
+The costs are calibrated when the session starts (every kind of frame of every level made twice,
+the first not timed: it builds the level's tessellation and loads the CPU upsampling's compiled
+kernels; plus one H.264 encode on an encoder of its own, so the session's stream is untouched)
+and followed online from what each frame takes, its wait for the shared GL thread and encoder pool included: sessions share them in fair turns (fair_queue.py),
 so a session that would take more than its share waits longer and moves down by itself, and
 never starves another to hold its own rate. Each frame's level travels with it (a FRAME_LEVEL
 payload: its index in ``SessionConfig.options["server_levels"]``) and the session's log says how
@@ -117,11 +117,13 @@ class RateControl:
             out = []
             for index in range(len(self.levels)):
                 every = int(self.levels[index].options.get("extra_every", 1))
-                with_extra = self.frame_level(index, 0)
+                with_extra, keeping = self.frame_level(index, 0), self.frame_level(index, 1)
                 for _ in range(CALIBRATION_FRAMES - 1):
                     timed(with_extra)        # builds the level's tessellation, compiles
+                    if every > 1:
+                        timed(keeping)       # a smaller view kept on the CPU: its kernels load
                 fresh = timed(with_extra)
-                kept = timed(self.frame_level(index, 1)) if every > 1 else fresh
+                kept = timed(keeping) if every > 1 else fresh
                 mean = (fresh + (every - 1) * kept) / every
                 self._kinds[index] = (fresh, kept)
                 self.controller.calibrate("frame", index, mean)

@@ -112,3 +112,36 @@ def test_the_virtual_clock_and_rate_control_off_announce_no_levels():
         pipeline = SessionPipeline(config, scene, Hello(clock=clock))
         assert "server_levels" not in pipeline.session.options
         pipeline.close_encoders()
+
+
+def test_calibration_does_not_time_the_first_frame_of_either_kind():
+    """A level's first frame of each kind (rendering the extra view, keeping it) pays one-off
+    costs (its tessellation, the CPU upsampling's kernels loading): calibration makes both kinds
+    once untimed, so a level that keeps the extra view is not calibrated at its first frame's cost."""
+    import time as _time
+
+    seen = set()
+
+    class SlowFirstPipeline:
+        def new_video_encoder(self):
+            class Encoder:
+                def encode(self, yuv):
+                    return b"", False
+
+                def close(self):
+                    pass
+            return Encoder()
+
+        def produce(self, pose, t, level):
+            first = level not in seen
+            seen.add(level)
+            _time.sleep(0.15 if first else 0.005)
+
+            class Produced:
+                yuv = None
+            return Produced()
+
+    rc = RateControl(server_levels(True), 10.0)
+    costs = rc.calibrate(SlowFirstPipeline(), Pose.identity(), 0.0)
+    assert len(costs) == len(rc.levels)
+    assert max(costs) < 60.0, costs      # 5 ms frames; a first frame timed would add 150 / every
