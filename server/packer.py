@@ -228,7 +228,8 @@ class CpuAtlasPacker:
     """Views read back from GL -> yuv420p bytes of the atlas, identical to :class:`AtlasPacker`'s.
 
     Keeps one buffer; parts of the atlas no rectangle covers stay Y 0, U and V 128 as the GL
-    passes clear them, and a rectangle a call is not given keeps what was last packed there. Thread-safe only per instance; the kernels release the GIL.
+    passes clear them, and a rectangle a call is not given keeps what was last packed
+    there. Thread-safe only per instance; the kernels release the GIL.
     """
 
     def __init__(self, layout: AtlasLayout, quantizer: DepthQuantizer | None):

@@ -149,7 +149,7 @@ class FrameProducer:
                                                        spec.extra_size[0])
             renderer.prepare_edge_angle(self.extra_edge_deg)
         self._low = {}              # scale -> the primary view's smaller render target
-        self._low_reads = {}        # (w, h) of a smaller target -> its readback buffers ((h, w, 4) uint8, (h, w) float32)
+        self._low_reads = {}        # (w, h) of a smaller target -> its readback buffers (RGBA, distance)
         self._small_primary = None  # this frame's smaller primary target, brought to size on the CPU
         self._upsampler = ViewUpsampler()
         self._extra_packed = False  # the CPU packer's buffer holds the extra view's planes

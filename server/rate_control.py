@@ -17,8 +17,9 @@ calibration in ``pibr bench realtime --placement split`` gave 314, 196, 189, 141
 The costs are calibrated when the session starts (every kind of frame of every level made twice,
 the first not timed: it builds the level's tessellation and loads the CPU upsampling's compiled
 kernels; plus one H.264 encode on an encoder of its own, so the session's stream is untouched)
-and followed online from what each frame takes, its wait for the shared GL thread and encoder pool included: sessions share them in fair turns (fair_queue.py),
-so a session that would take more than its share waits longer and moves down by itself, and
+and followed online from what each frame takes, its wait for the shared GL thread and encoder
+pool included: sessions share them in fair turns (fair_queue.py), so a session that would take
+more than its share waits longer and moves down by itself, and
 never starves another to hold its own rate. Each frame's level travels with it (a FRAME_LEVEL
 payload: its index in ``SessionConfig.options["server_levels"]``) and the session's log says how
 many frames each level made.

@@ -4,10 +4,10 @@ the readback (server/producer.py; the rate control's smaller views, server/rate_
 Colour is filtered bilinearly, as GL's LINEAR filter samples a texture at the whole view's pixel
 centres (edges clamped); distance (and a moving scene's motion and moving flags) takes the
 nearest low pixel: a distance between two surfaces, or a flag between an object and what is
-behind it, would be neither. On llvmpipe the GL pass that did this into the whole-size target, and the
-whole-size readback after it, cost more than the frame's render at 1/3 of the side (18 + 3 ms
-against 33 on one core, room, 1088^2): reading the small view back and filling the readback
-buffers here costs a few ms and the GL thread nothing.
+behind it, would be neither. On llvmpipe the GL pass that did this into the whole-size target,
+and the whole-size readback after it, cost more than half the frame's render at 1/3 of the side
+(18 + 3 ms against 33 on one core, room, 1088^2): reading the small view back and filling the
+readback buffers here costs a few ms and the GL thread nothing.
 """
 from __future__ import annotations
 
