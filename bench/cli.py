@@ -6,6 +6,7 @@ import argparse
 
 from pibr.client.cli import parse_methods
 from pibr.common import arguments
+from pibr.common.bandwidth import BUILTIN as BUILTIN_LINKS
 from pibr.protocol.depth_codecs import DEPTH_CODECS
 from pibr.protocol.motion_flow import FLOW_CODERS
 
@@ -423,8 +424,8 @@ def register(sub) -> None:
                                    "the bitrate that arrived, DSSIM; per link, the adapting stream's DSSIM per 5 s "
                                    "segment against the best static setting in hindsight. Writes network.json. About "
                                    "a minute a run at the defaults (links x (statics + 1) runs).")
-    nw.add_argument("--links", type=arguments.names, default=("steps", "oscillation", "outage", "cellular", "steady"),
-                    metavar="TRACE,...", help="bandwidth traces, built-in or files (default the five built-ins)")
+    nw.add_argument("--links", type=arguments.names, default=tuple(BUILTIN_LINKS),
+                    metavar="TRACE,...", help="bandwidth traces, built-in or files (default every built-in)")
     nw.add_argument("--static-kbps", type=arguments.positives, default=(2000.0, 4000.0, 8000.0, 16000.0),
                     metavar="KBPS,...", help="static bitrates to compare (default 2000,4000,8000,16000)")
     nw.add_argument("--adapt-kbps", type=arguments.positive, default=16000.0, metavar="KBPS",

@@ -19,6 +19,8 @@ import sys
 
 import numpy as np
 
+from pibr.common.bandwidth import BUILTIN
+
 from .results import write_result
 
 STALL_MS = 250.0
@@ -80,7 +82,7 @@ def _dssim_by_segment(out: str, method: str, duration_s: float, segment_s: float
             for a, b in zip(edges, edges[1:])]
 
 
-def run_network_bench(out_dir="out/bench", links=("steps", "oscillation", "outage", "cellular", "steady"),
+def run_network_bench(out_dir="out/bench", links=tuple(BUILTIN),
                       static_kbps=(2000.0, 4000.0, 8000.0, 16000.0), adapt_kbps: float = 16000.0,
                       method: str = "proxy", scene: str = "room", trace: str = "pred6dof-1", start_s: float = 30.0,
                       duration_s: float = 30.0, rate_hz: float = 30.0, size=(480, 270), view_size=(512, 512),
