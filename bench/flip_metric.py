@@ -85,9 +85,9 @@ def _lab(v, inv, third):
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def to_ycxcz(img, table, m):
-    """(h, w, 3) uint8 sRGB -> (h, w, 3) float32 YCxCz (FLIP's linear RGB -> XYZ -> YCxCz)."""
+    """(h, w, 3) uint8 sRGB -> (3, h, w) float32 YCxCz planes (FLIP's linear RGB -> XYZ -> YCxCz)."""
     h, w = img.shape[:2]
-    out = np.empty((h, w, 3), np.float32)
+    out = np.empty((3, h, w), np.float32)
     for j in range(h):
         for i in range(w):
             r = table[img[j, i, 0]]
@@ -96,53 +96,76 @@ def to_ycxcz(img, table, m):
             x = (m[0, 0] * r + m[0, 1] * g + m[0, 2] * b) * INV_ILLUMINANT[0]
             y = (m[1, 0] * r + m[1, 1] * g + m[1, 2] * b) * INV_ILLUMINANT[1]
             z = (m[2, 0] * r + m[2, 1] * g + m[2, 2] * b) * INV_ILLUMINANT[2]
-            out[j, i, 0] = np.float32(116.0) * y - np.float32(16.0)
-            out[j, i, 1] = np.float32(500.0) * (x - y)
-            out[j, i, 2] = np.float32(200.0) * (y - z)
+            out[0, j, i] = np.float32(116.0) * y - np.float32(16.0)
+            out[1, j, i] = np.float32(500.0) * (x - y)
+            out[2, j, i] = np.float32(200.0) * (y - z)
     return out
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
+def _filter_row(src, weights, out):
+    """Into out (w,) float32: one row src (w,) float32 filtered with weights (2r+1,) float32,
+    borders clamped, each pixel's products summed from 0 in tap order (as FLIP does).
+
+    Tap by tap over the row rather than pixel by pixel over the taps: each pixel's sum takes the
+    same operations in the same order, and the loop over pixels vectorises."""
+    w = src.shape[0]
+    r = weights.shape[0] // 2
+    out[:] = np.float32(0.0)
+    for t in range(2 * r + 1):
+        k = t - r
+        wk = weights[t]
+        lo = min(max(0, -k), w)        # pixels whose tap i + k is inside the row
+        hi = max(min(w, w - k), lo)
+        for i in range(lo):
+            out[i] += wk * src[min(max(0, i + k), w - 1)]
+        inner = out[lo:hi]          # views, so that the indices are the loop's own (numba tests
+        taps = src[lo + k:hi + k]   # a computed index for wrapping around, which stops vectorising)
+        for i in range(hi - lo):
+            inner[i] += wk * taps[i]
+        for i in range(hi, w):
+            out[i] += wk * src[min(max(0, i + k), w - 1)]
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _filter_column(planes, c, j, weights, out):
+    """Into out (w,) float32: row j of planes[c] ((n, h, w) float32) filtered vertically with
+    weights (2r+1,) float32, borders clamped, summed from 0 in tap order."""
+    h = planes.shape[1]
+    r = weights.shape[0] // 2
+    out[:] = np.float32(0.0)
+    for t in range(2 * r + 1):
+        row = planes[c, min(max(0, j + t - r), h - 1)]
+        wk = weights[t]
+        for i in range(out.shape[0]):
+            out[i] += wk * row[i]
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
 def filtered_lab(ycc, ycx_w, cz_w, to_xyz, to_rgb, third):
-    """(h, w, 3) float32 YCxCz -> (h, w, 3) float32 Hunt-adjusted CIELab of its spatially filtered
+    """(3, h, w) float32 YCxCz -> (3, h, w) float32 Hunt-adjusted CIELab of its spatially filtered
     image (FLIP's separable filters: x first, clamped borders; then back to clamped linear RGB;
     ``third``: 1/3 in float32)."""
-    h, w = ycc.shape[:2]
-    r = ycx_w.shape[0] // 2
-    mid = np.empty((h, w, 4), np.float32)   # x-filtered: Y, Cx (YCx filter), Cz (two Cz filters)
+    _, h, w = ycc.shape
+    ycx_0, ycx_1 = np.ascontiguousarray(ycx_w[:, 0]), np.ascontiguousarray(ycx_w[:, 1])
+    cz_0, cz_1 = np.ascontiguousarray(cz_w[:, 0]), np.ascontiguousarray(cz_w[:, 1])
+    mid = np.empty((4, h, w), np.float32)   # x-filtered: Y, Cx (YCx filter), Cz (two Cz filters)
     for j in range(h):
-        for i in range(w):
-            a0 = np.float32(0.0)
-            a1 = np.float32(0.0)
-            c0 = np.float32(0.0)
-            c1 = np.float32(0.0)
-            for k in range(-r, r + 1):
-                ii = min(max(0, i + k), w - 1)
-                a0 += ycx_w[k + r, 0] * ycc[j, ii, 0]
-                a1 += ycx_w[k + r, 1] * ycc[j, ii, 1]
-                c0 += cz_w[k + r, 0] * ycc[j, ii, 2]
-                c1 += cz_w[k + r, 1] * ycc[j, ii, 2]
-            mid[j, i, 0] = a0
-            mid[j, i, 1] = a1
-            mid[j, i, 2] = c0
-            mid[j, i, 3] = c1
-    out = np.empty((h, w, 3), np.float32)
+        _filter_row(ycc[0, j], ycx_0, mid[0, j])
+        _filter_row(ycc[1, j], ycx_1, mid[1, j])
+        _filter_row(ycc[2, j], cz_0, mid[2, j])
+        _filter_row(ycc[2, j], cz_1, mid[3, j])
+    out = np.empty((3, h, w), np.float32)
+    a0, a1, c0, c1 = np.empty(w, np.float32), np.empty(w, np.float32), np.empty(w, np.float32), np.empty(w, np.float32)
     for j in range(h):
-        for i in range(w):
-            a0 = np.float32(0.0)
-            a1 = np.float32(0.0)
-            c0 = np.float32(0.0)
-            c1 = np.float32(0.0)
-            for k in range(-r, r + 1):
-                jj = min(max(0, j + k), h - 1)
-                a0 += ycx_w[k + r, 0] * mid[jj, i, 0]
-                a1 += ycx_w[k + r, 1] * mid[jj, i, 1]
-                c0 += cz_w[k + r, 0] * mid[jj, i, 2]
-                c1 += cz_w[k + r, 1] * mid[jj, i, 3]
-            # YCxCz -> XYZ -> linear RGB, clamped to [0, 1]
-            yy = (a0 + np.float32(16.0)) / np.float32(116.0)
-            cx = a1 / np.float32(500.0)
-            cz = (c0 + c1) / np.float32(200.0)
+        _filter_column(mid, 0, j, ycx_0, a0)
+        _filter_column(mid, 1, j, ycx_1, a1)
+        _filter_column(mid, 2, j, cz_0, c0)
+        _filter_column(mid, 3, j, cz_1, c1)
+        for i in range(w):   # YCxCz -> XYZ -> linear RGB, clamped to [0, 1]
+            yy = (a0[i] + np.float32(16.0)) / np.float32(116.0)
+            cx = a1[i] / np.float32(500.0)
+            cz = (c0[i] + c1[i]) / np.float32(200.0)
             x = (yy + cx) * ILLUMINANT[0]
             y = yy * ILLUMINANT[1]
             z = (yy - cz) * ILLUMINANT[2]
@@ -150,71 +173,62 @@ def filtered_lab(ycc, ycx_w, cz_w, to_xyz, to_rgb, third):
             cg = _clamp01(to_rgb[1, 0] * x + to_rgb[1, 1] * y + to_rgb[1, 2] * z)
             cb = _clamp01(to_rgb[2, 0] * x + to_rgb[2, 1] * y + to_rgb[2, 2] * z)
             # linear RGB -> XYZ -> CIELab, then the Hunt adjustment of a and b
-            out[j, i, 0], out[j, i, 1], out[j, i, 2] = _hunt_lab_of_linear(cr, cg, cb, to_xyz, third)
+            out[0, j, i], out[1, j, i], out[2, j, i] = _hunt_lab_of_linear(cr, cg, cb, to_xyz, third)
     return out
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def features(ycc, fw):
-    """(h, w, 2) float32: per pixel the edge and point detectors' magnitudes on the achromatic
-    channel of YCxCz (h, w, 3) float32, normalised to [0, 1] (FLIP's separable feature filters)."""
-    h, w = ycc.shape[:2]
-    r = fw.shape[0] // 2
+    """(2, h, w) float32: per pixel the edge and point detectors' magnitudes on the achromatic
+    channel of YCxCz (3, h, w) float32, normalised to [0, 1] (FLIP's separable feature filters)."""
+    _, h, w = ycc.shape
     one_over = np.float32(1.0) / np.float32(116.0)
     sixteen_over = np.float32(16.0) / np.float32(116.0)
-    mid = np.empty((h, w, 3), np.float32)
+    g_w, d_w, dd_w = np.ascontiguousarray(fw[:, 0]), np.ascontiguousarray(fw[:, 1]), np.ascontiguousarray(fw[:, 2])
+    v = np.empty(w, np.float32)   # a row of the achromatic channel, as FLIP normalises it
+    mid = np.empty((3, h, w), np.float32)
     for j in range(h):
+        src = ycc[0, j]
         for i in range(w):
-            dx = np.float32(0.0)
-            ddx = np.float32(0.0)
-            g = np.float32(0.0)
-            for k in range(-r, r + 1):
-                ii = min(max(0, i + k), w - 1)
-                v = ycc[j, ii, 0] * one_over + sixteen_over
-                dx += fw[k + r, 1] * v
-                ddx += fw[k + r, 2] * v
-                g += fw[k + r, 0] * v
-            mid[j, i, 0] = dx
-            mid[j, i, 1] = ddx
-            mid[j, i, 2] = g
-    out = np.empty((h, w, 2), np.float32)
+            v[i] = src[i] * one_over + sixteen_over
+        _filter_row(v, d_w, mid[0, j])
+        _filter_row(v, dd_w, mid[1, j])
+        _filter_row(v, g_w, mid[2, j])
+    out = np.empty((2, h, w), np.float32)
+    dx, ddx, dy, ddy = np.empty(w, np.float32), np.empty(w, np.float32), np.empty(w, np.float32), np.empty(w, np.float32)
     for j in range(h):
+        _filter_column(mid, 0, j, g_w, dx)
+        _filter_column(mid, 1, j, g_w, ddx)
+        _filter_column(mid, 2, j, d_w, dy)
+        _filter_column(mid, 2, j, dd_w, ddy)
+        edge, point = out[0, j], out[1, j]
         for i in range(w):
-            dx = np.float32(0.0)
-            ddx = np.float32(0.0)
-            dy = np.float32(0.0)
-            ddy = np.float32(0.0)
-            for k in range(-r, r + 1):
-                jj = min(max(0, j + k), h - 1)
-                dx += fw[k + r, 0] * mid[jj, i, 0]
-                ddx += fw[k + r, 0] * mid[jj, i, 1]
-                dy += fw[k + r, 1] * mid[jj, i, 2]
-                ddy += fw[k + r, 2] * mid[jj, i, 2]
-            out[j, i, 0] = math.sqrt(dx * dx + dy * dy)
-            out[j, i, 1] = math.sqrt(ddx * ddx + ddy * ddy)
+            edge[i] = math.sqrt(dx[i] * dx[i] + dy[i] * dy[i])
+            point[i] = math.sqrt(ddx[i] * ddx[i] + ddy[i] * ddy[i])
     return out
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def error_map(ref_lab, ref_feat, test_lab, test_feat, cmax, pccmax, norm, qc, qf):
-    """(h, w) float32 FLIP error of a test against its reference, and its mean (FLIP's serial
-    float32 sum over rows, divided by the pixel count). The exponents ``qc`` and ``qf`` come as
-    arguments: a constant 0.5 lets the compiler turn ``pow`` into ``sqrt``, which rounds otherwise."""
-    h, w = ref_lab.shape[:2]
+    """(h, w) float32 FLIP error of a test against its reference (Lab (3, h, w) and features
+    (2, h, w) float32 each), and its mean (FLIP's serial float32 sum over rows, divided by the pixel
+    count). The exponents ``qc`` and ``qf`` come as arguments: a constant 0.5 lets the compiler
+    turn ``pow`` into ``sqrt``, which rounds otherwise."""
+    _, h, w = ref_lab.shape
     out = np.empty((h, w), np.float32)
     below = GPT / pccmax
     for j in range(h):
         for i in range(w):
-            dl = abs(ref_lab[j, i, 0] - test_lab[j, i, 0])
-            da = ref_lab[j, i, 1] - test_lab[j, i, 1]
-            db = ref_lab[j, i, 2] - test_lab[j, i, 2]
+            dl = abs(ref_lab[0, j, i] - test_lab[0, j, i])
+            da = ref_lab[1, j, i] - test_lab[1, j, i]
+            db = ref_lab[2, j, i] - test_lab[2, j, i]
             colour = math.pow(dl + math.sqrt(da * da + db * db), qc)
             if colour < pccmax:
                 colour *= below
             else:
                 colour = GPT + ((colour - pccmax) / (cmax - pccmax)) * (np.float32(1.0) - GPT)
-            edge = abs(ref_feat[j, i, 0] - test_feat[j, i, 0])
-            point = abs(ref_feat[j, i, 1] - test_feat[j, i, 1])
+            edge = abs(ref_feat[0, j, i] - test_feat[0, j, i])
+            point = abs(ref_feat[1, j, i] - test_feat[1, j, i])
             feature = math.pow(norm * (edge if edge > point else point), qf)
             out[j, i] = math.pow(colour, np.float32(1.0) - feature)
     total = np.float32(0.0)

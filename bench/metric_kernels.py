@@ -81,8 +81,9 @@ def _filtered_rows(y, x, win, sums, ext, means, row, products=True):
     for k in range(3 if products else 2):
         sk = sums[k]
         ek = ext[k]
-        for i in range(w):
-            ek[i + half] = sk[i] / win
+        inner = ext[k, half:half + w]   # a view: numba tests a computed index for wrapping around,
+        for i in range(w):              # which stops the loop vectorising
+            inner[i] = sk[i] / win
         for j in range(half):   # the reflected ends
             ek[j] = ek[2 * half - 1 - j]
             ek[w + half + j] = ek[w + half - 1 - j]
@@ -96,20 +97,22 @@ def _filtered_rows(y, x, win, sums, ext, means, row, products=True):
         t1 += e1[e]
         t2 += e2[e]
     m0[0], m1[0], m2[0] = t0, t1, t2
+    # pixel i + 1 adds ext[i + win] and drops ext[i]: views, for the same reason
+    n0, n1, n2, o0, o1, o2 = e0[win:], e1[win:], e2[win:], m0[1:], m1[1:], m2[1:]
     if products:   # three independent chains, each in scipy's order
-        for i in range(1, w):
-            t0 += e0[i + win - 1] - e0[i - 1]
-            t1 += e1[i + win - 1] - e1[i - 1]
-            t2 += e2[i + win - 1] - e2[i - 1]
-            m0[i] = t0
-            m1[i] = t1
-            m2[i] = t2
+        for i in range(w - 1):
+            t0 += n0[i] - e0[i]
+            t1 += n1[i] - e1[i]
+            t2 += n2[i] - e2[i]
+            o0[i] = t0
+            o1[i] = t1
+            o2[i] = t2
     else:
-        for i in range(1, w):
-            t0 += e0[i + win - 1] - e0[i - 1]
-            t1 += e1[i + win - 1] - e1[i - 1]
-            m0[i] = t0
-            m1[i] = t1
+        for i in range(w - 1):
+            t0 += n0[i] - e0[i]
+            t1 += n1[i] - e1[i]
+            o0[i] = t0
+            o1[i] = t1
     for k in range(3 if products else 2):
         mk = means[k]
         for i in range(w):
