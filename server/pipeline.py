@@ -146,10 +146,11 @@ class SessionPipeline:
         self.video.close()
         self.depth.close()
 
-    def adapt_stream(self, video_kbps: float, share: float) -> None:
+    def adapt_stream(self, video_kbps: float, share: float, at_once: bool = False) -> None:
         """The stream adaptation's choice for the frames to come (server/stream_adaptation.py): the
-        colour's target, and ``share`` of its rate for a depth stream of its own. Call between frames."""
-        self.video.retarget(video_kbps)
+        colour's target (``at_once``: from the next frame, H264Encoder.retarget), and ``share`` of
+        its rate for a depth stream of its own. Call between frames."""
+        self.video.retarget(video_kbps, at_once)
         set_share = getattr(self.depth, "set_share", None)
         if set_share is not None:
             set_share(share)

@@ -221,6 +221,8 @@ class Session:
             from .stream_adaptation import StreamAdaptation
 
             self.adaptation = StreamAdaptation(self.config.video_bitrate_kbps, MIN_VIDEO_KBPS)
+            # it starts below the session's bitrate: the first frame is made at its start
+            self.pipeline.adapt_stream(self.adaptation.choice.video_kbps, self.adaptation.share, at_once=True)
         if "server_levels" in self.config.options:   # the plan turned the rate control on (session_plan.py)
             self.rate = RateControl(server_levels(self.config.extra is not None), cfg.fps)
         setup_us = int((time.monotonic() - t_hello) * 1e6)
@@ -275,7 +277,7 @@ class Session:
                       "a frame every %d ticks (%s)", self.id, t, age, delivered, c.video_kbps, c.every, c.reason_name)
         choice = adaptation.choice
         if choice.video_kbps != before.video_kbps:
-            self.pipeline.adapt_stream(choice.video_kbps, adaptation.share)
+            self.pipeline.adapt_stream(choice.video_kbps, adaptation.share, at_once=adaptation.starting)
         return choice
 
     def _take_pose(self, msg: PoseMsg) -> None:

@@ -24,12 +24,21 @@ between the two clocks). Each report:
   single report sees whole frames (none, or one in 200 ms). Once a decrease was made, the next
   waits :data:`HOLD_S` and the queue's length (the frames already queued arrive old whatever the
   new rate) unless the link's rate drops further;
-* queued less than :data:`QUEUE_LOW_MS`: room, probed by :data:`PROBE_GAIN` per report up to
+* queued less than :data:`QUEUE_LOW_MS`: room, probed by :data:`PROBE_GAIN` per report (by
+  :data:`START_GAIN` until the first decrease: a slow start) up to
   the session's bitrate, and never past :data:`RECEIVED_CAP` times what arrived over the last
   :data:`RECEIVED_WINDOW_S` (the bound of Google's congestion control for WebRTC, Carlucci et al.
   2016: the encoder takes a new target at its next group of pictures, seconds later, and probes
   that add up unseen meanwhile would land on the link all at once);
 * in between: held.
+
+A stream starts at :data:`START_SHARE` of the session's bitrate, not at all of it. The queue is
+measured against the least age seen, so that least must come from frames that did not queue: a
+stream that starts above its link queues from its first frame, learns a baseline that holds the
+queue, and sees congestion only once it has grown past that (before this, the `cellular` link's
+frames were up to 2.2 s old in its first 4 s). From a quarter, the slow start reaches a link with
+room within seconds (an encoder restart at each step past half again its running target,
+video.py).
 
 Under the floor (:data:`FLOOR_SHARE` of the session's bitrate, where a colour atlas stops being
 worth its bits) the frame rate halves instead, down to one frame in :data:`MAX_EVERY` ticks, and
@@ -54,6 +63,8 @@ BASELINE_S = STREAM_BASELINE_S
 QUEUE_HIGH_MS = STREAM_QUEUE_HIGH_MS
 QUEUE_LOW_MS = 40.0
 PROBE_GAIN = 1.08
+START_SHARE = 0.25
+START_GAIN = 1.5
 RECEIVED_CAP = 1.5
 RECEIVED_WINDOW_S = 1.0
 MIN_DRAIN_SHARE = 0.3
@@ -79,10 +90,15 @@ class StreamChoice:
 class StreamAdaptation:
     """One session's stream adaptation (module docstring). Times in seconds of the session's clock."""
 
-    def __init__(self, max_video_kbps: float, min_video_kbps: float = 16.0):
+    def __init__(self, max_video_kbps: float, min_video_kbps: float = 16.0, start_share: float = START_SHARE):
+        """``start_share``: the colour's first target as a share of ``max_video_kbps`` (module docstring)."""
+        if not 0.0 < start_share <= 1.0:
+            raise ValueError(f"start_share must be in (0, 1], got {start_share}")
         self.max_kbps = float(max_video_kbps)
         self.floor_kbps = max(float(min_video_kbps), FLOOR_SHARE * self.max_kbps)
-        self.choice = StreamChoice(self.max_kbps, 1, START)
+        self.choice = StreamChoice(min(self.max_kbps, max(self.floor_kbps, start_share * self.max_kbps)), 1, START)
+        #: in the slow start (module docstring): a new target should reach the encoder at once
+        self.starting = True
         self._ages = AgeBaseline(BASELINE_S)   # the reports' ages (ms) over BASELINE_S
         self._received: deque = deque()   # (t, kbit arrived x every, span s, frames queued?) within RECEIVED_WINDOW_S
         self._sent: deque = deque()       # (frame id, t sent, bits) not known to have arrived
@@ -126,6 +142,8 @@ class StreamAdaptation:
         measure of the link, if any; ``newest_frame``: the newest frame id it has) -> the choice for
         the frames that follow."""
         queue = self.queue_ms(t, age_ms)
+        if queue >= QUEUE_LOW_MS or self.choice.video_kbps >= self.max_kbps:
+            self.starting = False
         overdue = None if newest_frame is None else self.overdue_bits(t, newest_frame)
         kbps, every = self.choice.video_kbps, self.choice.every
         span = max(float(span_ms), 1.0) / 1e3
@@ -167,6 +185,10 @@ class StreamAdaptation:
                 # an outage drains nothing: only the hold
                 hold = HOLD_S + (queue / 1e3 if capacity > 0 else 0.0)
                 self._last_decrease = (t, hold, capacity)
+        elif self.starting and queue < QUEUE_LOW_MS:
+            # the slow start: up by START_GAIN a report, applied at once (``starting``), until the
+            # first report that finds frames queued
+            kbps, reason = min(self.max_kbps, kbps * START_GAIN), PROBE
         elif queue < QUEUE_LOW_MS and (self._last_decrease is None or t - self._last_decrease[0] >= HOLD_S):
             if every > 1 and t - self._last_every_change >= HOLD_S:
                 every, reason = every // 2, RECOVERED

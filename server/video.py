@@ -82,17 +82,18 @@ class H264Encoder:
         self._ctx = self._context()
         self._group_bits = self._group_frames = 0
 
-    def retarget(self, kbps: float) -> None:
+    def retarget(self, kbps: float, at_once: bool = False) -> None:
         """A new target for the frames to come (the stream adaptation). Within RETARGET_KEEP of the
         target x264 runs at (``applied_kbps``, not the last one asked for: small steps must not add
-        up unseen) it waits for the next group of pictures; further, x264 starts again at the next
-        frame: a keyframe, held to two frames of the new rate by its VBV (an open context's VBV
-        cannot change, module docstring)."""
+        up unseen) it waits for the next group of pictures, unless ``at_once``; further, x264
+        starts again at the next frame: a keyframe, held to two frames of the new rate by its VBV
+        (an open context's VBV cannot change, module docstring; nor, measured, does a bit_rate set
+        on an open context change what x264 makes)."""
         kbps = float(kbps)
         if not kbps > 0:
             raise ValueError(f"an H.264 target must be positive, got {kbps}")
         lo, hi = RETARGET_KEEP
-        if not lo <= kbps / self.applied_kbps <= hi:
+        if (at_once and kbps != self.applied_kbps) or not lo <= kbps / self.applied_kbps <= hi:
             self._restart = True
         self.target_kbps = kbps
 

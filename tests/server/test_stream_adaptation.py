@@ -7,7 +7,7 @@ import pytest
 from pibr.protocol.errors import MalformedMessage
 from pibr.protocol.messages import decode_stream_rate, encode_stream_rate
 from pibr.server.stream_adaptation import (CONGESTED, FLOOR, HOLD_S, MAX_EVERY, OUTAGE, PROBE, PROBE_GAIN,
-                                           RECEIVED_CAP, RECOVERED, StreamAdaptation)
+                                           RECEIVED_CAP, RECOVERED, START_GAIN, START_SHARE, StreamAdaptation)
 
 
 def _steady(a, t0, t1, age_ms=90.0, kbps=8000.0, step=0.2):
@@ -179,14 +179,39 @@ def test_small_steps_that_add_up_far_from_the_running_target_restart_x264():
     assert enc.encode(grey)[1] and enc.applied_kbps == kbps
     enc.retarget(kbps * 1.2)              # near the running target again: no keyframe
     assert not enc.encode(grey)[1] and enc.applied_kbps == kbps
+    enc.retarget(kbps * 1.2, at_once=True)   # the slow start's: at the next frame all the same
+    assert enc.encode(grey)[1] and enc.applied_kbps == kbps * 1.2
+
+
+def test_a_stream_starts_at_a_quarter_and_climbs_at_once_until_frames_queue():
+    """The slow start: from START_SHARE of the session's bitrate, half again each report that finds
+    nothing queued, with no cap from what arrived (each step reaches x264 at once), until a report
+    finds frames queued; then the usual probes, within half again what arrives."""
+    a = StreamAdaptation(16000.0)
+    assert a.choice.video_kbps == 16000.0 * START_SHARE == 4000.0 and a.starting
+    t, climbed = 0.0, []
+    for _ in range(3):
+        climbed.append(a.report(t, 90.0, 1000.0).video_kbps)   # little arrived yet: no cap
+        t += 0.2
+    assert climbed == pytest.approx([4000.0 * START_GAIN ** k for k in (1, 2, 3)]) and a.starting
+    held = a.report(t, 90.0 + 60.0, 12000.0)      # 60 ms queued: the slow start ends, held
+    assert not a.starting and held.reason != PROBE and held.video_kbps == climbed[-1]
+    later = [a.report(t + 0.2 * k, 90.0, 12000.0) for k in range(1, 11)]   # room again: the usual probes
+    steps = [b.video_kbps / c.video_kbps for c, b in zip([held] + later, later)]
+    assert max(steps) == pytest.approx(PROBE_GAIN) and later[-1].video_kbps == 16000.0
+    # a stream that reaches the session's bitrate ends its slow start there
+    b = StreamAdaptation(16000.0)
+    for k in range(5):
+        b.report(0.2 * k, 90.0, 1000.0)
+    assert b.choice.video_kbps == 16000.0 and not b.starting
 
 
 @pytest.mark.gl
 async def test_through_a_link_that_drops_the_adapting_stream_keeps_its_frames_young(tmp_path):
     """Server, relay and client in one process on the virtual clock: the downlink carries 20
     Mbit/s for a second, then 1.2 Mbit/s, about half the stream. Without adaptation the frames
-    queue and age by the second; with it the colour's target falls (the records say to what), the
-    queue drains and the age comes back. The run is reproducible: a second one records the same."""
+    queue and age by the second; with it the colour's target starts low and climbs, then falls (the
+    records say to what), the queue drains and the age comes back. The run is reproducible: a second one records the same."""
     from pibr.client.app import run_client
     from pibr.client.config import ClientConfig
     from pibr.client.recorder import read_records
@@ -212,7 +237,8 @@ async def test_through_a_link_that_drops_the_adapting_stream_keeps_its_frames_yo
     assert max(r["age_ms"] for r in on) < 0.8 * max(r["age_ms"] for r in off)
     assert {r["stream_kbps"] for r in off} == {-1}
     kbps = [r["stream_kbps"] for r in on if r["frame_id"] >= 0]
-    assert kbps[0] == 2400 and max(kbps[-10:]) < 1200    # under what the link carries
+    # it starts at a quarter, climbs while the link has room, then falls under what the link carries
+    assert kbps[0] == 2400 * START_SHARE and max(kbps[:30]) > kbps[0] and max(kbps[-10:]) < 1200
     strip = lambda rows: [{k: v for k, v in r.items() if k != "client_ms"} for r in rows]
     assert strip(on) == strip(again)
 
