@@ -37,8 +37,9 @@ measured against the least age seen, so that least must come from frames that di
 stream that starts above its link queues from its first frame, learns a baseline that holds the
 queue, and sees congestion only once it has grown past that (before this, the `cellular` link's
 frames were up to 2.2 s old in its first 4 s). From a quarter, the slow start reaches a link with
-room within seconds (an encoder restart at each step past half again its running target,
-video.py).
+room within a second (each step restarts the encoder at once, video.py). The first report that
+finds frames queued ends it; one that finds them queued past :data:`QUEUE_HIGH_MS` decreases as
+any congestion does.
 
 Under the floor (:data:`FLOOR_SHARE` of the session's bitrate, where a colour atlas stops being
 worth its bits) the frame rate halves instead, down to one frame in :data:`MAX_EVERY` ticks, and
