@@ -417,7 +417,7 @@ def register(sub) -> None:
     pr.set_defaults(func=commands.cmd_bench_predict)
 
     nw = bs.add_parser("network", help="links whose bandwidth changes: static bitrates against the adapting stream",
-                       description="Runs server, relay and client processes on the virtual clock, the relay's "
+                       description="Runs server, relay and client processes on the virtual clock (or the wall clock), the relay's "
                                    "downlink replaying each bandwidth trace (pibr link list), once per static "
                                    "--bitrate-kbps and once with --adapt on; scores what was shown against ground "
                                    "truth. Per run: frame age p50/p95, stalls (no new frame for 250 ms), the longest, "
@@ -435,6 +435,12 @@ def register(sub) -> None:
     nw.add_argument("--start", type=arguments.non_negative, default=30.0, metavar="S", help="window start (default 30)")
     nw.add_argument("--duration", type=arguments.positive, default=30.0, metavar="S",
                     help="window length; the links loop (default 30)")
+    nw.add_argument("--clock", choices=("virtual", "real"), default="virtual",
+                    help="virtual (reproducible, the default) or real: the wall clock, where a busy client or "
+                         "server delays frames as a full link does")
+    nw.add_argument("--placement", choices=PLACEMENTS, default="split",
+                    help="on the real clock, which cores: split (server and relay on one, the client on the "
+                         "other, the default) or shared")
     _rate(nw)
     _view_size(nw, default=(512, 512))
     _output_size(nw, default=(480, 270))

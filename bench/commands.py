@@ -151,7 +151,8 @@ def cmd_bench_network(args) -> int:
         load_bandwidth_trace(link)   # a bad name or file refused before any process starts
     r = run_network_bench(out_dir=args.out, links=args.links, static_kbps=args.static_kbps,
                           adapt_kbps=args.adapt_kbps, method=args.method, trace=args.trace, start_s=args.start,
-                          duration_s=args.duration, rate_hz=args.rate, size=args.size, view_size=args.view_size)
+                          duration_s=args.duration, rate_hz=args.rate, size=args.size, view_size=args.view_size,
+                          clock=args.clock, placement=args.placement)
     print_network(r)
     print(f"written: {args.out}/network.json, {args.out}/network.png")
     return 0

@@ -87,10 +87,20 @@ def run_network_bench(out_dir="out/bench", links=tuple(BUILTIN),
                       method: str = "proxy", scene: str = "room", trace: str = "pred6dof-1", start_s: float = 30.0,
                       duration_s: float = 30.0, rate_hz: float = 30.0, size=(480, 270), view_size=(512, 512),
                       latency_ms: float = 128.0, server_fps: float = 10.0, segment_s: float = SEGMENT_S,
-                      progress: bool = True, plot: bool = True) -> dict:
+                      clock: str = "virtual", placement: str = "split", progress: bool = True,
+                      plot: bool = True) -> dict:
     """Every link trace x (each static bitrate, the adapting stream); writes ``out_dir/network.json``
     (and ``network.png`` with ``plot``: per link, its rate and the stream's choice, and the frame
-    age shown, over time)."""
+    age shown, over time).
+
+    ``clock``: ``virtual`` (reproducible: the link model schedules every message) or ``real`` (the
+    wall clock: the relay replays each link from the session's Hello, and a client or server too
+    busy to keep up makes frames wait as a full link does, which the adapting stream reads as
+    congestion); on the real clock ``placement`` says which cores each process may use
+    (bench/processes.py: ``split``, the server and relay on one core and the client on the other,
+    as on two machines)."""
+    if clock not in ("virtual", "real"):
+        raise ValueError(f"clock must be 'virtual' or 'real', got {clock!r}")
     from pibr.common.bandwidth import load_bandwidth_trace
 
     from .evaluate import evaluate_run
@@ -105,7 +115,8 @@ def run_network_bench(out_dir="out/bench", links=tuple(BUILTIN),
                            "rate_hz": rate_hz, "size": list(size), "view_size": list(view_size),
                            "latency_ms": latency_ms, "server_fps": server_fps, "method": method,
                            "links": list(links), "static_kbps": list(static_kbps), "adapt_kbps": adapt_kbps,
-                           "stall_ms": STALL_MS, "segment_s": segment_s,
+                           "stall_ms": STALL_MS, "segment_s": segment_s, "clock": clock,
+                           "placement": placement if clock == "real" else None,
                            "window": f"{trace} from {start_s:g} s (an evaluation window; nothing is fitted here)"},
               "goals": GOALS, "links": {}}
     plan = [(link, name, args) for link in links for name, args in settings]
@@ -119,8 +130,9 @@ def run_network_bench(out_dir="out/bench", links=tuple(BUILTIN),
                            f"{view_size[0]}x{view_size[1]}", *args],
                      ["--up-ms", f"{half:g}", "--down-ms", f"{half:g}", "--down-trace", link],
                      [["--trace", trace, "--start", f"{start_s:g}", "--duration", f"{duration_s:g}",
-                       "--rate", f"{rate_hz:g}", "--size", f"{size[0]}x{size[1]}", "--clock", "virtual",
-                       "--method", method]], verbose_server=True)
+                       "--rate", f"{rate_hz:g}", "--size", f"{size[0]}x{size[1]}", "--clock", clock,
+                       "--method", method]], verbose_server=True,
+                     placement=placement if clock == "real" else "shared")
         scored = evaluate_run(out, scene_spec=scene, flip_every=0, side_by_side=False, plot=False,
                               progress=False)["methods"][method]
         entry = result["links"].setdefault(link, {"trace": summary, "runs": {}})

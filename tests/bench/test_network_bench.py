@@ -39,3 +39,19 @@ def test_a_link_that_drops_ages_the_static_stream_and_not_the_adapting_one(tmp_p
         assert json.load(f)["links"][str(link)]["runs"]["adapt 2400"]["frames"] == adapt["frames"]
     print_network(r)
     assert "adapting: age p95" in capsys.readouterr().out
+
+
+def test_on_the_wall_clock_the_relay_replays_the_link_from_the_sessions_hello(tmp_path):
+    """``clock="real"``: the same runs on the wall clock (processes pinned as on two machines);
+    a link far under the stream still ages the static stream's frames."""
+    link = tmp_path / "slow.csv"
+    link.write_text("t,kbps\n0,600\n60,600\n")
+    r = run_network_bench(str(tmp_path), links=(str(link),), static_kbps=(2400.0,), adapt_kbps=2400.0,
+                          method="rotation", duration_s=3.0, size=(96, 64), view_size=(192, 192), segment_s=1.0,
+                          clock="real", progress=False, plot=False)
+    assert r["settings"]["clock"] == "real" and r["settings"]["placement"] == "split"
+    static, adapt = r["links"][str(link)]["runs"]["static 2400"], r["links"][str(link)]["runs"]["adapt 2400"]
+    assert static["frames"] > 0 and adapt["frames"] > 0
+    assert static["age_ms_p95"] > 1000.0 and adapt["age_ms_p95"] < static["age_ms_p95"]
+    with pytest.raises(ValueError, match="clock"):
+        run_network_bench(str(tmp_path), links=(str(link),), clock="wall", progress=False)
