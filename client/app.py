@@ -39,7 +39,7 @@ from pibr.protocol.age_baseline import AgeBaseline
 from pibr.protocol.errors import ConfigError, MalformedMessage, UnexpectedMessage
 from pibr.protocol.messages import (ARRIVAL_AGE_MS, DELIVERED_KBPS, DISPLAY_AGE_MS, FRAMES_DECODED, LINK_KBPS,
                                     NEWEST_FRAME, REPORT_SPAN_MS, STREAM_BASELINE_S, STREAM_QUEUE_HIGH_MS,
-                                    STREAM_REPORT_MS, STREAM_URGENT_GAP_MS,
+                                    STREAM_REPORT_MS, STREAM_URGENT_GAP_MS, WARMUP_SEQ,
                                     Clock, Frame, Hello, OutputConfig, PayloadKind, PoseMsg, Stats, decode_eye,
                                     decode_frame_level, decode_stream_rate)
 from pibr.protocol.pose import Pose
@@ -57,8 +57,6 @@ from .video import H264Decoder
 
 log = logging.getLogger(__name__)
 
-#: Sequence number of the poses a real-clock client sends while it warms up, before its clock.
-WARMUP_SEQ = (1 << 32) - 1
 #: Timed renders of every quality level before the wall clock starts (after one that compiles it).
 CALIBRATION_RENDERS = 5
 #: A server that predicts the head's pose hears the median age of the frames shown over this many

@@ -263,6 +263,11 @@ def _pose_from(name: str, values) -> Pose:
         raise MalformedMessage(f"{name}: invalid pose: {exc}") from None
 
 
+#: Sequence number of the poses a real-clock client sends while it warms up, before its clock
+#: starts; its ticks' poses count from 0 (``t_us`` then from its tick 0, negative while it rolls in).
+WARMUP_SEQ = (1 << 32) - 1
+
+
 @dataclass(frozen=True)
 class PoseMsg(Message):
     """Client -> server: the head pose sampled at client time ``t_us`` (sequence number ``seq``)."""

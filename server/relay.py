@@ -13,8 +13,13 @@ clock:
 
 **Bandwidth.** Each direction has a fixed cap (``--kbps``) or replays a bandwidth trace
 (``--up-trace``, ``--down-trace``: Mahimahi delivery opportunities, a ``t,kbps`` CSV or a
-built-in, common/bandwidth.py), looping, from the session's start (virtual time 0, or its Hello
-on the wall clock).
+built-in, common/bandwidth.py), looping, from the session's start: virtual time 0, or on the
+wall clock the client's tick 0 (read from its first tick's pose: the time it carries is the
+time since tick 0). The handshake, the proxies and the warm-up before it pass through the trace
+from the Hello on; the trace then starts again at tick 0, as the virtual clock's does, so that a
+link's events fall where its file puts them in the session (the server and the client calibrate
+for several seconds between the Hello and tick 0: from the Hello, the built-in outage at 10 s
+fell in the first second of the session's ticks).
 
 **Jitter seeds.** A session's link models are seeded from ``--seed`` and the client's Hello
 (all of it but the token), never from how many connections came before: the same client
@@ -38,8 +43,9 @@ the server. One token for relay and server is the simple set-up. ``--tls-cert``/
 make clients connect with TLS; ``--upstream-tls-ca``/``--upstream-tls-pin`` make the relay
 connect to a TLS server.
 
-The relay parses framing (never payloads, except the first ``Hello``), so a peer sending
-garbage gets an ``Error`` and its connection pair is closed; other pairs carry on.
+The relay parses framing (never payloads, except the first ``Hello`` and, on the wall clock, the
+poses up to the first tick's, which it only reads), so a peer sending garbage gets an ``Error``
+and its connection pair is closed; other pairs carry on.
 """
 from __future__ import annotations
 
@@ -56,7 +62,7 @@ from pibr.protocol.connection import Connection
 from pibr.protocol.errors import AccessDenied, ConfigError, ProtocolError, TLSError, UnexpectedMessage
 from pibr.protocol.framing import DEFAULT_MAX_MESSAGE_SIZE, HEADER_SIZE, FrameReader, RawFrame, encode_frame
 from pibr.common.link import LinkModel, LinkParams
-from pibr.protocol.messages import Clock, Error, Hello, ProxyChunk, Welcome, parse_message
+from pibr.protocol.messages import WARMUP_SEQ, Clock, Error, Hello, PoseMsg, ProxyChunk, Welcome, parse_message
 from pibr.common.tls import ClientTLS, check_server_files
 
 from .byte_queue import ByteBudgetQueue
@@ -129,6 +135,7 @@ class _Pair:
         self.clock: str | None = None
         self.up_model: LinkModel | None = None
         self.down_model: LinkModel | None = None
+        self._ticking = False      # the client's first pose has passed (the real clock's trace origin)
         #: direction ("up", "down") -> its buffer, once the pumps run
         self.queues: dict[str, ByteBudgetQueue] = {}
         self._hello_deadline: asyncio.Timeout | None = None
@@ -184,7 +191,8 @@ class _Pair:
         pairs.add(self)
         self.clock = self.hello.clock
         up_seed, down_seed = link_seeds(cfg.seed, self.hello)
-        # A bandwidth trace starts with the session: at virtual time 0, or now on the wall clock.
+        # A bandwidth trace starts with the session: at virtual time 0; on the wall clock now, and
+        # again at the client's first pose (_timed).
         origin = 0 if self.clock == "virtual" else int(asyncio.get_running_loop().time() * 1e6)
         self.up_model = LinkModel(cfg.up, seed=up_seed, origin_us=origin)
         self.down_model = LinkModel(cfg.down, seed=down_seed, origin_us=origin)
@@ -255,8 +263,24 @@ class _Pair:
                 return None, encode_frame(f.type, f.payload, f.vtime_us)
             return None, encode_frame(f.type, f.payload, model.arrival_us(f.vtime_us, f.wire_size, is_clock))
         loop = asyncio.get_running_loop()
-        arrive = model.arrival_us(int(loop.time() * 1e6), f.wire_size, is_clock)
+        now_us = int(loop.time() * 1e6)
+        if f.type == PoseMsg.TYPE and not self._ticking:
+            self._start_ticking(f.payload, now_us)
+        arrive = model.arrival_us(now_us, f.wire_size, is_clock)
         return arrive / 1e6, encode_frame(f.type, f.payload, f.vtime_us)
+
+    def _start_ticking(self, pose_payload: bytes, now_us: int) -> None:
+        """At the real-clock client's first tick's pose (not a warm-up's), both directions' traces
+        start again from its tick 0 (module docstring): its ``t_us`` is the time since then. A pose
+        that does not parse is the server's to refuse; it starts nothing here."""
+        try:
+            pose = PoseMsg.parse(pose_payload)
+        except ProtocolError:
+            return
+        if pose.seq == WARMUP_SEQ:
+            return
+        self._ticking = True
+        self.up_model.origin_us = self.down_model.origin_us = now_us - pose.t_us
 
     async def _pump(self, reader, writer, model: LinkModel, direction: str, source_writer,
                     frames: FrameReader, pending: list[RawFrame]) -> None:
