@@ -94,7 +94,7 @@ def run_network_bench(out_dir="out/bench", links=tuple(BUILTIN),
     age shown, over time).
 
     ``clock``: ``virtual`` (reproducible: the link model schedules every message) or ``real`` (the
-    wall clock: the relay replays each link from the session's Hello, and a client or server too
+    wall clock: the relay replays each link from the client's tick 0, and a client or server too
     busy to keep up makes frames wait as a full link does, which the adapting stream reads as
     congestion); on the real clock ``placement`` says which cores each process may use
     (bench/processes.py: ``split``, the server and relay on one core and the client on the other,
