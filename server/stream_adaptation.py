@@ -24,8 +24,7 @@ between the two clocks). Each report:
   single report sees whole frames (none, or one in 200 ms). Once a decrease was made, the next
   waits :data:`HOLD_S` and the queue's length (the frames already queued arrive old whatever the
   new rate) unless the link's rate drops further;
-* queued less than :data:`QUEUE_LOW_MS`: room, probed by :data:`PROBE_GAIN` per report (by
-  :data:`START_GAIN` until the first decrease: a slow start) up to
+* queued less than :data:`QUEUE_LOW_MS`: room, probed by :data:`PROBE_GAIN` per report up to
   the session's bitrate, and never past :data:`RECEIVED_CAP` times what arrived over the last
   :data:`RECEIVED_WINDOW_S` (the bound of Google's congestion control for WebRTC, Carlucci et al.
   2016: the encoder takes a new target at its next group of pictures, seconds later, and probes
@@ -37,8 +36,8 @@ measured against the least age seen, so that least must come from frames that di
 stream that starts above its link queues from its first frame, learns a baseline that holds the
 queue, and sees congestion only once it has grown past that (before this, the `cellular` link's
 frames were up to 2.2 s old in its first 4 s). From a quarter, the slow start reaches a link with
-room within a second (each step restarts the encoder at once, video.py). The first report that
-finds frames queued ends it; one that finds them queued past :data:`QUEUE_HIGH_MS` decreases as
+room within a second: :data:`START_GAIN` a report, with no cap from what arrived, since each
+step restarts the encoder at once (video.py). The first report that finds frames queued ends it; one that finds them queued past :data:`QUEUE_HIGH_MS` decreases as
 any congestion does.
 
 Under the floor (:data:`FLOOR_SHARE` of the session's bitrate, where a colour atlas stops being
