@@ -134,3 +134,22 @@ async def test_a_bandwidth_trace_holds_frames_through_an_outage_on_the_virtual_c
         assert vt >= 600_000 + 64_000
     arrivals = [vt for vt, _ in frames]
     assert arrivals == sorted(arrivals)
+
+
+def test_on_the_wall_clock_the_first_ticks_pose_restarts_the_traces_and_nothing_else_does():
+    """The relay reads poses only to find the client's tick 0: a warm-up pose or one that does not
+    parse leaves the traces where they are (the server refuses a bad pose; the relay forwards it)."""
+    from pibr.common.link import LinkModel
+    from pibr.protocol.messages import WARMUP_SEQ, PoseMsg
+    from pibr.protocol.pose import Pose
+    from pibr.server.relay import _Pair
+
+    pair = object.__new__(_Pair)
+    pair._ticking = False
+    pair.up_model, pair.down_model = LinkModel(LinkParams()), LinkModel(LinkParams(), origin_us=5)
+    pose = Pose.make([0.0, 1.6, 0.0], [1.0, 0.0, 0.0, 0.0])
+    pair._start_ticking(PoseMsg(WARMUP_SEQ, 2_000_000, pose).serialize(), 9_000_000)
+    pair._start_ticking(b"\x00" * 7, 9_000_000)
+    assert not pair._ticking and pair.down_model.origin_us == 5
+    pair._start_ticking(PoseMsg(0, -500_000, pose).serialize(), 9_000_000)   # tick -preroll, 0.5 s before 0
+    assert pair._ticking and pair.up_model.origin_us == pair.down_model.origin_us == 9_500_000
