@@ -8,6 +8,7 @@ from pibr.client.cli import parse_methods
 from pibr.common import arguments
 from pibr.common.bandwidth import BUILTIN as BUILTIN_LINKS
 from pibr.protocol.depth_codecs import DEPTH_CODECS
+from pibr.protocol.messages import CLOCKS
 from pibr.protocol.motion_flow import FLOW_CODERS
 
 from . import commands   # the runners: they import what they run when they run
@@ -133,7 +134,7 @@ def register(sub) -> None:
                    help="methods to compare, comma-separated (default none,rotation,proxy)")
     d.add_argument("--depth-codec", choices=tuple(DEPTH_CODECS), default="h264", help="depth transport")
 
-    d.add_argument("--clock", choices=("virtual", "real"), default="virtual")
+    d.add_argument("--clock", choices=CLOCKS, default="virtual")
     d.add_argument("--flip-every", type=arguments.non_negative_int, default=4, help="FLIP on every Nth frame, 0: never (default 4)")
     d.add_argument("--motion", choices=CLIENT_MOTION_MODES, default=None,
                    help="how the client brings moving objects to the display time (see 'pibr client --help'; "
@@ -435,7 +436,7 @@ def register(sub) -> None:
     nw.add_argument("--start", type=arguments.non_negative, default=30.0, metavar="S", help="window start (default 30)")
     nw.add_argument("--duration", type=arguments.positive, default=30.0, metavar="S",
                     help="window length; the links loop (default 30)")
-    nw.add_argument("--clock", choices=("virtual", "real"), default="virtual",
+    nw.add_argument("--clock", choices=CLOCKS, default="virtual",
                     help="virtual (reproducible, the default) or real: the wall clock, where a busy client or "
                          "server delays frames as a full link does")
     nw.add_argument("--placement", choices=PLACEMENTS, default="split",

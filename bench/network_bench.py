@@ -19,7 +19,8 @@ import sys
 
 import numpy as np
 
-from pibr.common.bandwidth import BUILTIN
+from pibr.common.bandwidth import BUILTIN, load_bandwidth_trace
+from pibr.protocol.messages import CLOCKS
 
 from .results import write_result
 
@@ -99,10 +100,8 @@ def run_network_bench(out_dir="out/bench", links=tuple(BUILTIN),
     congestion); on the real clock ``placement`` says which cores each process may use
     (bench/processes.py: ``split``, the server and relay on one core and the client on the other,
     as on two machines)."""
-    if clock not in ("virtual", "real"):
-        raise ValueError(f"clock must be 'virtual' or 'real', got {clock!r}")
-    from pibr.common.bandwidth import load_bandwidth_trace
-
+    if clock not in CLOCKS:
+        raise ValueError(f"clock must be one of {', '.join(CLOCKS)}, got {clock!r}")
     from .evaluate import evaluate_run
     from .processes import run_sessions
 

@@ -8,6 +8,7 @@ import sys
 from pibr.common import arguments
 from pibr.common.address import parse_host_port
 from pibr.protocol.depth_codecs import DEPTH_CODECS
+from pibr.protocol.messages import CLOCKS
 from pibr.protocol.stereo import DEFAULT_IPD_MM, STEREO_REFERENCES
 
 from .deadline import DEADLINE_MODES
@@ -33,7 +34,7 @@ def register(sub) -> None:
     p.add_argument("--trace", default="pred6dof-1",
                    help="head trace: a file (canonical CSV or pred6dof) or a built-in name (see 'pibr trace list')")
     p.add_argument("--rate", dest="rate_hz", type=float, default=60.0, help="output rate in Hz (default 60)")
-    p.add_argument("--clock", choices=("virtual", "real"), default="virtual",
+    p.add_argument("--clock", choices=CLOCKS, default="virtual",
                    help="virtual: simulated, deterministic time; real: the wall clock (default virtual)")
     p.add_argument("--method", dest="methods", type=parse_methods, default=("rotation",),
                    help="re-rendering method(s), comma-separated: none, rotation, ... (default rotation)")
