@@ -121,7 +121,7 @@ def run_network_bench(out_dir="out/bench", links=tuple(BUILTIN),
     plan = [(link, name, args) for link in links for name, args in settings]
     for k, (link, name, args) in enumerate(plan):
         summary = load_bandwidth_trace(link).summary()
-        label = f"{link}-{name.replace(' ', '-')}"
+        label = run_label(link, name)
         if progress:
             print(f"[{k + 1}/{len(plan)}] {link}: {name} ...", file=sys.stderr, flush=True)
         out = os.path.join(root, label)
@@ -147,6 +147,12 @@ def run_network_bench(out_dir="out/bench", links=tuple(BUILTIN),
 
         plot_network(result, os.path.join(out_dir, "network.png"))
     return result
+
+
+def run_label(link: str, setting: str) -> str:
+    """The folder of one run under ``out_dir/network``: the link's name (a file's base name, so a
+    link given as a path stays under ``out_dir``) and the setting."""
+    return f"{os.path.basename(os.path.normpath(link))}-{setting.replace(' ', '-')}"
 
 
 def _verdict(runs: dict, rtt_ms: float) -> dict:

@@ -4,7 +4,7 @@ import json
 
 import pytest
 
-from pibr.bench.network_bench import print_network, run_network_bench
+from pibr.bench.network_bench import print_network, run_label, run_network_bench
 
 pytestmark = [pytest.mark.integration, pytest.mark.gl]
 
@@ -59,3 +59,16 @@ def test_on_the_wall_clock_the_link_starts_with_the_clients_first_tick(tmp_path)
         assert 6 <= oldest <= 10 and max(ages[:5]) < 0.6 * ages[oldest]   # at 1.5-2.5 s, not before
     with pytest.raises(ValueError, match="clock"):
         run_network_bench(str(tmp_path), links=(str(link),), clock="wall", progress=False)
+
+
+def test_a_link_given_as_a_file_runs_under_the_output_folder(tmp_path):
+    """A link named by its path once made an absolute folder name, so its runs were written beside
+    the trace file, outside ``out_dir/network``."""
+    import os
+
+    root = str(tmp_path / "network")
+    for link in ("/data/links/lte.csv", "links/lte.csv", "lte.csv", "/data/links/lte.csv/"):
+        out = os.path.join(root, run_label(link, "static 4000"))
+        assert os.path.dirname(out) == root and os.path.basename(out) == "lte.csv-static-4000"
+    assert run_label("cellular", "adapt 16000") == "cellular-adapt-16000"
+
