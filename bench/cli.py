@@ -426,7 +426,8 @@ def register(sub) -> None:
                                    "segment against the best static setting in hindsight. Writes network.json. About "
                                    "a minute a run at the defaults (links x (statics + 1) runs).")
     nw.add_argument("--links", type=arguments.names, default=tuple(BUILTIN_LINKS),
-                    metavar="TRACE,...", help="bandwidth traces, built-in or files (default every built-in)")
+                    metavar="TRACE,...", help="bandwidth traces, built-in (cellular:SEED: another draw of the "
+                                                "cellular model) or files (default every built-in)")
     nw.add_argument("--static-kbps", type=arguments.positives, default=(2000.0, 4000.0, 8000.0, 16000.0),
                     metavar="KBPS,...", help="static bitrates to compare (default 2000,4000,8000,16000)")
     nw.add_argument("--adapt-kbps", type=arguments.positive, default=16000.0, metavar="KBPS",

@@ -14,8 +14,8 @@ Both become a piecewise-constant rate over one period (a millisecond's opportuni
 that millisecond), so a message's serialisation ends where the bits delivered since it started
 reach its size (:meth:`BandwidthTrace.finish_us`); a rate of 0 is an outage. The built-in traces
 (:data:`BUILTIN`) are deterministic: steps down and up, an oscillation, a short outage, a
-synthetic cellular-like link (log-normal rate with handover dips, seeded), and a steady link with
-room (what adapting costs when nothing needs it).
+synthetic cellular-like link (log-normal rate with handover dips, seeded; ``cellular:SEED`` draws
+another realisation), and a steady link with room (what adapting costs when nothing needs it).
 """
 from __future__ import annotations
 
@@ -239,10 +239,15 @@ def _outage() -> BandwidthTrace:
                           np.array([16000.0, 0.0, 16000.0]))
 
 
-def _cellular() -> BandwidthTrace:
+#: The seed of the built-in ``cellular`` link; ``cellular:SEED`` draws another realisation.
+CELLULAR_SEED = 20261202
+
+
+def _cellular(seed: int = CELLULAR_SEED) -> BandwidthTrace:
     """60 s in 100 ms bins: a log-normal rate (scale 8 Mbit/s, sigma 0.55) with a 2 s memory, and
-    five handovers of 0.2-0.6 s at a twentieth of the rate (seeded: the same trace everywhere)."""
-    rng = np.random.default_rng(20261202)
+    five handovers of 0.2-0.6 s at a twentieth of the rate (seeded: the same trace everywhere for
+    one seed)."""
+    rng = np.random.default_rng(seed)
     n, dt = 600, 0.1
     a = math.exp(-dt / 2.0)
     x = np.empty(n)
@@ -253,7 +258,8 @@ def _cellular() -> BandwidthTrace:
     kbps = 8000.0 * np.exp(x - 0.55 ** 2 / 2)
     for start in rng.choice(np.arange(20, n - 10), 5, replace=False):
         kbps[start:start + rng.integers(2, 7)] *= 0.05
-    return BandwidthTrace("cellular", np.arange(n + 1, dtype=np.int64) * 100_000, np.round(np.clip(kbps, 50, 60000)))
+    name = "cellular" if seed == CELLULAR_SEED else f"cellular:{seed}"
+    return BandwidthTrace(name, np.arange(n + 1, dtype=np.int64) * 100_000, np.round(np.clip(kbps, 50, 60000)))
 
 
 def _steady() -> BandwidthTrace:
@@ -266,17 +272,25 @@ BUILTIN = {
     "oscillation": ("3 to 20 Mbit/s and back every 20 s, in 100 ms steps (60 s)", _oscillation),
     "outage": ("16 Mbit/s with nothing at all from 10 to 11 s (30 s)", _outage),
     "cellular": ("synthetic cellular: log-normal in 100 ms steps (mean 5.7, 10th percentile 2.7 Mbit/s), "
-                 "five handover dips (60 s)",
+                 "five handover dips (60 s); cellular:SEED draws another realisation of the same model",
                  _cellular),
     "steady": ("40 Mbit/s throughout (30 s): a link with room, where adapting should cost nothing", _steady),
 }
 
 
 def load_bandwidth_trace(spec: str) -> BandwidthTrace:
-    """A built-in name (:data:`BUILTIN`) or a file: ``t,kbps`` CSV when its lines hold commas,
-    Mahimahi opportunities otherwise. Errors name the file and line."""
+    """A built-in name (:data:`BUILTIN`), ``cellular:SEED`` (the cellular model drawn with another
+    seed, a non-negative integer: more realisations to judge an adaptation on than the one
+    built-in), or a file: ``t,kbps`` CSV when its lines hold commas, Mahimahi opportunities
+    otherwise. Errors name the file and line."""
     if spec in BUILTIN:
         return BUILTIN[spec][1]()
+    if spec.startswith("cellular:") and not os.path.exists(spec):
+        seed = spec.partition(":")[2]
+        if not seed.isdigit() or len(seed) > 18:
+            raise ConfigError(f"bandwidth trace {spec!r}: cellular:SEED takes a non-negative integer seed, "
+                              f"got {seed!r}")
+        return _cellular(int(seed))
     if not os.path.isfile(spec):
         raise ConfigError(f"bandwidth trace {spec!r}: neither a file nor a built-in ({', '.join(BUILTIN)})")
     if os.path.getsize(spec) > 200 * 1024 * 1024:

@@ -106,6 +106,33 @@ def test_builtins_are_the_same_every_time():
         [20000, 8000, 3000, 8000, 20000, 20000]
 
 
+def test_other_seeds_of_the_cellular_model_are_realisations_of_their_own(tmp_path):
+    """cellular:SEED draws the built-in cellular model with another seed: the same for one seed, a
+    different trace for another, the built-in itself for its own seed; a seed that is not a
+    non-negative integer is refused by name, and a file of that name is still read as a file."""
+    from pibr.common.bandwidth import CELLULAR_SEED
+
+    builtin = load_bandwidth_trace("cellular")
+    own = load_bandwidth_trace(f"cellular:{CELLULAR_SEED}")
+    assert own.name == "cellular" and np.array_equal(own.rates_kbps, builtin.rates_kbps)
+    a, again, b = (load_bandwidth_trace(s) for s in ("cellular:13", "cellular:13", "cellular:14"))
+    assert a.name == "cellular:13" and np.array_equal(a.rates_kbps, again.rates_kbps)
+    assert not np.array_equal(a.rates_kbps, b.rates_kbps) and not np.array_equal(a.rates_kbps, builtin.rates_kbps)
+    assert a.period_us == builtin.period_us == 60_000_000 and len(a.rates_kbps) == 600
+    for bad in ("cellular:", "cellular:-3", "cellular:x1", "cellular:1.5"):
+        with pytest.raises(ConfigError, match="non-negative integer seed"):
+            load_bandwidth_trace(bad)
+    f = tmp_path / "cellular:7"
+    f.write_text("t,kbps\n0,1234\n")
+    import os
+    cwd = os.getcwd()
+    os.chdir(tmp_path)
+    try:
+        assert load_bandwidth_trace("cellular:7").mean_kbps == 1234.0
+    finally:
+        os.chdir(cwd)
+
+
 @pytest.mark.parametrize("text, fmt, message", [
     ("t,kbps\n1,100\n", "csv", "first row must be at t = 0"),
     ("0,100\n2,100\n1,100\n", "csv", "times must increase"),
