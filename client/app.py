@@ -32,7 +32,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from pibr.common.gl import GLThread
+from pibr.common.gl import GLThread, wait_idle
 from pibr.common.priority import background_executor
 from pibr.common.quality import OFF, DeadlineController, read_cost_table
 from pibr.protocol.age_baseline import AgeBaseline
@@ -268,7 +268,7 @@ class Client:
                 t0 = time.perf_counter()
                 if decoded is not None:
                     methods[slot][name][level].render(pose, decoded.frame, textures[slot], scene_t)
-                ctx.finish()
+                wait_idle(ctx)   # the GIL released: frames arriving meanwhile are read on time
                 t1 = time.perf_counter()
                 rgb, hole = None, float("nan")
                 if read:
@@ -303,7 +303,7 @@ class Client:
                         target.begin()
                         t0 = time.perf_counter()
                         methods[slot][name][level].render(pose, shown[slot].frame, textures[slot], 0.0)
-                        ctx.finish()
+                        wait_idle(ctx)
                         spent += time.perf_counter() - t0
                     if k:
                         costs[name][level].append(spent * 1e3)

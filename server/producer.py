@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from pibr.common.gl import wait_idle
 from pibr.protocol.atlas import AtlasLayout, colour_jitter
 from pibr.protocol.depth import DepthQuantizer
 from pibr.protocol.pose import Pose
@@ -195,7 +196,7 @@ class FrameProducer:
             self.renderer.render_wide(self.extra, self._extra_pose, t, self.spec.projection, peel=peel,
                                       mark_peeled=self.spec.mark_peeled, max_edge_deg=extra_edge)
         extra_pose = self._extra_pose if self.extra is not None else None
-        ctx.finish()
+        wait_idle(ctx)   # the GIL released while the rasteriser draws (common/gl.py)
         t1 = time.perf_counter()
         if self.spec.gpu_pack:
             if level != FULL:
@@ -305,7 +306,7 @@ class FrameProducer:
         if self.extra is not None:
             sources.update({"extra.color": self.extra.color, "extra.depth": self.extra.distance})
         self.packer.pack(sources)
-        self.ctx.finish()
+        wait_idle(self.ctx)
         t2 = time.perf_counter()
         yuv = self.packer.read().copy()
         distances, low = {}, None

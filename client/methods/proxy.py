@@ -76,6 +76,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from pibr.common.gl import wait_idle
 from pibr.protocol.messages import PayloadKind
 from pibr.protocol.object_poses import decode_object_poses
 from pibr.protocol.pose import Pose
@@ -313,6 +314,7 @@ class ProxyIBR(Method):
         if not self.inpaint:
             return
         ctx.memory_barrier()   # the counter's writes are incoherent until then
+        wait_idle(ctx)   # pass 1 and the background drawn, the GIL released meanwhile (common/gl.py)
         left = np.frombuffer(self.left.read(), np.uint32)
         self.last_fallback_pixels = int(left[0])
         if left[0] == 0:
