@@ -53,33 +53,43 @@ def create_context(require: int = REQUIRED_GL):
 GL_SYNC_GPU_COMMANDS_COMPLETE = 0x9117
 GL_SYNC_FLUSH_COMMANDS_BIT = 0x1
 GL_ALREADY_SIGNALED, GL_TIMEOUT_EXPIRED, GL_CONDITION_SATISFIED, GL_WAIT_FAILED = 0x911A, 0x911B, 0x911C, 0x911D
+GL_RENDERER = 0x1F01
 #: The libraries that export the GL entry points (libglvnd's, which dispatch to the context current
 #: on the calling thread, EGL's or GLX's), tried in order.
 GL_LIBRARIES = ("libOpenGL.so.0", "libGL.so.1")
+_sync_lock = threading.Lock()
 _sync_functions: tuple | None = None
 _sync_loaded = False
 
 
-def _load_sync_functions() -> tuple | None:
+def _load_sync_functions(ctx) -> tuple | None:
     """(glFenceSync, glClientWaitSync, glDeleteSync) as ctypes functions (a foreign call releases
-    the GIL), or None where no library exports them."""
+    the GIL) from the first library whose entry points reach ``ctx`` (its glGetString names the
+    renderer moderngl's does), or None where none does. Loaded once per process."""
     global _sync_functions, _sync_loaded
-    if not _sync_loaded:
-        _sync_loaded = True
+    with _sync_lock:
+        if _sync_loaded:
+            return _sync_functions
+        renderer = str(ctx.info.get("GL_RENDERER", "")).encode()
         for name in GL_LIBRARIES:
             try:
                 lib = ctypes.CDLL(name)
-                fence, wait, delete = lib.glFenceSync, lib.glClientWaitSync, lib.glDeleteSync
+                get_string, fence, wait, delete = lib.glGetString, lib.glFenceSync, lib.glClientWaitSync, lib.glDeleteSync
             except (OSError, AttributeError):
                 continue
+            get_string.restype, get_string.argtypes = ctypes.c_char_p, [ctypes.c_uint]
+            if not renderer or get_string(GL_RENDERER) != renderer:
+                continue   # its calls would not reach this context
             fence.restype, fence.argtypes = ctypes.c_void_p, [ctypes.c_uint, ctypes.c_uint]
             wait.restype, wait.argtypes = ctypes.c_uint, [ctypes.c_void_p, ctypes.c_uint, ctypes.c_uint64]
             delete.restype, delete.argtypes = None, [ctypes.c_void_p]
             _sync_functions = (fence, wait, delete)
             break
+        _sync_loaded = True
         if _sync_functions is None:
-            log.info("no GL library exports glClientWaitSync (%s): GL waits hold the GIL", ", ".join(GL_LIBRARIES))
-    return _sync_functions
+            log.info("no GL library reaches the context with glClientWaitSync (%s): GL waits hold the GIL",
+                     ", ".join(GL_LIBRARIES))
+        return _sync_functions
 
 
 def wait_idle(ctx) -> None:
@@ -87,7 +97,7 @@ def wait_idle(ctx) -> None:
     does, but wait with the GIL released (module docstring), so the event loop and other threads
     run meanwhile. Call it on the context's own thread. Falls back to ``ctx.finish()`` where the
     sync functions are missing or the wait fails."""
-    functions = _load_sync_functions()
+    functions = _load_sync_functions(ctx)
     if functions is None:
         ctx.finish()
         return

@@ -87,3 +87,25 @@ def test_other_threads_run_while_wait_idle_waits_and_not_while_finish_does():
         assert seen["wait_idle"] > 5 * seen["finish"], (seen, took)
     finally:
         ctx.release()
+
+
+def test_a_library_whose_calls_do_not_reach_the_context_is_not_used(monkeypatch):
+    """The entry points are taken only from a library whose glGetString names the context's
+    renderer (a libGL without dispatch to an EGL context would wait on no context at all);
+    where none does, wait_idle is ctx.finish()."""
+    import pibr.common.gl as gl
+
+    monkeypatch.setattr(gl, "_sync_loaded", False)
+    monkeypatch.setattr(gl, "_sync_functions", None)
+
+    class Elsewhere:
+        info = {"GL_RENDERER": "a renderer no library here reaches"}
+        finished = 0
+
+        def finish(self):
+            self.finished += 1
+
+    ctx = Elsewhere()
+    gl.wait_idle(ctx)          # no context is current on this thread: glGetString gives nothing
+    gl.wait_idle(ctx)
+    assert ctx.finished == 2 and gl._sync_functions is None and gl._sync_loaded
