@@ -287,7 +287,7 @@ def load_bandwidth_trace(spec: str) -> BandwidthTrace:
         return BUILTIN[spec][1]()
     if spec.startswith("cellular:") and not os.path.exists(spec):
         seed = spec.partition(":")[2]
-        if not seed.isdigit() or len(seed) > 18:
+        if not (seed.isascii() and seed.isdigit()) or len(seed) > 18:
             raise ConfigError(f"bandwidth trace {spec!r}: cellular:SEED takes a non-negative integer seed, "
                               f"got {seed!r}")
         return _cellular(int(seed))

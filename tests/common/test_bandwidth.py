@@ -119,7 +119,7 @@ def test_other_seeds_of_the_cellular_model_are_realisations_of_their_own(tmp_pat
     assert a.name == "cellular:13" and np.array_equal(a.rates_kbps, again.rates_kbps)
     assert not np.array_equal(a.rates_kbps, b.rates_kbps) and not np.array_equal(a.rates_kbps, builtin.rates_kbps)
     assert a.period_us == builtin.period_us == 60_000_000 and len(a.rates_kbps) == 600
-    for bad in ("cellular:", "cellular:-3", "cellular:x1", "cellular:1.5"):
+    for bad in ("cellular:", "cellular:-3", "cellular:x1", "cellular:1.5", "cellular:\u00b2", "cellular:" + "9" * 19):
         with pytest.raises(ConfigError, match="non-negative integer seed"):
             load_bandwidth_trace(bad)
     f = tmp_path / "cellular:7"
