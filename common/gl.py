@@ -52,29 +52,31 @@ def create_context(require: int = REQUIRED_GL):
 
 GL_SYNC_GPU_COMMANDS_COMPLETE = 0x9117
 GL_SYNC_FLUSH_COMMANDS_BIT = 0x1
-GL_ALREADY_SIGNALED, GL_TIMEOUT_EXPIRED, GL_CONDITION_SATISFIED, GL_WAIT_FAILED = 0x911A, 0x911B, 0x911C, 0x911D
+GL_ALREADY_SIGNALED, GL_TIMEOUT_EXPIRED, GL_CONDITION_SATISFIED = 0x911A, 0x911B, 0x911C
 GL_RENDERER = 0x1F01
 #: The libraries that export the GL entry points (libglvnd's, which dispatch to the context current
 #: on the calling thread, EGL's or GLX's), tried in order.
 GL_LIBRARIES = ("libOpenGL.so.0", "libGL.so.1")
 _sync_lock = threading.Lock()
-_sync_functions: tuple | None = None
-_sync_loaded = False
+_NOT_LOADED = object()
+_sync_functions = _NOT_LOADED   # then (fence, wait, delete), or None where no library reaches the context
 
 
 def _load_sync_functions(ctx) -> tuple | None:
     """(glFenceSync, glClientWaitSync, glDeleteSync) as ctypes functions (a foreign call releases
     the GIL) from the first library whose entry points reach ``ctx`` (its glGetString names the
     renderer moderngl's does), or None where none does. Loaded once per process."""
-    global _sync_functions, _sync_loaded
+    global _sync_functions
     with _sync_lock:
-        if _sync_loaded:
+        if _sync_functions is not _NOT_LOADED:
             return _sync_functions
+        _sync_functions = None
         renderer = str(ctx.info.get("GL_RENDERER", "")).encode()
         for name in GL_LIBRARIES:
             try:
                 lib = ctypes.CDLL(name)
-                get_string, fence, wait, delete = lib.glGetString, lib.glFenceSync, lib.glClientWaitSync, lib.glDeleteSync
+                get_string, fence = lib.glGetString, lib.glFenceSync
+                wait, delete = lib.glClientWaitSync, lib.glDeleteSync
             except (OSError, AttributeError):
                 continue
             get_string.restype, get_string.argtypes = ctypes.c_char_p, [ctypes.c_uint]
@@ -85,7 +87,6 @@ def _load_sync_functions(ctx) -> tuple | None:
             delete.restype, delete.argtypes = None, [ctypes.c_void_p]
             _sync_functions = (fence, wait, delete)
             break
-        _sync_loaded = True
         if _sync_functions is None:
             log.info("no GL library reaches the context with glClientWaitSync (%s): GL waits hold the GIL",
                      ", ".join(GL_LIBRARIES))

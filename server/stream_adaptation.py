@@ -37,8 +37,8 @@ stream that starts above its link queues from its first frame, learns a baseline
 queue, and sees congestion only once it has grown past that (before this, the `cellular` link's
 frames were up to 2.2 s old in its first 4 s). From a quarter, the slow start reaches a link with
 room within a second: :data:`START_GAIN` a report, with no cap from what arrived, since each
-step restarts the encoder at once (video.py). The first report that finds frames queued ends it; one that finds them queued past :data:`QUEUE_HIGH_MS` decreases as
-any congestion does.
+step restarts the encoder at once (video.py). The first report that finds frames queued ends
+it; one that finds them queued past :data:`QUEUE_HIGH_MS` decreases as any congestion does.
 
 Under the floor (:data:`FLOOR_SHARE` of the session's bitrate, where a colour atlas stops being
 worth its bits) the frame rate halves instead, down to one frame in :data:`MAX_EVERY` ticks, and

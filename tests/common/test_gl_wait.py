@@ -95,8 +95,7 @@ def test_a_library_whose_calls_do_not_reach_the_context_is_not_used(monkeypatch)
     where none does, wait_idle is ctx.finish()."""
     import pibr.common.gl as gl
 
-    monkeypatch.setattr(gl, "_sync_loaded", False)
-    monkeypatch.setattr(gl, "_sync_functions", None)
+    monkeypatch.setattr(gl, "_sync_functions", gl._NOT_LOADED)
 
     class Elsewhere:
         info = {"GL_RENDERER": "a renderer no library here reaches"}
@@ -108,4 +107,4 @@ def test_a_library_whose_calls_do_not_reach_the_context_is_not_used(monkeypatch)
     ctx = Elsewhere()
     gl.wait_idle(ctx)          # no context is current on this thread: glGetString gives nothing
     gl.wait_idle(ctx)
-    assert ctx.finished == 2 and gl._sync_functions is None and gl._sync_loaded
+    assert ctx.finished == 2 and gl._sync_functions is None   # looked up once, found nothing
