@@ -15,7 +15,8 @@ that millisecond), so a message's serialisation ends where the bits delivered si
 reach its size (:meth:`BandwidthTrace.finish_us`); a rate of 0 is an outage. The built-in traces
 (:data:`BUILTIN`) are deterministic: steps down and up, an oscillation, a short outage, a
 synthetic cellular-like link (log-normal rate with handover dips, seeded; ``cellular:SEED`` draws
-another realisation), and a steady link with room (what adapting costs when nothing needs it).
+another realisation), and a steady link with room (what adapting costs when nothing needs it;
+``steady:KBPS`` is a steady link at another rate).
 """
 from __future__ import annotations
 
@@ -262,8 +263,13 @@ def _cellular(seed: int = CELLULAR_SEED) -> BandwidthTrace:
     return BandwidthTrace(name, np.arange(n + 1, dtype=np.int64) * 100_000, np.round(np.clip(kbps, 50, 60000)))
 
 
-def _steady() -> BandwidthTrace:
-    return BandwidthTrace("steady", np.array([0, 30_000_000]), np.array([40000.0]))
+#: The rate of the built-in ``steady`` link (kbit/s); ``steady:KBPS`` is a steady link at another.
+STEADY_KBPS = 40000.0
+
+
+def _steady(kbps: float = STEADY_KBPS) -> BandwidthTrace:
+    name = "steady" if kbps == STEADY_KBPS else f"steady:{kbps:g}"
+    return BandwidthTrace(name, np.array([0, 30_000_000]), np.array([float(kbps)]))
 
 
 #: name -> (what it is, how to make it)
@@ -274,17 +280,30 @@ BUILTIN = {
     "cellular": ("synthetic cellular: log-normal in 100 ms steps (mean 5.7, 10th percentile 2.7 Mbit/s), "
                  "five handover dips (60 s); cellular:SEED draws another realisation of the same model",
                  _cellular),
-    "steady": ("40 Mbit/s throughout (30 s): a link with room, where adapting should cost nothing", _steady),
+    "steady": ("40 Mbit/s throughout (30 s): a link with room, where adapting should cost nothing; "
+               "steady:KBPS is a steady link at KBPS kbit/s (a slow one: where even the floor does not fit)",
+               _steady),
 }
 
 
 def load_bandwidth_trace(spec: str) -> BandwidthTrace:
     """A built-in name (:data:`BUILTIN`), ``cellular:SEED`` (the cellular model drawn with another
     seed, a non-negative integer: more realisations to judge an adaptation on than the one
-    built-in), or a file: ``t,kbps`` CSV when its lines hold commas, Mahimahi opportunities
-    otherwise. Errors name the file and line."""
+    built-in), ``steady:KBPS`` (a steady link at KBPS kbit/s, a positive number), or a file:
+    ``t,kbps`` CSV when its lines hold commas, Mahimahi opportunities otherwise. Errors name the
+    file and line."""
     if spec in BUILTIN:
         return BUILTIN[spec][1]()
+    if spec.startswith("steady:") and not os.path.exists(spec):
+        text = spec.partition(":")[2]
+        try:
+            kbps = float(text) if text.isascii() else math.nan
+        except ValueError:
+            kbps = math.nan
+        if not 0 < kbps <= MAX_KBPS:
+            raise ConfigError(f"bandwidth trace {spec!r}: steady:KBPS takes a rate in kbit/s above 0 and at most "
+                              f"{MAX_KBPS:g}, got {text!r}")
+        return _steady(kbps)
     if spec.startswith("cellular:") and not os.path.exists(spec):
         seed = spec.partition(":")[2]
         if not (seed.isascii() and seed.isdigit()) or len(seed) > 18:

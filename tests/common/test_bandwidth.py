@@ -133,6 +133,26 @@ def test_other_seeds_of_the_cellular_model_are_realisations_of_their_own(tmp_pat
         os.chdir(cwd)
 
 
+def test_a_steady_link_at_any_rate(tmp_path, monkeypatch):
+    """steady:KBPS is the steady link at another rate (the slow links where even the colour's floor
+    does not fit); the built-in's own rate is the built-in; a rate that is not a positive number
+    up to the cap is refused by name; a file of that name is still read as a file."""
+    from pibr.common.bandwidth import MAX_KBPS, STEADY_KBPS
+
+    slow = load_bandwidth_trace("steady:600")
+    assert slow.name == "steady:600" and slow.mean_kbps == 600.0 and slow.summary()["min_kbps"] == 600.0
+    assert load_bandwidth_trace("steady:2.5").mean_kbps == 2.5
+    assert load_bandwidth_trace(f"steady:{STEADY_KBPS:g}").name == "steady"
+    assert slow.period_us == load_bandwidth_trace("steady").period_us
+    for bad in ("steady:", "steady:0", "steady:-5", "steady:fast", "steady:nan", "steady:inf", "steady:\u00b2",
+                f"steady:{MAX_KBPS * 2:g}"):
+        with pytest.raises(ConfigError, match="steady:KBPS takes a rate"):
+            load_bandwidth_trace(bad)
+    (tmp_path / "steady:7").write_text("t,kbps\n0,1234\n")
+    monkeypatch.chdir(tmp_path)
+    assert load_bandwidth_trace("steady:7").mean_kbps == 1234.0
+
+
 @pytest.mark.parametrize("text, fmt, message", [
     ("t,kbps\n1,100\n", "csv", "first row must be at t = 0"),
     ("0,100\n2,100\n1,100\n", "csv", "times must increase"),
