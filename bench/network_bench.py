@@ -46,12 +46,15 @@ def _records_summary(out: str, method: str, duration_s: float) -> dict:
     sizes = np.array(session.get("frame_bytes", []), float)
     on_clock = (arrivals >= 0) & (arrivals <= duration_s) if len(arrivals) == len(sizes) else slice(None)
     kbps = [r["stream_kbps"] for r in rows if r["stream_kbps"] >= 0]
+    views = [r["stream_view"] for r in rows if r["stream_view"] >= 1]
     return {"age_ms_p50": float(np.percentile(ages, 50)) if len(ages) else None,
             "age_ms_p95": float(np.percentile(ages, 95)) if len(ages) else None,
             "stalls": int(np.count_nonzero(gaps > STALL_MS)), "longest_stall_ms": float(gaps.max()),
             "arrived_kbps": float(sizes[on_clock].sum() * 8 / duration_s / 1e3),
             "frames": int(len(changes)),
-            "colour_kbps_chosen": {"min": min(kbps), "max": max(kbps), "mean": float(np.mean(kbps))} if kbps else None}
+            "colour_kbps_chosen": {"min": min(kbps), "max": max(kbps), "mean": float(np.mean(kbps))} if kbps else None,
+            # the share of ticks that showed a frame whose primary view the adaptation made smaller
+            "smaller_view_share": float(np.mean(np.array(views) > 1)) if views else None}
 
 
 def _series(out: str, method: str, duration_s: float, step_s: float = SERIES_STEP_S) -> dict:

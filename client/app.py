@@ -682,17 +682,21 @@ class Client:
             "client_ms": client_ms, "hole_fraction": hole, "missed": missed,
             "level": 0, "level_reason": OFF, "budget_ms": 1e3 / self.cfg.rate_hz, "predicted_ms": 0.0,
             "server_level": self._server_level(f),
-            "stream_kbps": self._stream_kbps(f),
+            **dict(zip(("stream_kbps", "stream_view"), self._stream_rate(f))),
             "frame_scene_t": float("nan") if f is None else f.scene_t_us / 1e6,
             **dict(zip((f"frame_{k}" for k in POSE_FIELDS),
                        [float("nan")] * 7 if f is None else f.primary_pose.as_array())),
         }
 
     @staticmethod
-    def _stream_kbps(frame) -> int:
-        """The colour's target the stream adaptation chose for ``frame`` (kbit/s), -1 for none."""
+    def _stream_rate(frame) -> tuple[int, int]:
+        """The colour's target the stream adaptation chose for ``frame`` (kbit/s) and its primary
+        view's divisor (rendered at 1/view of its side); -1, -1 for none."""
         payload = None if frame is None else frame.payload(PayloadKind.STREAM_RATE)
-        return -1 if payload is None else decode_stream_rate(payload)[0]
+        if payload is None:
+            return -1, -1
+        kbps, _, _, view = decode_stream_rate(payload)
+        return kbps, view
 
     def _server_level(self, frame) -> int:
         """The server's rate-control level ``frame`` was made at (an index in the session's

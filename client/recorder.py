@@ -21,7 +21,8 @@ level the tick was drawn at (client/deadline.py; 0 the method's best), ``level_r
 controller) and the level's predicted cost (0: no prediction); ``server_level`` the level the
 shown frame was made at by the server's rate control (an index in ``server_levels`` of the
 session's options; -1: none); ``stream_kbps`` the colour's bitrate the server's stream
-adaptation chose for the shown frame (-1: no adaptation).
+adaptation chose for the shown frame and ``stream_view`` its primary view's size there (rendered at
+1/``stream_view`` of its side; -1 for both: no adaptation).
 
 Writing runs on a worker thread per method; at most ``max_pending`` frames wait, so a slow
 disk slows the client (and, on the real clock, shows up as missed deadlines) rather than
@@ -49,10 +50,11 @@ RECORD_FIELDS = (
     "frame_id", "frame_render_t", "frame_pose_t", "frame_arrival_t", "age_ms",
     "client_ms", "hole_fraction", "missed", "frame_scene_t", *(f"frame_{k}" for k in POSE_FIELDS),
     "level", "level_reason", "budget_ms", "predicted_ms", "server_level", "stream_kbps",
+    "stream_view",
 )
 #: The columns of a recording made before they existed: the top level, no controller, no adaptation.
 _LEVEL_DEFAULTS = {"level": 0, "level_reason": OFF, "budget_ms": 0.0, "predicted_ms": 0.0, "server_level": -1,
-                   "stream_kbps": -1}
+                   "stream_kbps": -1, "stream_view": -1}
 #: The lossless copy's file suffix and (codec, pixel format, options). Ut Video's median
 #: prediction, measured on the demo's recordings (960x540 room, one thread): 311 KiB a frame,
 #: 5.8 ms to encode and 5.6 to decode to RGB, against 359 KiB, 8.4 and 11.7 ms for x264's lossless
@@ -73,7 +75,8 @@ def lossless_recording(out_dir: str, method: str) -> str:
 
 
 #: Columns read as integers (the rest are numbers).
-_INTEGER_FIELDS = ("tick", "frame_id", "missed", "level", "level_reason", "server_level", "stream_kbps")
+_INTEGER_FIELDS = ("tick", "frame_id", "missed", "level", "level_reason", "server_level", "stream_kbps",
+                   "stream_view")
 
 
 class MethodRecorder:

@@ -311,26 +311,30 @@ class PayloadKind:
              6: "object-poses", 7: "motion-flow", 8: "frame-level", 9: "eye", 10: "stream-rate"}
 
 
-_STREAM_RATE = struct.Struct("<IBB")
+_STREAM_RATE = struct.Struct("<IBBB")
 
 
-def encode_stream_rate(video_kbps: float, every: int, reason: int) -> bytes:
+def encode_stream_rate(video_kbps: float, every: int, reason: int, view: int = 1) -> bytes:
     """The STREAM_RATE payload: the colour's target (whole kbit/s), the frames made (one every
-    ``every`` ticks, 1..255) and the reason code of the choice (server/stream_adaptation.py)."""
-    if not (0 <= video_kbps < 2 ** 32 and 1 <= every <= 255 and 0 <= reason <= 255):
-        raise ValueError(f"a stream rate is kbps in 0..2^32, every in 1..255, a reason in 0..255; got "
-                         f"{video_kbps}, {every}, {reason}")
-    return _STREAM_RATE.pack(int(round(video_kbps)), every, reason)
+    ``every`` ticks, 1..255), the reason code of the choice (server/stream_adaptation.py) and the
+    primary view's size (rendered at 1/``view`` of its side, 1..255)."""
+    if not (0 <= video_kbps < 2 ** 32 and 1 <= every <= 255 and 0 <= reason <= 255 and 1 <= view <= 255):
+        raise ValueError(f"a stream rate is kbps in 0..2^32, every in 1..255, a reason in 0..255 and a view "
+                         f"divisor in 1..255; got {video_kbps}, {every}, {reason}, {view}")
+    return _STREAM_RATE.pack(int(round(video_kbps)), every, reason, view)
 
 
-def decode_stream_rate(payload) -> tuple[int, int, int]:
-    """A STREAM_RATE payload -> (video kbps, every, reason); MalformedMessage unless 6 bytes, every >= 1."""
+def decode_stream_rate(payload) -> tuple[int, int, int, int]:
+    """A STREAM_RATE payload -> (video kbps, every, reason, view); MalformedMessage unless 7 bytes,
+    every >= 1 and view >= 1."""
     if len(payload) != _STREAM_RATE.size:
         raise MalformedMessage(f"Frame: a stream-rate payload is {_STREAM_RATE.size} bytes, got {len(payload)}")
-    kbps, every, reason = _STREAM_RATE.unpack(bytes(payload))
+    kbps, every, reason, view = _STREAM_RATE.unpack(bytes(payload))
     if every < 1:
         raise MalformedMessage("Frame: a stream-rate payload says a frame every 0 ticks")
-    return kbps, every, reason
+    if view < 1:
+        raise MalformedMessage("Frame: a stream-rate payload says a view at 1/0 of its side")
+    return kbps, every, reason, view
 
 
 def encode_frame_level(level: int) -> bytes:

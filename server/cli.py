@@ -133,9 +133,10 @@ def register(sub) -> None:
                         "the pose as it came)")
     p.add_argument("--adapt", choices=("on", "off"), default="off",
                    help="adapt the stream to the link the client reports: the colour's bitrate, the edge codec's "
-                        "rate and the frame rate, for frames that stay young (server/stream_adaptation.py; "
-                        "default off: 'pibr bench network' finds it far ahead of a static 16 Mbit/s on changing links, behind "
-                        "the best static rate in hindsight, and it is not yet measured on the wall clock)")
+                        "rate, and under the floor the frame rate and the primary view's size, for frames that stay "
+                        "young (server/stream_adaptation.py; default off: 'pibr bench network' finds it far ahead of "
+                        "a static 16 Mbit/s on changing links but behind the best static rate in hindsight, and "
+                        "short of its goals on the wall clock)")
     p.add_argument("--silent-slot-s", type=float, default=2.0, metavar="S",
                    help="a session that has sent no pose S seconds after its Welcome gives its slot to a Hello "
                         "waiting for one (default 2; a running client sends a pose every tick)")

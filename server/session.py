@@ -15,6 +15,7 @@ client's clock may run at most ``max_clock_lead_s`` ahead of the next frame it a
 from __future__ import annotations
 
 import asyncio
+import dataclasses
 import logging
 import ssl
 import time
@@ -57,6 +58,7 @@ class Session:
         self.adaptation = None          # the stream's adaptation to the link (server/stream_adaptation.py), if on
         self._adapt_ticks = 0
         self.frames_thinned = 0         # ticks without a frame: the adaptation lowered the frame rate
+        self.frames_shrunk = 0          # ticks whose primary view the adaptation rendered smaller
         self.idle_timeout_s: float | None = None   # set by the Hello's clock
         self._accepted = asyncio.get_running_loop().time()
         self._hello_deadline: asyncio.Timeout | None = None
@@ -179,9 +181,10 @@ class Session:
         if self.adaptation is not None:
             a = self.adaptation.summary()
             log.info("session %d: stream adaptation: %d reports (%s), colour at %.0f of %.0f kbit/s, a frame every "
-                     "%d ticks at the end, %d ticks without a frame", self.id, a["reports"],
+                     "%d ticks and the primary view at 1/%d of its side at the end, %d ticks without a frame, %d with a "
+                     "smaller primary view", self.id, a["reports"],
                      ", ".join(f"{k} {v}" for k, v in a["reasons"].items() if v), a["video_kbps"], a["max_kbps"],
-                     a["every"], self.frames_thinned)
+                     a["every"], a["view"], self.frames_thinned, self.frames_shrunk)
         if self.rate is not None:
             made = self.rate.summary()["frames_at_level"]
             log.info("session %d: frames by rate-control level: %s", self.id,
@@ -240,22 +243,27 @@ class Session:
     # ------------------------------------------------------------------ frames
 
     async def _send_tick(self, pose_msg: PoseMsg, t_us: int, vtime_us: int, force_keyframe: bool = False,
-                         level: tuple | None = None) -> None:
+                         level: tuple | None = None) -> bool:
         """The frames of one server tick: one from the head's pose, or a stereo session's eyes for
-        this tick (protocol/stereo.py: one alternating eye, or both, each a frame of its own)."""
+        this tick (protocol/stereo.py: one alternating eye, or both, each a frame of its own).
+        -> whether they were made as ``level`` says (not when the stream adaptation made none, or
+        made the primary view smaller still: their cost is not the level's)."""
         reference = self.stereo["reference"] if self.stereo else None
-        stream_rate = None
+        stream_rate, view = None, 1
         if self.adaptation is not None:
             choice = self._adapt(t_us)
             self._adapt_ticks += 1
             if (self._adapt_ticks - 1) % choice.every:
                 self.frames_thinned += 1
-                return       # the adaptation makes one frame every `every` ticks
-            stream_rate = encode_stream_rate(choice.video_kbps, choice.every, choice.reason)
+                return False   # the adaptation makes one frame every `every` ticks
+            stream_rate, view = encode_stream_rate(choice.video_kbps, choice.every, choice.reason, choice.view), choice.view
+            if view > 1:
+                self.frames_shrunk += 1
         pose_msg = self._predicted(pose_msg)
         for i, eye in enumerate(frame_eyes(reference, self.server_ticks)):
-            await self._send_frame(pose_msg, t_us, vtime_us, force_keyframe and i == 0, level, eye, stream_rate)
+            await self._send_frame(pose_msg, t_us, vtime_us, force_keyframe and i == 0, level, eye, stream_rate, view)
         self.server_ticks += 1
+        return level is None or level[1].scale <= 1.0 / view
 
     def _adapt(self, t_us: int):
         """The stream adaptation's choice for a tick at ``t_us`` (server/stream_adaptation.py): the
@@ -296,13 +304,17 @@ class Session:
         return PoseMsg(pose_msg.seq, pose_msg.t_us, self.predictor.predict(ahead))
 
     async def _send_frame(self, pose_msg: PoseMsg, t_us: int, vtime_us: int, force_keyframe: bool = False,
-                          level: tuple | None = None, eye: str = CENTRE, stream_rate: bytes | None = None) -> None:
+                          level: tuple | None = None, eye: str = CENTRE, stream_rate: bytes | None = None,
+                          view: int = 1) -> None:
         """The pipeline's stages (server/pipeline.py) where they belong: rendering on the shared GL
         thread, the encoders in the pool, the H.264 encode and the quadtrees side by side.
         ``level``: (index, FrameLevel) of the rate control (server/rate_control.py), or None;
-        ``eye``: rendered for that eye of the head at the pose (a stereo session), or its centre."""
+        ``eye``: rendered for that eye of the head at the pose (a stereo session), or its centre;
+        ``view``: the stream adaptation's primary view at 1/``view`` of its side at most."""
         pipeline = self.pipeline
         made, frame_id = FULL if level is None else level[1], self.frames_sent
+        if made.scale > 1.0 / view:
+            made = dataclasses.replace(made, scale=1.0 / view)
         pose = pose_msg.pose if eye == CENTRE else eye_pose(pose_msg.pose, eye, self.stereo["ipd_mm"])
         produced = await self.server.render(self.id, lambda ctx: pipeline.produce(pose, t_us * 1e-6, made, frame_id))
         t0 = time.perf_counter()
@@ -432,8 +444,8 @@ class Session:
                             level = (index, made)
                         t0 = loop.time()
                         t_us = int(round((t0 - start) * 1e6))
-                        await self._send_tick(newest[0], t_us, t_us, need_keyframe, level)
-                        if self.rate is not None:
+                        as_chosen = await self._send_tick(newest[0], t_us, t_us, need_keyframe, level)
+                        if self.rate is not None and as_chosen:
                             self.rate.observe(level[0], (loop.time() - t0) * 1e3, level[1].extra)
                         need_keyframe = False
                         self.writer.write(self.conn.data_to_send())  # no drain: never wait on one client

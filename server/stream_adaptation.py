@@ -31,21 +31,31 @@ between the two clocks). Each report:
   that add up unseen meanwhile would land on the link all at once);
 * in between: held.
 
-A stream starts at :data:`START_SHARE` of the session's bitrate, not at all of it. The queue is
+Under the floor (:data:`FLOOR_SHARE` of the session's bitrate, where a colour atlas stops being
+worth its bits) the stream goes down :data:`LADDER`: the frame rate halves, or the primary view
+is rendered at half its side and upsampled into the atlas (the server's own smaller views,
+server/producer.py), which halves the floor (smooth content keeps its quality on fewer bits). A
+decrease goes at once to the first rung whose floor fits (an outage, which measures nothing: a
+rung at a time). With room, the stream climbs a rung once the rung's rate on the wire is within
+:data:`RECEIVED_CAP` of what arrives (as a probe is), and probes within its rung until then.
+
+A stream starts at the ladder's foot, its last rung at that rung's floor, and climbs in a slow
+start: a rung a report, then :data:`START_GAIN` a report, with no cap from what arrived, since
+each step restarts the encoder at once (video.py); it reaches a link with room within two
+seconds. The first report that finds frames queued ends it; one that finds them queued past
+:data:`QUEUE_HIGH_MS` decreases as any congestion does. Starting low matters twice. The queue is
 measured against the least age seen, so that least must come from frames that did not queue: a
 stream that starts above its link queues from its first frame, learns a baseline that holds the
-queue, and sees congestion only once it has grown past that (before this, the `cellular` link's
-frames were up to 2.2 s old in its first 4 s). From a quarter, the slow start reaches a link with
-room within a second: :data:`START_GAIN` a report, with no cap from what arrived, since each
-step restarts the encoder at once (video.py). The first report that finds frames queued ends
-it; one that finds them queued past :data:`QUEUE_HIGH_MS` decreases as any congestion does.
+queue, and sees congestion only once it has grown past that (the `cellular` link's frames were
+up to 2.2 s old in its first 4 s starting at the session's bitrate). And nothing is known of the
+link before the first frame arrives: the frames sent meanwhile are all queued on a link slower
+than them (starting at a quarter of 16 Mbit/s on a 300 kbit/s link, the first frame took 2.7 s
+and the frames sent until the first report kept every later one 15 s old or more).
 
-Under the floor (:data:`FLOOR_SHARE` of the session's bitrate, where a colour atlas stops being
-worth its bits) the frame rate halves instead, down to one frame in :data:`MAX_EVERY` ticks, and
-comes back first when there is room. The edge codec's rate follows the colour's share of its
-bitrate. On the virtual clock the reports are taken as of each frame's time, so the choices are
-reproducible. The constants are not fitted to any trace (a declared choice, as in a delay-based
-congestion controller: a queue above one frame interval is a congestion signal).
+The edge codec's rate follows the colour's share of its bitrate. On the virtual clock the
+reports are taken as of each frame's time, so the choices are reproducible. The constants are
+not fitted to any trace (a declared choice, as in a delay-based congestion controller: a queue
+above one frame interval is a congestion signal).
 """
 from __future__ import annotations
 
@@ -63,24 +73,28 @@ BASELINE_S = STREAM_BASELINE_S
 QUEUE_HIGH_MS = STREAM_QUEUE_HIGH_MS
 QUEUE_LOW_MS = 40.0
 PROBE_GAIN = 1.08
-START_SHARE = 0.25
 START_GAIN = 1.5
 RECEIVED_CAP = 1.5
 RECEIVED_WINDOW_S = 1.0
 MIN_DRAIN_SHARE = 0.3
 HOLD_S = 0.6
 FLOOR_SHARE = 0.1
-MAX_EVERY = 4
+#: The rungs under the floor, from the top: (one frame every ``every`` ticks, the primary view
+#: rendered at 1/``view`` of its side). Each view step halves the floor.
+LADDER = ((1, 1), (2, 1), (2, 2), (4, 2))
+MAX_EVERY = max(every for every, _ in LADDER)
 MAX_SENT_KEPT = 256
 
 
 @dataclass(frozen=True)
 class StreamChoice:
-    """What the next frames are made at: the colour's target, one frame every ``every`` ticks, why."""
+    """What the next frames are made at: the colour's target, one frame every ``every`` ticks, the
+    primary view rendered at 1/``view`` of its side, and why."""
 
     video_kbps: float
     every: int
     reason: int
+    view: int = 1
 
     @property
     def reason_name(self) -> str:
@@ -90,22 +104,22 @@ class StreamChoice:
 class StreamAdaptation:
     """One session's stream adaptation (module docstring). Times in seconds of the session's clock."""
 
-    def __init__(self, max_video_kbps: float, min_video_kbps: float = 16.0, start_share: float = START_SHARE):
-        """``start_share``: the colour's first target as a share of ``max_video_kbps`` (module docstring)."""
-        if not 0.0 < start_share <= 1.0:
-            raise ValueError(f"start_share must be in (0, 1], got {start_share}")
+    def __init__(self, max_video_kbps: float, min_video_kbps: float = 16.0):
         self.max_kbps = float(max_video_kbps)
         self.floor_kbps = max(float(min_video_kbps), FLOOR_SHARE * self.max_kbps)
-        self.choice = StreamChoice(min(self.max_kbps, max(self.floor_kbps, start_share * self.max_kbps)), 1, START)
+        # the start: the ladder's last rung at its floor (module docstring)
+        self.rung = len(LADDER) - 1       # the index in LADDER of (every, view)
+        every, view = LADDER[self.rung]
+        self.choice = StreamChoice(min(self.max_kbps, self.rung_floor_kbps(self.rung)), every, START, view)
         #: in the slow start (module docstring): a new target should reach the encoder at once
         self.starting = True
         self._ages = AgeBaseline(BASELINE_S)   # the reports' ages (ms) over BASELINE_S
-        self._received: deque = deque()   # (t, kbit arrived x every, span s, frames queued?) within RECEIVED_WINDOW_S
+        self._received: deque = deque()   # (t, kbit arrived, span s, frames queued?) within RECEIVED_WINDOW_S
         self._sent: deque = deque()       # (frame id, t sent, bits) not known to have arrived
         #: what arrived over the last RECEIVED_WINDOW_S of reports, each weighed by its span (kbit/s)
         self.received_kbps = 0.0
         self._last_decrease: tuple | None = None   # (t, hold s, the link's kbit/s) of the last decrease
-        self._last_every_change = float("-inf")
+        self._last_rung_change = float("-inf")
         self.reports = 0
         self.reasons = {name: 0 for name in REASONS}   # reports per reason
 
@@ -113,6 +127,10 @@ class StreamAdaptation:
     def share(self) -> float:
         """The colour's target as a share of the session's bitrate (the edge codec's follows it)."""
         return self.choice.video_kbps / self.max_kbps
+
+    def rung_floor_kbps(self, rung: int) -> float:
+        """The least colour target at ``rung`` of LADDER: the floor, halved per view step."""
+        return self.floor_kbps / LADDER[rung][1]
 
     def queue_ms(self, t: float, age_ms: float) -> float:
         """Record a report's age -> the time its frames spent queued (ms)."""
@@ -131,23 +149,38 @@ class StreamAdaptation:
         transmission outlasts the least age, measured when the link was fast)."""
         while self._sent and self._sent[0][0] <= newest_frame:
             self._sent.popleft()
-        # (on the real clock the least age holds the two clocks' offset too: never below 0)
-        least_s = max(0.0, self._ages.least / 1e3)
-        overdue = [bits for _, sent, bits in self._sent if sent < t - least_s]
+        overdue = [bits for _, sent, bits in self._sent if sent < t - self._least_s()]
         return sum(overdue[1:])
+
+    def _least_s(self) -> float:
+        # (on the real clock the least age holds the two clocks' offset too: never below 0)
+        return max(0.0, self._ages.least / 1e3)
+
+    def _oldest_due(self, t: float) -> float | None:
+        """When the oldest frame that should have arrived by ``t`` and is not known to have was
+        sent, None if none (call after overdue_bits)."""
+        return next((sent for _, sent, _ in self._sent if sent < t - self._least_s()), None)
 
     def report(self, t: float, age_ms: float, delivered_kbps: float, span_ms: float = STREAM_REPORT_MS,
                link_kbps: float | None = None, newest_frame: int | None = None) -> StreamChoice:
         """Take one report of the client (at ``t`` s, over its last ``span_ms``; ``link_kbps``: its
         measure of the link, if any; ``newest_frame``: the newest frame id it has) -> the choice for
-        the frames that follow."""
-        queue = self.queue_ms(t, age_ms)
+        the frames that follow. Rates on the wire (what arrived, the link) are kbit/s of the
+        stream as sent; the colour's target is the encoder's, made one frame every ``every`` ticks."""
+        overdue = None if newest_frame is None else self.overdue_bits(t, newest_frame)
+        if overdue is not None and delivered_kbps <= 0:
+            # Nothing arrived: the newest frame's age now tells how long ago it was made (at a
+            # frame every few ticks, the gap between frames too), not how long frames queue. The
+            # oldest frame that should have arrived and has not does: its age now, less the least.
+            due = self._oldest_due(t)
+            queue = 0.0 if due is None else max(0.0, (t - due) * 1e3 - self._ages.least)
+        else:
+            queue = self.queue_ms(t, age_ms)
         if queue >= QUEUE_LOW_MS or self.choice.video_kbps >= self.max_kbps:
             self.starting = False
-        overdue = None if newest_frame is None else self.overdue_bits(t, newest_frame)
         kbps, every = self.choice.video_kbps, self.choice.every
         span = max(float(span_ms), 1.0) / 1e3
-        self._received.append((t, delivered_kbps * every * span, span, queue > QUEUE_LOW_MS))
+        self._received.append((t, delivered_kbps * span, span, queue > QUEUE_LOW_MS))
         while self._received[0][0] <= t - RECEIVED_WINDOW_S:
             self._received.popleft()
         received = sum(k for _, k, _, _ in self._received) / sum(s for _, _, s, _ in self._received)
@@ -157,49 +190,66 @@ class StreamAdaptation:
         # none, or one in 200 ms)
         busy = [(k, s) for _, k, s, queued in self._received if queued]
         if link_kbps is not None and link_kbps > 0:
-            capacity = float(link_kbps)
+            link = float(link_kbps)
         else:
-            capacity = sum(k for k, _ in busy) / sum(s for _, s in busy) if busy else delivered_kbps * every
-        if overdue and capacity > 0 and queue > QUEUE_LOW_MS:
+            link = sum(k for k, _ in busy) / sum(s for _, s in busy) if busy else delivered_kbps
+        if overdue and link > 0 and queue > QUEUE_LOW_MS:
             # frames queue: the backlog the frames already sent make is what they will wait
-            queue = max(queue, overdue / capacity)   # bits / (kbit/s) = ms
+            queue = max(queue, overdue / link)   # bits / (kbit/s) = ms
         reason = HOLD
         if queue > QUEUE_HIGH_MS:
             # After a decrease the frames already queued keep arriving old: wait for them to drain
             # (the hold and the queue's own length) unless the link itself got slower still.
-            worse = self._last_decrease is not None and capacity < 0.8 * self._last_decrease[2]
+            worse = self._last_decrease is not None and link < 0.8 * self._last_decrease[2]
             if self._last_decrease is None or t - self._last_decrease[0] >= self._last_decrease[1] or worse:
-                if capacity > 0:
+                if link > 0:
                     share = max(MIN_DRAIN_SHARE, 1.0 - queue / 1000.0 - 0.1)
-                    # the colour's part of what arrived: the same share of it the colour had
-                    wanted = min(kbps, capacity * share)
-                    reason = CONGESTED
+                    # on the wire: the stream's rate, no more than that share of the link
+                    wanted = min(kbps / every, link * share)
+                    rung, reason = self.rung, CONGESTED
+                    # down the ladder at once to the first rung whose floor that fits
+                    while rung + 1 < len(LADDER) and self.rung_floor_kbps(rung) > wanted * LADDER[rung][0]:
+                        rung, reason = rung + 1, FLOOR
+                    wanted *= LADDER[rung][0]
                 else:
-                    wanted, reason = kbps * 0.5, OUTAGE
-                if wanted < self.floor_kbps:
-                    if kbps <= self.floor_kbps * 1.001 and every < MAX_EVERY:
-                        every, reason = every * 2, FLOOR
-                        self._last_every_change = t
-                    wanted = self.floor_kbps
-                kbps = wanted
+                    # nothing arrived: half the target, a rung down once it is at the floor
+                    wanted, reason, rung = kbps * 0.5, OUTAGE, self.rung
+                    floor = self.rung_floor_kbps(rung)
+                    if wanted < floor and kbps <= floor * 1.001 and rung + 1 < len(LADDER):
+                        rung, reason = rung + 1, FLOOR
+                        wanted *= LADDER[rung][0] / every
+                if rung != self.rung:
+                    self.rung, self._last_rung_change = rung, t
+                kbps = max(wanted, self.rung_floor_kbps(self.rung))
                 # an outage drains nothing: only the hold
-                hold = HOLD_S + (queue / 1e3 if capacity > 0 else 0.0)
-                self._last_decrease = (t, hold, capacity)
+                hold = HOLD_S + (queue / 1e3 if link > 0 else 0.0)
+                self._last_decrease = (t, hold, link)
         elif self.starting and queue < QUEUE_LOW_MS:
-            # the slow start: up by START_GAIN a report, applied at once (``starting``), until the
-            # first report that finds frames queued
-            kbps, reason = min(self.max_kbps, kbps * START_GAIN), PROBE
+            # the slow start: up the ladder a rung a report, then the target by START_GAIN a
+            # report, applied at once (``starting``), until the first report that finds frames queued
+            if self.rung > 0:
+                self.rung, reason, self._last_rung_change = self.rung - 1, PROBE, t
+                kbps = max(kbps * LADDER[self.rung][0] / every, self.rung_floor_kbps(self.rung))
+            else:
+                kbps, reason = min(self.max_kbps, kbps * START_GAIN), PROBE
         elif queue < QUEUE_LOW_MS and (self._last_decrease is None or t - self._last_decrease[0] >= HOLD_S):
-            if every > 1 and t - self._last_every_change >= HOLD_S:
-                every, reason = every // 2, RECOVERED
-                self._last_every_change = t
-            elif kbps < self.max_kbps and kbps < RECEIVED_CAP * received:
-                kbps, reason = min(self.max_kbps, kbps * PROBE_GAIN, RECEIVED_CAP * received), PROBE
-        self.choice = StreamChoice(kbps, every, reason)
+            # room: a rung up once its rate is within RECEIVED_CAP of what arrives, else a probe
+            # within the rung (both on the wire)
+            up = self.rung - 1
+            # the same rate on the wire at the rung's frame rate, at least its floor
+            up_kbps = max(kbps * LADDER[up][0] / every, self.rung_floor_kbps(up)) if up >= 0 else 0.0
+            if (up >= 0 and t - self._last_rung_change >= HOLD_S
+                    and up_kbps / LADDER[up][0] <= RECEIVED_CAP * received):
+                self.rung, reason, self._last_rung_change = up, RECOVERED, t
+                kbps = up_kbps
+            elif kbps < self.max_kbps and kbps / every < RECEIVED_CAP * received:
+                kbps, reason = min(self.max_kbps, kbps * PROBE_GAIN, RECEIVED_CAP * received * every), PROBE
+        every, view = LADDER[self.rung]
+        self.choice = StreamChoice(kbps, every, reason, view)
         self.reports += 1
         self.reasons[REASONS[reason]] += 1
         return self.choice
 
     def summary(self) -> dict:
         return {"reports": self.reports, "reasons": dict(self.reasons), "video_kbps": round(self.choice.video_kbps, 1),
-                "every": self.choice.every, "max_kbps": self.max_kbps, "floor_kbps": self.floor_kbps}
+                "every": self.choice.every, "view": self.choice.view, "max_kbps": self.max_kbps, "floor_kbps": self.floor_kbps}

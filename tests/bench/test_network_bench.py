@@ -20,7 +20,10 @@ def test_a_link_that_drops_ages_the_static_stream_and_not_the_adapting_one(tmp_p
     assert static["age_ms_p95"] > 1000.0                      # the queue behind a link at half the stream
     assert adapt["age_ms_p95"] < 0.7 * static["age_ms_p95"]
     assert static["colour_kbps_chosen"] is None
-    assert adapt["colour_kbps_chosen"]["max"] == 2400 and adapt["colour_kbps_chosen"]["min"] < 1200
+    # from the ladder's foot it climbs while the link has room, then falls under the link's 1.2 Mbit/s
+    chosen = adapt["colour_kbps_chosen"]
+    assert chosen["max"] > 1200 > chosen["min"] and chosen["max"] <= 2400
+    assert static["smaller_view_share"] is None and 0 < adapt["smaller_view_share"] < 1   # the start's foot
     assert 0 < static["arrived_kbps"] <= 20000 * 1 / 3 + 1200 * 2 / 3 + 1
     for run in (static, adapt):
         assert len(run["dssim_by_segment"]) == 3 and 0 < run["dssim_mean"] < 1
@@ -52,11 +55,15 @@ def test_on_the_wall_clock_the_link_starts_with_the_clients_first_tick(tmp_path)
                           method="rotation", duration_s=4.0, size=(96, 64), view_size=(192, 192), segment_s=1.0,
                           clock="real", progress=False, plot=False)
     assert r["settings"]["clock"] == "real" and r["settings"]["placement"] == "split"
-    for run in r["links"][str(link)]["runs"].values():
+    for name, run in r["links"][str(link)]["runs"].items():
         ages = run["series"]["age_ms_max"]            # the oldest frame shown every 0.25 s
         assert run["frames"] > 0 and run["longest_stall_ms"] >= 400.0
         oldest = max(range(len(ages)), key=lambda k: ages[k] or 0.0)
-        assert 6 <= oldest <= 10 and max(ages[:5]) < 0.6 * ages[oldest]   # at 1.5-2.5 s, not before
+        assert 6 <= oldest <= 10                      # at 1.5-2.5 s
+        if name.startswith("static"):
+            # not before (the adapting stream's first second is its slow start from a frame every
+            # 4 ticks: older frames there whatever the link does)
+            assert max(ages[:5]) < 0.6 * ages[oldest]
     with pytest.raises(ValueError, match="clock"):
         run_network_bench(str(tmp_path), links=(str(link),), clock="wall", progress=False)
 

@@ -6,8 +6,12 @@ import pytest
 
 from pibr.protocol.errors import MalformedMessage
 from pibr.protocol.messages import decode_stream_rate, encode_stream_rate
-from pibr.server.stream_adaptation import (CONGESTED, FLOOR, HOLD_S, MAX_EVERY, OUTAGE, PROBE, PROBE_GAIN,
-                                           RECEIVED_CAP, RECOVERED, START_GAIN, START_SHARE, StreamAdaptation)
+from pibr.server.stream_adaptation import (CONGESTED, FLOOR, HOLD_S, LADDER, MAX_EVERY, OUTAGE, PROBE, PROBE_GAIN,
+                                           RECEIVED_CAP, RECOVERED, START_GAIN, StreamAdaptation)
+
+
+#: The link of the ladder's integration test (kbit/s) and how long its client runs (s).
+LINK_KBPS, LADDER_S = 100, 6.0
 
 
 def _steady(a, t0, t1, age_ms=90.0, kbps=8000.0, step=0.2):
@@ -42,30 +46,58 @@ def test_a_queue_brings_the_colour_under_what_arrived_and_holds_before_the_next_
     times = [t + HOLD_S + 0.51 + 0.2 * i for i in range(5)]
     worse = [a.report(u, 90.0 + 320.0, 1000.0) for u in times]
     first = next(u for u, c in zip(times, worse) if c.reason == CONGESTED)
-    assert first < t + HOLD_S + 0.31 + HOLD_S + 0.32 and worse[-1].video_kbps < 1000.0
+    assert first < t + HOLD_S + 0.31 + HOLD_S + 0.32 and worse[-1].video_kbps / worse[-1].every < 1000.0
 
 
-def test_an_outage_halves_then_thins_the_frames_and_recovery_comes_back_step_by_step():
+def test_a_link_far_under_the_floor_takes_the_stream_down_the_ladder_in_one_decrease():
+    """The link measures 300 kbit/s, far under the floor of 800: one report takes the stream to the
+    first rung whose floor fits what it may send (a frame every 4 ticks at half the view), not one
+    rung per decrease with a hold between (the queue grows meanwhile)."""
+    a = StreamAdaptation(8000.0)
+    t = _steady(a, 0.0, 3.0)
+    assert (a.choice.every, a.choice.view) == (1, 1)
+    c = a.report(t, 90.0 + 300.0, 300.0, link_kbps=300.0)
+    assert c.reason == FLOOR and (c.every, c.view) == LADDER[-1]
+    # on the wire, the share of the link that drains 300 ms of queue: 180 kbit/s, 720 at a frame in 4
+    assert c.video_kbps == pytest.approx(4 * 300.0 * (1 - 0.3 - 0.1)) and c.video_kbps > a.rung_floor_kbps(len(LADDER) - 1)
+    # a link that fits the second rung's floor stops there
+    b = StreamAdaptation(8000.0)
+    t = _steady(b, 0.0, 3.0)
+    c = b.report(t, 90.0 + 150.0, 1000.0, link_kbps=1000.0)          # may send 750 on the wire
+    assert c.reason == FLOOR and (c.every, c.view) == LADDER[1] and c.video_kbps == pytest.approx(2 * 750.0)
+
+
+def test_an_outage_halves_then_steps_down_the_ladder_and_recovery_comes_back_step_by_step():
     a = StreamAdaptation(8000.0)
     t = _steady(a, 0.0, 2.0)
-    kbps, everies = [], []
+    kbps, everies, views = [], [], []
     for i in range(30):                           # nothing arrives; the newest frame ages
         c = a.report(t, 90.0 + 200.0 + 200.0 * i, 0.0)
         kbps.append(c.video_kbps)
         everies.append(c.every)
+        views.append(c.view)
         t += 0.2
     assert a.reasons["outage"] >= 3 and kbps[0] == 4000.0
-    assert min(kbps) == a.floor_kbps == 800.0
-    assert everies[-1] == MAX_EVERY and a.reasons["floor"] == 2      # 1 -> 2 -> 4
-    reasons = []
-    for _ in range(60):                           # the link is back: nothing queued, all of it carried
-        reasons.append(a.report(t, 90.0, a.choice.video_kbps / a.choice.every).reason)
+    assert a.floor_kbps == 800.0 and kbps.index(800.0) < everies.index(2)   # the floor first, then the ladder
+    # an outage measures nothing: one rung a decrease, the frame rate halving, then the view (its
+    # floor halves), then the frame rate again
+    steps = [(e, v) for k, (e, v) in enumerate(zip(everies, views)) if k == 0 or (e, v) != (everies[k - 1], views[k - 1])]
+    assert steps == list(LADDER) and a.reasons["floor"] == len(LADDER) - 1
+    assert min(kbps) == a.rung_floor_kbps(len(LADDER) - 1) == 400.0
+    assert everies[-1] == MAX_EVERY == 4 and views[-1] == 2
+    reasons, climbed = [], []
+    for _ in range(80):                           # the link is back: nothing queued, all of it carried
+        c = a.report(t, 90.0, a.choice.video_kbps / a.choice.every)
+        reasons.append(c.reason)
+        climbed.append((c.every, c.view, c.video_kbps))
         t += 0.2
-    assert reasons.count(RECOVERED) == 2 and a.choice.every == 1
-    assert reasons.index(RECOVERED) < reasons.index(PROBE)   # the frame rate first, then the bitrate
+    assert reasons.count(RECOVERED) == len(LADDER) - 1 and (a.choice.every, a.choice.view) == (1, 1)
     assert a.choice.video_kbps == 8000.0
-    probes = reasons.count(PROBE)
-    assert probes == int(np.ceil(np.log(8000.0 / 800.0) / np.log(PROBE_GAIN)))
+    # each step up, a rung or a probe, at most half again the rate on the wire (what arrives), and
+    # every rung at least its floor
+    wire = [k / e for e, _, k in climbed]
+    assert all(after <= RECEIVED_CAP * before * (1 + 1e-9) for before, after in zip(wire, wire[1:]))
+    assert all(k >= a.floor_kbps / v * (1 - 1e-9) for _, v, k in climbed)
 
 
 def test_probes_stay_within_half_again_what_arrives():
@@ -109,6 +141,25 @@ def test_frames_sent_that_are_overdue_make_the_backlog_the_arrived_ones_do_not_y
     assert arrived_only.video_kbps == pytest.approx(8000.0 * (1 - 0.12 - 0.1))
 
 
+def test_a_report_with_no_arrival_reads_the_queue_from_the_frames_due_not_the_newest_frames_age():
+    """At a frame every 4 ticks, a report between two frames finds nothing arrived and the newest
+    frame 300 ms old: that is the gap between frames, not a queue (it once read as congestion and
+    kept such a stream at the ladder's foot). A frame that should have arrived and has not is one:
+    its age now less the least age."""
+    a = StreamAdaptation(16000.0)
+    t, frame = 0.0, 0
+    while t < 3.0 - 1e-9:          # the foot's rung: a frame every 0.4 s, each arriving 90 ms later
+        a.sent(frame, t, 80_000)
+        a.report(t + 0.09, 90.0, 800.0, newest_frame=frame)
+        t, frame = round(t + 0.4, 6), frame + 1
+    before = a.choice
+    between = a.report(t - 0.1, 390.0, 0.0, newest_frame=frame - 1)   # nothing sent since: idle
+    assert between.reason != CONGESTED and between.reason != OUTAGE and between.video_kbps >= before.video_kbps
+    a.sent(frame, t, 80_000)
+    late = a.report(t + 0.35, 440.0, 0.0, newest_frame=frame - 1)      # sent 350 ms ago, due after 90
+    assert late.reason in (CONGESTED, OUTAGE)
+
+
 def test_the_clients_measure_of_the_link_is_its_rate_and_reports_weigh_by_their_span():
     a = StreamAdaptation(8000.0)
     t = _steady(a, 0.0, 2.0, kbps=8000.0)
@@ -131,13 +182,16 @@ def test_the_baseline_is_the_least_age_so_a_clock_offset_cancels():
 
 
 def test_the_stream_rate_payload_round_trips_and_refuses_bad_bytes():
-    assert encode_stream_rate(4000, 2, CONGESTED) == b"\xa0\x0f\x00\x00\x02\x03"
-    assert decode_stream_rate(b"\xa0\x0f\x00\x00\x02\x03") == (4000, 2, CONGESTED)
-    for bad in (b"\xa0\x0f\x00\x00\x02", b"\xa0\x0f\x00\x00\x00\x03"):
-        with pytest.raises(MalformedMessage):
+    assert encode_stream_rate(4000, 2, CONGESTED, 2) == b"\xa0\x0f\x00\x00\x02\x03\x02"
+    assert encode_stream_rate(4000, 2, CONGESTED) == b"\xa0\x0f\x00\x00\x02\x03\x01"   # the whole view
+    assert decode_stream_rate(b"\xa0\x0f\x00\x00\x02\x03\x02") == (4000, 2, CONGESTED, 2)
+    for bad, why in ((b"\xa0\x0f\x00\x00\x02\x03", "7 bytes"), (b"\xa0\x0f\x00\x00\x00\x03\x01", "every 0"),
+                     (b"\xa0\x0f\x00\x00\x02\x03\x00", "1/0")):
+        with pytest.raises(MalformedMessage, match=why):
             decode_stream_rate(bad)
-    with pytest.raises(ValueError):
-        encode_stream_rate(4000, 0, FLOOR)
+    for every, view in ((0, 1), (1, 0)):
+        with pytest.raises(ValueError):
+            encode_stream_rate(4000, every, FLOOR, view)
     assert OUTAGE != CONGESTED
 
 
@@ -183,26 +237,32 @@ def test_small_steps_that_add_up_far_from_the_running_target_restart_x264():
     assert enc.encode(grey)[1] and enc.applied_kbps == kbps * 1.2
 
 
-def test_a_stream_starts_at_a_quarter_and_climbs_at_once_until_frames_queue():
-    """The slow start: from START_SHARE of the session's bitrate, half again each report that finds
-    nothing queued, with no cap from what arrived (each step reaches x264 at once), until a report
-    finds frames queued; then the usual probes, within half again what arrives."""
+def test_a_stream_starts_at_the_ladders_foot_and_climbs_at_once_until_frames_queue():
+    """The slow start: from the ladder's last rung at its floor, a rung up each report that finds
+    nothing queued, then the target half again each report, with no cap from what arrived (each
+    step reaches x264 at once), until a report finds frames queued; then the usual probes, within
+    half again what arrives."""
     a = StreamAdaptation(16000.0)
-    assert a.choice.video_kbps == 16000.0 * START_SHARE == 4000.0 and a.starting
+    first = a.choice
+    assert (first.every, first.view) == LADDER[-1] and first.video_kbps == a.rung_floor_kbps(len(LADDER) - 1) == 800.0
+    assert a.starting
     t, climbed = 0.0, []
-    for _ in range(3):
-        climbed.append(a.report(t, 90.0, 1000.0).video_kbps)   # little arrived yet: no cap
+    for _ in range(len(LADDER) + 2):
+        c = a.report(t, 90.0, 100.0)                # little arrived yet: no cap
+        climbed.append((c.every, c.view, c.video_kbps))
         t += 0.2
-    assert climbed == pytest.approx([4000.0 * START_GAIN ** k for k in (1, 2, 3)]) and a.starting
+    rungs = [(e, v) for e, v, _ in climbed]
+    assert rungs[:len(LADDER) - 1] == list(reversed(LADDER[:-1])) and a.starting
+    assert [k for _, _, k in climbed[len(LADDER) - 1:]] == pytest.approx([1600.0 * START_GAIN ** k for k in (1, 2, 3)])
     held = a.report(t, 90.0 + 60.0, 12000.0)      # 60 ms queued: the slow start ends, held
-    assert not a.starting and held.reason != PROBE and held.video_kbps == climbed[-1]
-    later = [a.report(t + 0.2 * k, 90.0, 12000.0) for k in range(1, 11)]   # room again: the usual probes
+    assert not a.starting and held.reason != PROBE and held.video_kbps == climbed[-1][2]
+    later = [a.report(t + 0.2 * k, 90.0, 12000.0) for k in range(1, 16)]   # room again: the usual probes
     steps = [b.video_kbps / c.video_kbps for c, b in zip([held] + later, later)]
     assert max(steps) == pytest.approx(PROBE_GAIN) and later[-1].video_kbps == 16000.0
     # a stream that reaches the session's bitrate ends its slow start there
     b = StreamAdaptation(16000.0)
-    for k in range(5):
-        b.report(0.2 * k, 90.0, 1000.0)
+    for k in range(len(LADDER) + 6):
+        b.report(0.2 * k, 90.0, 100.0)
     assert b.choice.video_kbps == 16000.0 and not b.starting
 
 
@@ -237,10 +297,46 @@ async def test_through_a_link_that_drops_the_adapting_stream_keeps_its_frames_yo
     assert max(r["age_ms"] for r in on) < 0.8 * max(r["age_ms"] for r in off)
     assert {r["stream_kbps"] for r in off} == {-1}
     kbps = [r["stream_kbps"] for r in on if r["frame_id"] >= 0]
-    # it starts at a quarter, climbs while the link has room, then falls under what the link carries
-    assert kbps[0] == 2400 * START_SHARE and max(kbps[:30]) > kbps[0] and max(kbps[-10:]) < 1200
+    # it starts at the ladder's foot, climbs while the link has room, then falls under what the link carries
+    assert kbps[0] == 240 / LADDER[-1][1] and max(kbps) > 240 and max(kbps[-10:]) < 1200
     strip = lambda rows: [{k: v for k, v in r.items() if k != "client_ms"} for r in rows]
     assert strip(on) == strip(again)
+
+
+@pytest.mark.gl
+async def test_a_link_under_the_floor_gets_fewer_frames_and_a_smaller_view_and_the_records_say_so(tmp_path, caplog):
+    """Server, relay and client on the virtual clock, the downlink at LINK_KBPS, far under the
+    colour's floor: the stream starts at the ladder's foot (a frame every 4 ticks, the primary view
+    rendered at half its side), climbs to the whole view while frames do not queue, and goes back
+    down to the rung that fits once they do (the records carry each shown frame's view, the server
+    counts the ticks without a frame and the frames it made smaller)."""
+    import logging
+    import re
+
+    from pibr.client.app import run_client
+    from pibr.client.config import ClientConfig
+    from pibr.client.recorder import read_records
+    from pibr.common.bandwidth import parse_rate_csv
+    from pibr.server.config import ServerConfig
+
+    from ..loopback import server_behind_relay
+
+    trace = parse_rate_csv(f"0,{LINK_KBPS}\n")
+    config = ServerConfig(port=0, scene="room", view_size=(192, 192), bitrate_kbps=2400, adapt="on")
+    with caplog.at_level(logging.INFO, logger="pibr.server.session"):
+        async with server_behind_relay(config, down_trace=trace) as (host, port):
+            await run_client(ClientConfig(host=host, port=port, trace="pred6dof-1", start_s=12.0, duration_s=LADDER_S,
+                                          rate_hz=30.0, methods=("rotation",), out_dir=str(tmp_path), width=96,
+                                          height=64, progress="none"))
+    rows = [r for r in read_records(tmp_path / "rotation.records.csv") if r["frame_id"] >= 0]
+    views = [r["stream_view"] for r in rows]
+    # from the ladder's foot up to the whole view while the link has room, then down again
+    assert views[0] == 2 and 1 in views and views[-1] == 2
+    summary = [line for line in caplog.messages if "stream adaptation:" in line]
+    assert len(summary) == 1
+    found = re.search(r"(\d+) ticks without a frame, (\d+) with a smaller primary view", summary[0])
+    thinned, shrunk = int(found.group(1)), int(found.group(2))
+    assert thinned > 0 and shrunk > 0
 
 
 def test_an_edge_stream_without_a_cap_codes_at_a_share_of_what_it_spent_and_comes_back():
