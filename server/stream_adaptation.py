@@ -116,6 +116,7 @@ class StreamAdaptation:
         self._ages = AgeBaseline(BASELINE_S)   # the reports' ages (ms) over BASELINE_S
         self._received: deque = deque()   # (t, kbit arrived, span s, frames queued?) within RECEIVED_WINDOW_S
         self._sent: deque = deque()       # (frame id, t sent, bits) not known to have arrived
+        self._acked: tuple | None = None  # (frame id, t sent) of the newest frame the client has
         #: what arrived over the last RECEIVED_WINDOW_S of reports, each weighed by its span (kbit/s)
         self.received_kbps = 0.0
         self._last_decrease: tuple | None = None   # (t, hold s, the link's kbit/s) of the last decrease
@@ -148,18 +149,15 @@ class StreamAdaptation:
         less the first of them: on the wire, not waiting (on a slow link a frame's own
         transmission outlasts the least age, measured when the link was fast)."""
         while self._sent and self._sent[0][0] <= newest_frame:
-            self._sent.popleft()
+            frame = self._sent.popleft()
+            if frame[0] == newest_frame:
+                self._acked = frame[:2]
         overdue = [bits for _, sent, bits in self._sent if sent < t - self._least_s()]
         return sum(overdue[1:])
 
     def _least_s(self) -> float:
         # (on the real clock the least age holds the two clocks' offset too: never below 0)
         return max(0.0, self._ages.least / 1e3)
-
-    def _oldest_due(self, t: float) -> float | None:
-        """When the oldest frame that should have arrived by ``t`` and is not known to have was
-        sent, None if none (call after overdue_bits)."""
-        return next((sent for _, sent, _ in self._sent if sent < t - self._least_s()), None)
 
     def report(self, t: float, age_ms: float, delivered_kbps: float, span_ms: float = STREAM_REPORT_MS,
                link_kbps: float | None = None, newest_frame: int | None = None) -> StreamChoice:
@@ -168,12 +166,14 @@ class StreamAdaptation:
         the frames that follow. Rates on the wire (what arrived, the link) are kbit/s of the
         stream as sent; the colour's target is the encoder's, made one frame every ``every`` ticks."""
         overdue = None if newest_frame is None else self.overdue_bits(t, newest_frame)
-        if overdue is not None and delivered_kbps <= 0:
+        if overdue is not None and delivered_kbps <= 0 and self._acked is not None and self._acked[0] == newest_frame:
             # Nothing arrived: the newest frame's age now tells how long ago it was made (at a
             # frame every few ticks, the gap between frames too), not how long frames queue. The
-            # oldest frame that should have arrived and has not does: its age now, less the least.
-            due = self._oldest_due(t)
-            queue = 0.0 if due is None else max(0.0, (t - due) * 1e3 - self._ages.least)
+            # frame sent after it does: its age now (the newest's less the time between the two
+            # were made, on the server's clock, so any offset between the clocks stays in both
+            # ages and cancels against the least), less the least; nothing sent since: no queue.
+            after = self._sent[0][1] if self._sent else None
+            queue = 0.0 if after is None else max(0.0, age_ms - (after - self._acked[1]) * 1e3 - self._ages.least)
         else:
             queue = self.queue_ms(t, age_ms)
         if queue >= QUEUE_LOW_MS or self.choice.video_kbps >= self.max_kbps:

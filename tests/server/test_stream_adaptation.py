@@ -141,23 +141,31 @@ def test_frames_sent_that_are_overdue_make_the_backlog_the_arrived_ones_do_not_y
     assert arrived_only.video_kbps == pytest.approx(8000.0 * (1 - 0.12 - 0.1))
 
 
-def test_a_report_with_no_arrival_reads_the_queue_from_the_frames_due_not_the_newest_frames_age():
+def test_a_report_with_no_arrival_reads_the_queue_from_the_frame_sent_after_the_newest_not_its_age():
     """At a frame every 4 ticks, a report between two frames finds nothing arrived and the newest
     frame 300 ms old: that is the gap between frames, not a queue (it once read as congestion and
-    kept such a stream at the ladder's foot). A frame that should have arrived and has not is one:
-    its age now less the least age."""
-    a = StreamAdaptation(16000.0)
-    t, frame = 0.0, 0
-    while t < 3.0 - 1e-9:          # the foot's rung: a frame every 0.4 s, each arriving 90 ms later
+    kept such a stream at the ladder's foot). A frame sent after the newest and not arrived is one:
+    its age now (the newest's less the 400 ms between them) less the least age. The same with the
+    client's clock 7 s off the server's (on the wall clock the ages hold the offset; the server's
+    own clock must not be mixed with them: that kept every wall-clock stream at the foot)."""
+    for offset_ms in (0.0, -7000.0, 7000.0):
+        a = StreamAdaptation(16000.0)
+        t, frame = 0.0, 0
+        while t < 3.0 - 1e-9:      # the foot's rung: a frame every 0.4 s, each arriving 90 ms later
+            a.sent(frame, t, 80_000)
+            a.report(t + 0.09, 90.0 + offset_ms, 800.0, newest_frame=frame)
+            t, frame = round(t + 0.4, 6), frame + 1
+        before = a.choice
+        # 0.3 s after the newest frame was made, nothing sent since: no queue
+        between = a.report(t - 0.1, 300.0 + offset_ms, 0.0, newest_frame=frame - 1)
+        assert between.reason not in (CONGESTED, OUTAGE) and between.video_kbps >= before.video_kbps
         a.sent(frame, t, 80_000)
-        a.report(t + 0.09, 90.0, 800.0, newest_frame=frame)
-        t, frame = round(t + 0.4, 6), frame + 1
-    before = a.choice
-    between = a.report(t - 0.1, 390.0, 0.0, newest_frame=frame - 1)   # nothing sent since: idle
-    assert between.reason != CONGESTED and between.reason != OUTAGE and between.video_kbps >= before.video_kbps
-    a.sent(frame, t, 80_000)
-    late = a.report(t + 0.35, 440.0, 0.0, newest_frame=frame - 1)      # sent 350 ms ago, due after 90
-    assert late.reason in (CONGESTED, OUTAGE)
+        # 50 ms after the next was sent: on its way, not queued (it takes 90)
+        on_way = a.report(t + 0.05, 450.0 + offset_ms, 0.0, newest_frame=frame - 1)
+        assert on_way.reason not in (CONGESTED, OUTAGE), offset_ms
+        # 0.35 s after the next was sent (0.75 s after the newest): 350 - 90 ms queued
+        late = a.report(t + 0.35, 750.0 + offset_ms, 0.0, newest_frame=frame - 1)
+        assert late.reason in (CONGESTED, OUTAGE), offset_ms
 
 
 def test_the_clients_measure_of_the_link_is_its_rate_and_reports_weigh_by_their_span():
