@@ -9,7 +9,10 @@ brought over the report's interval, the link's rate measured from the frames tha
 the link was busy with them (each one's bits over the time since the one before arrived), and the
 newest frame it has. The age less its least over the last :data:`BASELINE_S` seconds is the time
 frames spent queued (the propagation and the server's own delay cancel, and so does an offset
-between the two clocks). Each report:
+between the two clocks). A report where nothing arrived is read from the frame sent after the
+newest one the client has: its age now (the newest's less the time between the two were made),
+less the least; nothing sent since, no queue (at a frame every few ticks the newest frame's age
+is the gap between frames). Each report:
 
 * queued more than :data:`QUEUE_HIGH_MS`: the link carries less than the stream. The colour's
   target goes to the link's rate, less a share that drains the queue within about a second
