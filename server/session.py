@@ -256,7 +256,8 @@ class Session:
             if (self._adapt_ticks - 1) % choice.every:
                 self.frames_thinned += 1
                 return False   # the adaptation makes one frame every `every` ticks
-            stream_rate, view = encode_stream_rate(choice.video_kbps, choice.every, choice.reason, choice.view), choice.view
+            view = choice.view
+            stream_rate = encode_stream_rate(choice.video_kbps, choice.every, choice.reason, view)
             if view > 1:
                 self.frames_shrunk += 1
         pose_msg = self._predicted(pose_msg)

@@ -136,6 +136,11 @@ class StreamAdaptation:
         """The least colour target at ``rung`` of LADDER: the floor, halved per view step."""
         return self.floor_kbps / LADDER[rung][1]
 
+    def _target_at(self, rung: int, kbps: float, every: int) -> float:
+        """The colour target at ``rung`` that keeps the rate on the wire of ``kbps`` made one frame
+        every ``every`` ticks, at least the rung's floor."""
+        return max(kbps * LADDER[rung][0] / every, self.rung_floor_kbps(rung))
+
     def queue_ms(self, t: float, age_ms: float) -> float:
         """Record a report's age -> the time its frames spent queued (ms)."""
         return self._ages.add(t, age_ms)
@@ -232,15 +237,14 @@ class StreamAdaptation:
             # report, applied at once (``starting``), until the first report that finds frames queued
             if self.rung > 0:
                 self.rung, reason, self._last_rung_change = self.rung - 1, PROBE, t
-                kbps = max(kbps * LADDER[self.rung][0] / every, self.rung_floor_kbps(self.rung))
+                kbps = self._target_at(self.rung, kbps, every)
             else:
                 kbps, reason = min(self.max_kbps, kbps * START_GAIN), PROBE
         elif queue < QUEUE_LOW_MS and (self._last_decrease is None or t - self._last_decrease[0] >= HOLD_S):
             # room: a rung up once its rate is within RECEIVED_CAP of what arrives, else a probe
             # within the rung (both on the wire)
             up = self.rung - 1
-            # the same rate on the wire at the rung's frame rate, at least its floor
-            up_kbps = max(kbps * LADDER[up][0] / every, self.rung_floor_kbps(up)) if up >= 0 else 0.0
+            up_kbps = self._target_at(up, kbps, every) if up >= 0 else 0.0
             if (up >= 0 and t - self._last_rung_change >= HOLD_S
                     and up_kbps / LADDER[up][0] <= RECEIVED_CAP * received):
                 self.rung, reason, self._last_rung_change = up, RECOVERED, t
@@ -255,4 +259,5 @@ class StreamAdaptation:
 
     def summary(self) -> dict:
         return {"reports": self.reports, "reasons": dict(self.reasons), "video_kbps": round(self.choice.video_kbps, 1),
-                "every": self.choice.every, "view": self.choice.view, "max_kbps": self.max_kbps, "floor_kbps": self.floor_kbps}
+                "every": self.choice.every, "view": self.choice.view, "max_kbps": self.max_kbps,
+                "floor_kbps": self.floor_kbps}
