@@ -119,6 +119,7 @@ class Simulation:
         self.textures = FrameTextures(self.ctx, self.session)
         self.output = OutputConfig(out_size[0], out_size[1], fov_deg, 60.0)
         self.target = OutputTarget(self.ctx, *out_size)
+        self._pair_target = None   # both eyes side by side (display_pair_timed), made when first used
         self.gt = RenderTarget(self.ctx, *out_size, motion=moving_truth)
         self.proxies = proxies
         self._last_render = None
@@ -316,6 +317,23 @@ class Simulation:
         rgb, own, ms = self.display(method, pose, frame, t, textures)
         return rgb, own, ms, (time.process_time() - c0) * 1e3
 
+    def display_pair_timed(self, method, left, right, frame, t, textures=None):
+        """Both eyes at once (a method whose ``shares_pair(left, right)``: its ``render_pair``) ->
+        per eye (left, right) (rgb (h, w, 3), hole fraction), and the process CPU ms of the pair."""
+        if self._pair_target is None:
+            from pibr.client.output_target import OutputTarget
+
+            self._pair_target = OutputTarget(self.ctx, 2 * self.output.width, self.output.height)
+        c0 = time.process_time()
+        self._pair_target.begin()
+        method.render_pair(left, right, frame, textures or self.textures, t)
+        self.ctx.finish()
+        rgba = self._pair_target.read()
+        w = self.output.width
+        eyes = [(rgba[:, half, :3].copy(), float(np.mean(rgba[:, half, 3] == 0)))
+                for half in (slice(0, w), slice(w, 2 * w))]
+        return eyes, (time.process_time() - c0) * 1e3
+
     def ground_truth(self, pose, t):
         self.renderer.render_perspective(self.gt, pose, t, self.output.fov_deg)
         return self.gt.read_color().copy()
@@ -339,6 +357,8 @@ class Simulation:
         self.pipeline.release()
         self.textures.release()
         self.target.release()
+        if self._pair_target is not None:
+            self._pair_target.release()
         self.gt.release()
 
 

@@ -111,6 +111,14 @@ class _Progress:
             self._bar.close()
 
 
+def _read_back(rgba, ms: float) -> tuple:
+    """(rgb or None, hole fraction, ms) of one eye's image read back, (h, w, 4) or None (not read)."""
+    if rgba is None:
+        return None, float("nan"), ms
+    hole = float(np.count_nonzero(rgba[:, :, 3] == 0)) / (rgba.shape[0] * rgba.shape[1])
+    return rgba[:, :, :3], hole, ms
+
+
 class Client:
     def __init__(self, config: ClientConfig):
         self.cfg = config
@@ -235,9 +243,18 @@ class Client:
                                  for lv in self._levels[name]] for name in self.cfg.methods}
                    for slot in self._slots}
         target = OutputTarget(ctx, self.cfg.width, self.cfg.height)
-        self._gl_state = (textures, methods, target)
+        # both eyes side by side, for the methods that draw a pair at once from one slot's frame
+        pair_target = OutputTarget(ctx, 2 * self.cfg.width, self.cfg.height) if len(self._eyes) == 2 \
+            and len(self._slots) == 1 else None
+        self._gl_state = (textures, methods, target, pair_target)
         first = methods[self._slots[0]]
         self._method_info = {name: {"uses_extra_view": bool(ms[0].uses_extra_view)} for name, ms in first.items()}
+        if pair_target is not None:   # whether each eye of a pair is drawn alone, or both at once
+            head = Pose.identity()
+            eyes = {eye: eye_pose(head, eye, self.cfg.ipd_mm) for eye in EYES}
+            for name, ms in first.items():
+                shares = getattr(ms[0], "shares_pair", None)
+                self._method_info[name]["pair_drawn_at_once"] = bool(shares and shares(eyes["left"], eyes["right"]))
 
     def _slot(self, eye: str) -> str:
         return eye if eye in self._slots else CENTRE
@@ -253,7 +270,7 @@ class Client:
         (eye -> Pose) from its slot's frame (``shown``: slot -> _Decoded) -> per method
         [(rgb or None, hole fraction, ms) per eye], with the wall ms of reading the images back in
         ``self._record_ms`` (``read``: for the recorders)."""
-        textures, methods, target = self._gl_state
+        textures, methods, target, pair_target = self._gl_state
         for slot, decoded in shown.items():
             if textures[slot].frame_id != decoded.frame.frame_id:
                 textures[slot].upload(decoded.image, decoded.frame, decoded.distances, decoded.flow)
@@ -261,32 +278,49 @@ class Client:
         for name in self.cfg.methods:
             level = chosen[name][0] if chosen else 0
             per_eye = []
-            for eye, pose in poses.items():
-                slot = self._slot(eye)
-                decoded = shown.get(slot)
-                target.begin()
+            pair = self._pair_method(methods, name, level, poses, shown)
+            if pair is not None:
+                pair_target.begin()
                 t0 = time.perf_counter()
-                if decoded is not None:
-                    methods[slot][name][level].render(pose, decoded.frame, textures[slot], scene_t)
-                wait_idle(ctx)   # the GIL released: frames arriving meanwhile are read on time
+                pair.render_pair(poses["left"], poses["right"], shown[CENTRE].frame, textures[CENTRE], scene_t)
+                wait_idle(ctx)
                 t1 = time.perf_counter()
-                rgb, hole = None, float("nan")
-                if read:
-                    rgba = target.read()
-                    hole = float(np.count_nonzero(rgba[:, :, 3] == 0)) / (rgba.shape[0] * rgba.shape[1])
-                    rgb = rgba[:, :, :3]
-                    read_ms += (time.perf_counter() - t1) * 1e3
-                per_eye.append((rgb, hole, (t1 - t0) * 1e3))
+                rgba = pair_target.read() if read else None
+                read_ms += (time.perf_counter() - t1) * 1e3 if read else 0.0
+                w = self.cfg.width
+                for half in (slice(0, w), slice(w, 2 * w)):   # the pair's ms shared out evenly
+                    per_eye.append(_read_back(None if rgba is None else rgba[:, half], (t1 - t0) * 0.5e3))
+            else:
+                for eye, pose in poses.items():
+                    slot = self._slot(eye)
+                    decoded = shown.get(slot)
+                    target.begin()
+                    t0 = time.perf_counter()
+                    if decoded is not None:
+                        methods[slot][name][level].render(pose, decoded.frame, textures[slot], scene_t)
+                    wait_idle(ctx)   # the GIL released: frames arriving meanwhile are read on time
+                    t1 = time.perf_counter()
+                    per_eye.append(_read_back(target.read() if read else None, (t1 - t0) * 1e3))
+                    read_ms += (time.perf_counter() - t1) * 1e3 if read else 0.0
             out.append(per_eye)
         if read:
             self._record_ms.append(read_ms)
         return out
 
+    def _pair_method(self, methods, name: str, level: int, poses: dict, shown: dict):
+        """The method instance that draws both eyes of ``poses`` at once (one slot's frame, and a
+        method that shares the pair: proxy's render_pair), else None: one eye at a time."""
+        if set(poses) != set(EYES) or self._gl_state[3] is None or CENTRE not in shown:
+            return None
+        inst = methods[CENTRE][name][level]
+        shares = getattr(inst, "shares_pair", None)
+        return inst if shares is not None and shares(poses["left"], poses["right"]) else None
+
     def _gl_calibrate(self, ctx, poses: dict, shown: dict, renders: int) -> dict:
         """Draw every level of every method for every eye ``renders`` times, untimed the first (it
         compiles shader variants) -> method -> [ms per level, all eyes]: the wall clock's first cost
         estimates."""
-        textures, methods, target = self._gl_state
+        textures, methods, target, pair_target = self._gl_state
         for slot, decoded in shown.items():
             if textures[slot].frame_id != decoded.frame.frame_id:
                 textures[slot].upload(decoded.image, decoded.frame, decoded.distances, decoded.flow)
@@ -298,7 +332,14 @@ class Client:
             for name in self.cfg.methods:
                 for level in range(len(self._levels[name])):
                     spent = 0.0
-                    for eye, pose in poses.items():
+                    pair = self._pair_method(methods, name, level, poses, shown)
+                    if pair is not None:
+                        pair_target.begin()
+                        t0 = time.perf_counter()
+                        pair.render_pair(poses["left"], poses["right"], shown[CENTRE].frame, textures[CENTRE], 0.0)
+                        wait_idle(ctx)
+                        spent += time.perf_counter() - t0
+                    for eye, pose in poses.items() if pair is None else ():
                         slot = self._slot(eye)
                         target.begin()
                         t0 = time.perf_counter()
@@ -312,14 +353,16 @@ class Client:
     def _gl_release(self, ctx):
         if self._gl_state is None:
             return
-        textures, methods, target = self._gl_state
+        textures, methods, target, pair_target = self._gl_state
         for per_slot in methods.values():
             for instances in per_slot.values():
                 for m in instances:
                     m.release()
         for t in textures.values():
             t.release()
-        target.release()
+        for t in (target, pair_target):
+            if t is not None:
+                t.release()
         self._gl_state = None
 
     # ------------------------------------------------------------------ run

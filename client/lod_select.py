@@ -82,11 +82,16 @@ class LodSelector:
         self._rest_world = np.stack([c @ o.transform.T for c, o in zip(self._corners, objects)]) if objects else \
             np.zeros((0, 8, 4))
 
-    def select(self, pose: Pose, near: float = 0.0, placed: dict | None = None) -> list[Selection]:
+    def select(self, pose: Pose, near: float = 0.0, placed: dict | None = None,
+               half_baseline: float = 0.0) -> list[Selection]:
         """What to draw at ``pose``; ``placed`` maps an object index to its (4, 4) object-to-world
         transform where it is not at rest (moving objects), the others use their rest transform.
         All objects at once: a frustum test of their box corners (conservative: culled only when
-        all 8 lie outside one plane) and the distance from the eye to their world box."""
+        all 8 lie outside one plane) and the distance from the eye to their world box.
+
+        ``half_baseline`` (metres): for two eyes looking as ``pose`` does from ``half_baseline``
+        either side of it along its x axis (a stereo pair), what either eye sees: their union
+        frustum (its side planes those of the outer eyes), each object at the level of the nearer eye."""
         world = self._rest_world
         if placed:
             world = world.copy()
@@ -96,11 +101,14 @@ class LodSelector:
         x, y, z = cam[:, :, 0], cam[:, :, 1], -cam[:, :, 2]
         visible = np.ones(len(world), dtype=bool)
         if self.cull:
+            b = half_baseline
             visible = ~(np.all(z < near, axis=1)
-                        | np.all(x > self.tan_x * z, axis=1) | np.all(x < -self.tan_x * z, axis=1)
+                        | np.all(x > self.tan_x * z + b, axis=1) | np.all(x < -self.tan_x * z - b, axis=1)
                         | np.all(y > self.tan_y * z, axis=1) | np.all(y < -self.tan_y * z, axis=1))
         lo, hi = world[:, :, :3].min(axis=1), world[:, :, :3].max(axis=1)
-        d = np.linalg.norm(np.maximum(0.0, np.maximum(lo - pose.p, pose.p - hi)), axis=1)
+        side = half_baseline * pose.rotation()[:, 0]
+        eyes = (pose.p,) if half_baseline == 0.0 else (pose.p - side, pose.p + side)
+        d = np.min([np.linalg.norm(np.maximum(0.0, np.maximum(lo - e, e - hi)), axis=1) for e in eyes], axis=0)
         out = []
         for i in np.flatnonzero(visible).tolist():
             if self.force_level is not None:

@@ -241,18 +241,78 @@ class ProxyIBR(Method):
                 lo, hi = np.min(v, axis=0), np.max(v, axis=0)
                 corners = np.array([[x, y, z, 1.0] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
                                     for z in (lo[2], hi[2])])
-                levels[level] = (vaos, len(f), corners, BackFaceTest(v, f, self.cull))
+                levels[level] = (vaos, len(f), corners, BackFaceTest(v, f, self.cull), (vbo, ibo))
             self.vaos.append(levels)
         self.last_primitives = 0
         self.last_culled = 0   # draws that skipped their back faces in the last render
         self._culling = False
+        self.pair_passes = []   # both eyes at once (render_pair), made when first used
+        self._pair_refs = None
+
+    def shares_pair(self, left: Pose, right: Pose) -> bool:
+        """Whether :meth:`render_pair` draws these two eyes at once: carving's passes (neither
+        carve_all, nor carve=False, nor flow's points, which stay one view at a time), and eyes
+        that look the same way from either side of a centre, along their common x axis (as
+        protocol/stereo.py places them)."""
+        if not self.carve or self.carve_all or self.motion == "flow":
+            return False
+        r = left.rotation()
+        if not np.allclose(r, right.rotation(), atol=1e-9):
+            return False
+        baseline = r.T @ (np.asarray(right.p, np.float64) - np.asarray(left.p, np.float64))
+        return bool(baseline[0] > 0.0 and np.all(np.abs(baseline[1:]) <= 1e-9 + 1e-6 * baseline[0]))
+
+    def render_pair(self, left: Pose, right: Pose, frame, textures, scene_t: float = 0.0) -> None:
+        """Both eyes of a stereo pair (:meth:`shares_pair`) into the bound framebuffer, twice the
+        output's width: the left eye's image in its left half, the right eye's in its right half.
+        What the two eyes share is done once: the textures bound, one LoD selection and culling for
+        the pair's union frustum (client/lod_select.py), every matrix to the views, the pixels left
+        to the second carving pass counted once for both; and each proxy is drawn once per pass for
+        both eyes (two instances, shaders.PAIR_PROXY_VS), as are the background pass and the resolve
+        over both halves. The fragments each eye covers are its own: on a software rasteriser that
+        is most of the cost (see docs/results/stereo.json)."""
+        ctx = self.ctx
+        output_fbo = ctx.fbo
+        self._make_pair_passes()
+        textures.use(None)
+        draws = self._draws((left, right), frame, scene_t)
+        ctx.enable(ctx.DEPTH_TEST)
+        self._carve(draws, None, left, frame, pair=True)
+        ctx.disable(ctx.DEPTH_TEST)
+        output_fbo.use()
+        self._pair_refs[0].use(5)
+        self.resolve_vao.render(ctx.TRIANGLE_STRIP)
+
+    def _make_pair_passes(self) -> None:
+        """The carving passes' programs for both eyes at once and their targets, once."""
+        if self.pair_passes:
+            return
+        ctx = self.ctx
+        glsl = {"frame": frame_glsl(self.config), "background": shaders.BACKGROUND_GLSL}
+        for main, mono in zip((shaders.ACCEPT_MAIN, shaders.FALLBACK_MAIN), self.passes):
+            prog = ctx.program(vertex_shader=shaders.PAIR_PROXY_VS, fragment_shader=shaders.PROXY_FS % (glsl | {"main": main}))
+            bind_frame_uniforms(prog, self.config)
+            for k in ("u_slack_codes", "u_has_extra", "u_tau"):
+                if k in mono:
+                    prog[k].value = mono[k].value
+            self.pair_passes.append(prog)
+        for levels in self.vaos:
+            for vaos, _, _, _, (vbo, ibo) in levels.values():
+                vaos += [ctx.vertex_array(p, [(vbo, "3f", "in_position")], index_buffer=ibo, index_element_size=4)
+                         for p in self.pair_passes]
+        size = (2 * self.output.width, self.output.height)
+        refs = ctx.texture(size, 2, dtype="f4")
+        refs.filter = (ctx.NEAREST, ctx.NEAREST)
+        depth = ctx.depth_renderbuffer(size)
+        self._pair_refs = (refs, depth, ctx.framebuffer(color_attachments=[refs], depth_attachment=depth),
+                           ctx.framebuffer(depth_attachment=depth))
 
     def render(self, out_pose: Pose, frame, textures, scene_t: float = 0.0) -> None:
         ctx = self.ctx
         output_fbo = ctx.fbo
         textures.use(self.flow_time(scene_t))
         moved = textures.extrapolated if self.motion == "flow" else None
-        draws = self._draws(out_pose, frame, scene_t, skip_moving=moved is not None)
+        draws = self._draws((out_pose,), frame, scene_t, skip_moving=moved is not None)
         self.refs_fbo.use()
         ctx.enable(ctx.DEPTH_TEST)
         if self.carve_all:
@@ -276,7 +336,7 @@ class ProxyIBR(Method):
                 ctx.enable_direct(shaders.GL_CLIP_DISTANCE0)
                 self._draw_points(moved, out_pose, frame)
                 ctx.disable_direct(shaders.GL_CLIP_DISTANCE0)
-            for vaos, mvp, _, _, seen, _, cull in draws:
+            for vaos, mvp, _, _, seen, _, (cull,) in draws:
                 self._cull_back_faces(cull)
                 self.prog["u_mvp"].write(mvp)
                 self.prog["u_seen"].write(seen)
@@ -291,26 +351,31 @@ class ProxyIBR(Method):
             self._background_rotations(out_pose, frame)
         self.resolve_vao.render(ctx.TRIANGLE_STRIP)
 
-    def _carve(self, draws, moved, out_pose: Pose, frame) -> None:
+    def _carve(self, draws, moved, out_pose: Pose, frame, pair: bool = False) -> None:
         """Both carving passes and the background between them (shaders.BACKGROUND_FS): every pixel's
-        record into refs."""
+        record into refs (``pair``: both eyes' records, side by side, see render_pair)."""
         ctx = self.ctx
-        self.refs_depth_fbo.clear(depth=1.0)   # every pixel's record is written below
-        self.refs_fbo.use()
-        ctx.enable_direct(shaders.GL_CLIP_DISTANCE0)
+        refs_fbo, refs_depth_fbo = self._pair_refs[2:] if pair else (self.refs_fbo, self.refs_depth_fbo)
+        first = len(self.passes) if pair else 0   # the passes' index in each object's vaos
+        clips = [shaders.GL_CLIP_DISTANCE0 + k for k in range(shaders.PAIR_CLIP_DISTANCES if pair else 1)]
+        refs_depth_fbo.clear(depth=1.0)   # every pixel's record is written below
+        refs_fbo.use()
+        for c in clips:
+            ctx.enable_direct(c)
         if moved is not None:
             self._draw_points(moved, out_pose, frame)
-        self.passes[0]["u_depth_half"].value = -1.0
-        self._draw_proxies(0, draws)   # pass 1: accepted fragments
-        ctx.disable_direct(shaders.GL_CLIP_DISTANCE0)
+        self._program(first)["u_depth_half"].value = -1.0
+        self._draw_proxies(first, draws)   # pass 1: accepted fragments
+        for c in clips:
+            ctx.disable_direct(c)
         self._background_rotations(out_pose, frame)
         self.left.write(shaders.LEFT_EMPTY)
         self.left.bind_to_storage_buffer(0)
-        self.refs_fbo.depth_mask = False   # pass 2 still sees where pass 1 accepted nothing
-        self.refs_fbo.use()
+        refs_fbo.depth_mask = False   # pass 2 still sees where pass 1 accepted nothing
+        refs_fbo.use()
         self.background_vao.render(ctx.TRIANGLE_STRIP)
-        self.refs_fbo.depth_mask = True
-        self.refs_fbo.use()
+        refs_fbo.depth_mask = True
+        refs_fbo.use()
         if not self.inpaint:
             return
         ctx.memory_barrier()   # the counter's writes are incoherent until then
@@ -319,13 +384,22 @@ class ProxyIBR(Method):
         self.last_fallback_pixels = int(left[0])
         if left[0] == 0:
             return
-        x0, y0, x1, y1 = (int(x) for x in left[1:])
-        ctx.enable_direct(shaders.GL_CLIP_DISTANCE0)
-        ctx.scissor = (x0, y0, x1 - x0 + 1, y1 - y0 + 1)
-        self.passes[1]["u_depth_half"].value = 1.0
-        self._draw_proxies(1, draws, (x0, y0, x1, y1))   # pass 2: the rest, behind
+        for c in clips:
+            ctx.enable_direct(c)
+        self._program(first + 1)["u_depth_half"].value = 1.0
+        for eye in range(2 if pair else 1):   # pass 2: the rest, behind, each eye in its box
+            x0, y0, x1, y1 = (int(x) for x in left[1 + 4 * eye:5 + 4 * eye])
+            if x0 > x1:
+                continue   # this eye accepted a fragment everywhere
+            ctx.scissor = (x0, y0, x1 - x0 + 1, y1 - y0 + 1)
+            self._draw_proxies(first + 1, draws, (x0, y0, x1, y1), eye if pair else None)
         ctx.scissor = None
-        ctx.disable_direct(shaders.GL_CLIP_DISTANCE0)
+        for c in clips:
+            ctx.disable_direct(c)
+
+    def _program(self, which: int):
+        """Program ``which`` of self.passes followed by self.pair_passes (each object's vaos, in order)."""
+        return self.passes[which] if which < len(self.passes) else self.pair_passes[which - len(self.passes)]
 
     def _background_rotations(self, out_pose: Pose, frame) -> None:
         prog = self.finds_background
@@ -335,21 +409,36 @@ class ProxyIBR(Method):
             rot = frame.extra_pose.rotation().T @ out_pose.rotation()
             prog["u_out_to_extra"].write(rot.T.astype("f4").tobytes())
 
-    def _draw_proxies(self, which: int, draws, box=None) -> None:
-        """The proxies of ``draws`` (see _draws) with program ``which`` of self.passes; only those
-        whose screen rectangle meets ``box`` (x0, y0, x1, y1 inclusive, window pixels) if given."""
-        prog = self.passes[which]
+    def _draw_proxies(self, which: int, draws, box=None, eye: int | None = None) -> None:
+        """The proxies of ``draws`` (see _draws) with program ``which`` (see _program), for every eye
+        of the draws, or only ``eye`` of a pair; only those whose screen rectangle in such an eye
+        meets ``box`` (x0, y0, x1, y1 inclusive, window pixels) if given."""
+        prog = self._program(which)
+        if "u_first_eye" in prog:
+            prog["u_first_eye"].value = eye or 0
         for vaos, mvp, to_primary, to_extra, _, bounds, cull in draws:
-            if box is not None:
-                rect = self._screen_rect(*bounds)
-                if rect[0] > box[2] or rect[2] < box[0] or rect[1] > box[3] or rect[3] < box[1]:
-                    continue
-            self._cull_back_faces(cull)
+            eyes = range(len(bounds)) if eye is None else (eye,)
+            if box is not None and not any(self._rect_meets(box, *bounds[e]) for e in eyes):
+                continue
             prog["u_mvp"].write(mvp)
             prog["u_to_primary"].write(to_primary)
             prog["u_to_extra"].write(to_extra)
-            vaos[which].render(self.ctx.TRIANGLES)
+            if len(eyes) > 1 and len(set(cull)) > 1:   # one eye may skip the back faces, the other not
+                for e in eyes:
+                    prog["u_first_eye"].value = e
+                    self._cull_back_faces(cull[e])
+                    vaos[which].render(self.ctx.TRIANGLES, instances=1)
+                prog["u_first_eye"].value = eye or 0
+                continue
+            self._cull_back_faces(cull[eyes[0]])
+            vaos[which].render(self.ctx.TRIANGLES, instances=len(eyes))
         self._cull_back_faces(False)
+
+    def _rect_meets(self, box, mvp: np.ndarray, corners: np.ndarray, x_offset: int) -> bool:
+        """Whether ``box`` meets the screen rectangle of a mesh (see _screen_rect) drawn ``x_offset``
+        pixels to the right (the right eye's half of a pair)."""
+        x0, y0, x1, y1 = self._screen_rect(mvp, corners)
+        return not (x0 + x_offset > box[2] or x1 + x_offset < box[0] or y0 > box[3] or y1 < box[1])
 
     def _cull_back_faces(self, cull: bool) -> None:
         if cull != self._culling:
@@ -387,12 +476,13 @@ class ProxyIBR(Method):
         self.ctx.point_size = self.point_size
         self.points_vao.render(self.ctx.POINTS, vertices=n)
 
-    def _draws(self, out_pose: Pose, frame, scene_t: float, skip_moving: bool = False) -> list:
-        """[(vaos, mvp, to_primary, to_extra, seen, bounds, cull)] of the objects to draw, nearest
-        first (so the depth test rejects most hidden fragments before they are shaded); matrices as
-        uniform bytes (seen: object -> world where the views saw it), bounds: _screen_rect's
-        arguments, for the passes that skip objects outside a box; cull: whether to skip the mesh's
-        back faces.
+    def _draws(self, eyes: tuple, frame, scene_t: float, skip_moving: bool = False) -> list:
+        """[(vaos, mvp, to_primary, to_extra, seen, bounds, cull)] of the objects to draw for the
+        output poses ``eyes`` (one, or a pair that :meth:`shares_pair`), nearest first (so the depth
+        test rejects most hidden fragments before they are shaded); matrices as uniform bytes (mvp:
+        one per eye; seen: object -> world where the views saw it), bounds: per eye _rect_meets's
+        arguments, for the passes that skip objects outside a box; cull: per eye whether to skip
+        the mesh's back faces.
 
         From outside a closed, outward-wound mesh every back face lies behind a front face of the
         same mesh, so none of its fragments is a pixel's nearest (client/back_faces.py);
@@ -402,14 +492,20 @@ class ProxyIBR(Method):
         shows it (measured on the fast ball of tests/client/test_proxy_motion.py: 24.7 dB with
         them, 22.8 without).
         ``skip_moving``: leave the moving objects out (``flow`` draws their pixels instead)."""
-        view = out_pose.view_matrix()
         to_p = frame.primary_pose.view_matrix()
         to_e = frame.extra_pose.view_matrix() if frame.extra_pose is not None else to_p
-        vp = self.projection @ view
+        vps = [self.projection @ eye.view_matrix() for eye in eyes]
+        offsets = [k * self.output.width for k in range(len(eyes))]   # side by side
         seen_motion = self._frame_motions(frame)
         now = {i: m @ self.objects[i].transform for i, m in self.placer.motions(self.moving, scene_t).items()}
+        if len(eyes) == 1:
+            selected = self.selector.select(eyes[0], self.near, now)
+        else:   # the pair's union frustum, from the eyes' centre (shares_pair)
+            half = 0.5 * float(np.linalg.norm(np.asarray(eyes[1].p) - np.asarray(eyes[0].p)))
+            centre = Pose.make(0.5 * (np.asarray(eyes[0].p) + np.asarray(eyes[1].p)), eyes[0].q)
+            selected = self.selector.select(centre, self.near, now, half_baseline=half)
         draws, tris = [], 0
-        for sel in sorted(self.selector.select(out_pose, self.near, now), key=_front_to_back):
+        for sel in sorted(selected, key=_front_to_back):
             if skip_moving and sel.index in self._moving_set:
                 continue
             levels = self.vaos[sel.index]
@@ -420,15 +516,16 @@ class ProxyIBR(Method):
             model = now.get(sel.index, obj.transform)
             # A moving object is drawn where it is now, but looked up where the views saw it.
             seen = seen_motion[sel.index] @ obj.transform if sel.index in seen_motion else model
-            vaos, n, corners, back_faces = levels[level]
-            mvp = vp @ model
-            draws.append((vaos, mat4_bytes(mvp), mat4_bytes(to_p @ seen), mat4_bytes(to_e @ seen),
-                          mat4_bytes(seen), (mvp, corners),
-                          (self.carve is False or sel.index not in self._moving_set)
-                          and back_faces.allows(out_pose.p, model, self._near_reach)))
-            tris += n
+            vaos, n, corners, back_faces, _ = levels[level]
+            mvps = [vp @ model for vp in vps]
+            draws.append((vaos, b"".join(mat4_bytes(m) for m in mvps), mat4_bytes(to_p @ seen),
+                          mat4_bytes(to_e @ seen), mat4_bytes(seen),
+                          tuple((m, corners, x) for m, x in zip(mvps, offsets)),
+                          tuple((self.carve is False or sel.index not in self._moving_set)
+                                and back_faces.allows(eye.p, model, self._near_reach) for eye in eyes)))
+            tris += n * len(eyes)
         self.last_primitives = tris
-        self.last_culled = sum(d[-1] for d in draws)
+        self.last_culled = sum(sum(d[-1]) for d in draws)
         return draws
 
     def _screen_rect(self, mvp: np.ndarray, corners: np.ndarray) -> tuple[int, int, int, int]:
@@ -464,6 +561,8 @@ class ProxyIBR(Method):
             for vaos, *_ in levels.values():
                 for vao in vaos:
                     vao.release()
+        for r in (*self.pair_passes, *(self._pair_refs or ())):
+            r.release()
         for b in self._buffers:
             b.release()
         for r in (*self.passes, self.resolve_vao, self.resolve_vbo, self.resolve, self.refs_fbo, self.refs_depth_fbo,

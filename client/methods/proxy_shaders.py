@@ -10,9 +10,9 @@ import numpy as np
 GL_FOR_RESTRICTED_CARVING = 430
 GL_CLIP_DISTANCE0 = 0x3000
 
-PROXY_VS = """
+_PROXY_VS = """
 #version 410
-uniform mat4 u_mvp;          // object -> clip space of the output camera
+uniform mat4 u_mvp%(eyes)s;          // object -> clip space of the output camera%(eyes_note)s%(eye_uniform)s
 uniform mat4 u_to_primary;   // object -> primary camera space
 uniform mat4 u_to_extra;     // object -> extra camera space
 uniform float u_depth_half;  // -1: window depth into [0, 0.5) (accepted), +1: into [0.5, 1] (fallback)
@@ -23,7 +23,7 @@ void main() {
     vec4 p = vec4(in_position, 1.0);
     v_p = (u_to_primary * p).xyz;
     v_e = (u_to_extra * p).xyz;
-    gl_Position = u_mvp * p;
+    gl_Position = u_mvp%(eye)s * p;
     gl_Position.y = -gl_Position.y;   // top-row-first images
     // Halve the depth range in clip space (linear, so interpolation is unchanged): accepted
     // fragments always lie in front of fallback ones without writing gl_FragDepth. That moves
@@ -31,9 +31,24 @@ void main() {
     // puts the moved one back.
     float z = gl_Position.z, w = gl_Position.w;
     gl_ClipDistance[0] = u_depth_half < 0.0 ? w - z : z + w;
-    gl_Position.z = 0.5 * (z + u_depth_half * w);
+    gl_Position.z = 0.5 * (z + u_depth_half * w);%(pair)s
 }
 """
+PROXY_VS = _PROXY_VS % {"eyes": "", "eyes_note": "", "eye_uniform": "", "eye": "", "pair": ""}
+#: Both eyes of a stereo pair in one draw (two instances: the left eye, then the right; one
+#: instance from eye u_first_eye on), side by side in a target twice as wide: each eye's clip
+#: space is squeezed into its half, and two clip distances keep its triangles out of the other
+#: half (no viewport arrays needed).
+PAIR_PROXY_VS = _PROXY_VS % {
+    "eyes": "[2]", "eyes_note": " of each eye (left, right)",
+    "eye_uniform": "\nuniform int u_first_eye;   // the eye of instance 0", "eye": "[u_first_eye + gl_InstanceID]",
+    "pair": """
+    float x = gl_Position.x;
+    gl_ClipDistance[1] = w + x;
+    gl_ClipDistance[2] = w - x;
+    gl_Position.x = 0.5 * x + (u_first_eye + gl_InstanceID == 0 ? -0.5 : 0.5) * w;"""}
+#: How many clip distances PAIR_PROXY_VS writes.
+PAIR_CLIP_DISTANCES = 3
 
 # The views' colour rectangles and the background of a pixel (for BACKGROUND_FS and the resolves
 # of carve_all and carve=False).
@@ -50,8 +65,10 @@ uniform vec2 u_out_size;
 // extra view's if that one does (it saw past what blocks the primary: a lamp post in front of
 // the sky); else a rotation-only fallback from the primary (alpha 0: no view vouches for it).
 // -> false where nothing can be shown (behind the primary camera); else rect, uv and alpha.
+// A stereo pair drawn side by side (PAIR_PROXY_VS) shares the eyes' rotation: the right half's
+// pixels wrap onto the left's (x exactly as it is in one view, where it is below the width).
 bool background(out vec4 rect, out vec2 uv, out float alpha) {
-    vec2 ndc = vec2(2.0 * gl_FragCoord.x / u_out_size.x - 1.0, 1.0 - 2.0 * gl_FragCoord.y / u_out_size.y);
+    vec2 ndc = vec2(2.0 * mod(gl_FragCoord.x, u_out_size.x) / u_out_size.x - 1.0, 1.0 - 2.0 * gl_FragCoord.y / u_out_size.y);
     vec3 ray = normalize(vec3(ndc * u_tan_half, -1.0));
     vec3 d = u_out_to_src * ray;
     uv = wa_uv(wa_project(d).xy);
@@ -206,7 +223,8 @@ EITHER_MAIN = "uniform bool u_fallback;\nvoid main() { if (u_fallback) fallback(
 # After pass 1, the pixels where it accepted no fragment, at depth 1 still (the quad lies at
 # 0.75): their record is the background's (a record like the proxy passes', so every record is 8
 # bytes), unless pass 2 finds a proxy fragment there; and they are counted, with
-# their bounding box, so that pass 2 is scissored to them, or skipped. Only these pixels run the
+# their bounding box (one per eye of a pair drawn side by side), so that pass 2 is scissored to
+# them, or skipped. Only these pixels run the
 # background's lookups, not all (the resolve after it does one lookup per pixel), and pass 2
 # costs its rasterisation even where every fragment fails the depth test.
 BACKGROUND_VS = """
@@ -218,20 +236,22 @@ void main() { gl_Position = vec4(in_pos, 0.5, 1.0); }
 BACKGROUND_FS = "#version 430\n%(frame)s\n%(background)s\n" + RECORD_GLSL + BACKGROUND_RECORD_GLSL + """
 // the depth test before the shader, although it writes the counters (it would run the shader first)
 layout(early_fragment_tests) in;
-layout(std430, binding = 0) buffer Left { uint n_left; uint box[4]; };   // box: min x, min y, max x, max y
+// box k: min x, min y, max x, max y of eye k (the right half of a pair: x from u_out_size.x on)
+layout(std430, binding = 0) buffer Left { uint n_left; uint box[8]; };
 out vec2 f_ref;
 void main() {
     f_ref = background_record();
     uvec2 px = uvec2(gl_FragCoord.xy);
+    uint k = px.x >= uint(u_out_size.x) ? 4u : 0u;
     atomicAdd(n_left, 1u);
-    atomicMin(box[0], px.x);
-    atomicMin(box[1], px.y);
-    atomicMax(box[2], px.x);
-    atomicMax(box[3], px.y);
+    atomicMin(box[k], px.x);
+    atomicMin(box[k + 1u], px.y);
+    atomicMax(box[k + 2u], px.x);
+    atomicMax(box[k + 3u], px.y);
 }
 """
-#: The Left block of BACKGROUND_FS before it runs: no pixel, an empty box.
-LEFT_EMPTY = np.array([0, 0xFFFFFFFF, 0xFFFFFFFF, 0, 0], np.uint32).tobytes()
+#: The Left block of BACKGROUND_FS before it runs: no pixel, empty boxes.
+LEFT_EMPTY = np.array([0] + [0xFFFFFFFF, 0xFFFFFFFF, 0, 0] * 2, np.uint32).tobytes()
 
 # The resolve after BACKGROUND_FS: one lookup per pixel, from the view and place its record says.
 RECORD_RESOLVE_FS = """
