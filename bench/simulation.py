@@ -75,6 +75,19 @@ class FloorPass:
             r.release()
 
 
+def blas_on_one_thread():
+    """A context in which numpy's BLAS runs on the calling thread alone, for benches that time the
+    client's CPU. Between its calls OpenBLAS's worker threads keep spinning for a while, on every
+    core: the process CPU time of whatever runs next is charged with that spinning, and llvmpipe
+    loses the cores meanwhile. Measured in ``pibr bench stereo`` (dynamic scene, proxy): the first
+    display after each tick's ground-truth maths cost 85 CPU-ms against 42 for the same view drawn
+    after it; with BLAS on one thread both cost 42 (and mono against a pair read 1.06x instead of
+    2.0x)."""
+    from threadpoolctl import threadpool_limits
+
+    return threadpool_limits(limits=1, user_api="blas")
+
+
 class Simulation:
     """Server and client pipelines of one session in one process, on one GL context.
 

@@ -163,7 +163,7 @@ def run_stereo_bench(windows=None, dynamic_windows=None, methods=DEFAULT_METHODS
     from pibr.protocol.errors import ConfigError
     from pibr.protocol.stereo import check_ipd_mm
 
-    from .simulation import BENCH_VIEW_SIZE
+    from .simulation import BENCH_VIEW_SIZE, blas_on_one_thread
 
     check_ipd_mm(ipd_mm)
     unknown = [m for m in modes if m not in MODES]
@@ -192,11 +192,13 @@ def run_stereo_bench(windows=None, dynamic_windows=None, methods=DEFAULT_METHODS
         total = sum(len(range(0, int(w.duration_s * rate_hz), stride)) for w in all_windows)
         bar = tqdm(total=total, unit="tick", desc="bench stereo", file=sys.stderr, leave=False, disable=None)
     pictures = {}
+    result["blas_threads"] = 1   # the client's CPU is timed with BLAS on one thread (blas_on_one_thread)
     try:
-        for scene_name, scene_windows in plan.items():
-            result["scenes"][scene_name] = _run_scene(scene_name, scene_windows, methods, modes, ipd_mm, schedule,
-                                                      view_size, out_size, stride, flip_every, bar,
-                                                      pictures if pair_png and not pictures else None)
+        with blas_on_one_thread():
+            for scene_name, scene_windows in plan.items():
+                result["scenes"][scene_name] = _run_scene(scene_name, scene_windows, methods, modes, ipd_mm,
+                                                          schedule, view_size, out_size, stride, flip_every, bar,
+                                                          pictures if pair_png and not pictures else None)
     finally:
         if bar is not None:
             bar.close()

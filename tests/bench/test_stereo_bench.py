@@ -53,8 +53,22 @@ def test_a_tiny_run(tmp_path):
     assert v["proxy cyclops"]["cpu_ms_vs_mono"] > 1.2
     assert v["proxy cyclops"]["pair_drawn_at_once"] is True and v["proxy cyclops"]["cpu_ms_eye_by_eye_vs_mono"] > 1.2
     assert "pair_drawn_at_once" not in v["rotation cyclops"] and "pair_drawn_at_once" not in v["proxy per-eye"]
-    assert r["goals"]["room"]["ms_per_pair"]["pair_drawn_at_once"] is True
+    assert r["goals"]["room"]["ms_per_pair"]["pair_drawn_at_once"] is True and r["blas_threads"] == 1
     assert set(r["goals"]["room"]) == {"dssim", "ms_per_pair", "consistency"}
+
+
+def test_the_client_is_timed_with_blas_on_one_thread():
+    """OpenBLAS's idle workers spin between calls and were charged to the display timed next
+    (bench/simulation.py blas_on_one_thread): within the bench BLAS runs on one thread."""
+    from threadpoolctl import threadpool_info
+
+    from pibr.bench.simulation import blas_on_one_thread
+
+    np.ones((64, 64)) @ np.ones((64, 64))   # numpy's BLAS loaded
+    blas = [i for i in threadpool_info() if i["user_api"] == "blas"]
+    assert blas
+    with blas_on_one_thread():
+        assert all(i["num_threads"] == 1 for i in threadpool_info() if i["user_api"] == "blas")
 
 
 def test_modes_without_the_baseline_are_refused(tmp_path):
