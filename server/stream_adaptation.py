@@ -24,10 +24,7 @@ is the gap between frames). Each report:
   backlog, and they have not spoken yet. The link's rate
   is the client's measure when the report has one, else what arrived over the reports of the last
   :data:`RECEIVED_WINDOW_S` that found frames queued: the link was busy all along them, while a
-  single report sees whole frames (none, or one in 200 ms). Reports where nothing arrived count
-  there once a frame arrives after them: until then they may be an outage, which measures no link
-  (they had pulled the link's rate toward zero, so an outage went down the ladder as a slow link
-  does). Once a decrease was made, the next
+  single report sees whole frames (none, or one in 200 ms). Once a decrease was made, the next
   waits :data:`HOLD_S` and the queue's length (the frames already queued arrive old whatever the
   new rate) unless the link's rate drops further;
 * queued less than :data:`QUEUE_LOW_MS`: room, probed by :data:`PROBE_GAIN` per report up to
@@ -198,13 +195,8 @@ class StreamAdaptation:
         self.received_kbps = received
         # What the link carries: the client's measure, else what arrived over the reports that
         # found frames queued (the link busy all along them; one report alone sees whole frames:
-        # none, or one in 200 ms). The reports where nothing arrived since the last arrival count
-        # once a frame ends them: until then they may be a frame still on the wire of a slow link,
-        # or an outage, and an outage carries nothing to measure the link by.
-        closed = len(self._received)
-        while closed and self._received[closed - 1][1] <= 0:
-            closed -= 1
-        busy = [(k, s) for _, k, s, queued in list(self._received)[:closed] if queued]
+        # none, or one in 200 ms)
+        busy = [(k, s) for _, k, s, queued in self._received if queued]
         if link_kbps is not None and link_kbps > 0:
             link = float(link_kbps)
         else:

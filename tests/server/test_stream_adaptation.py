@@ -100,35 +100,6 @@ def test_an_outage_halves_then_steps_down_the_ladder_and_recovery_comes_back_ste
     assert all(k >= a.floor_kbps / v * (1 - 1e-9) for _, v, k in climbed)
 
 
-def test_an_outage_on_a_busy_link_is_not_read_as_a_slow_link():
-    """Frames queue a little (60 ms) on a link carrying 6 Mbit/s, then nothing arrives for 3 s.
-    The reports with no arrival measure no link: the first decrease drains at the rate the link
-    had, the rest halve as an outage does, the floor before the ladder (before, their zeros pulled
-    the link's rate toward zero and the first second of the outage went down the ladder: a frame
-    every 2 ticks within 0.4 s)."""
-    a = StreamAdaptation(8000.0)
-    t = _steady(a, _steady(a, 0.0, 2.0), 3.0, age_ms=90.0 + 60.0, kbps=6000.0)
-    kbps_before = a.choice.video_kbps
-    choices = []
-    for i in range(15):
-        choices.append(a.report(t, 90.0 + 200.0 + 200.0 * i, 0.0))
-        t += 0.2
-    decreases = [c for c in choices if c.reason in (CONGESTED, OUTAGE, FLOOR)]
-    assert decreases[0].reason == CONGESTED
-    assert decreases[0].video_kbps == pytest.approx(min(kbps_before, 6000.0 * (1 - 0.2 - 0.1)))
-    assert all(c.reason == OUTAGE for c in decreases[1:3])
-    first_rung = next(k for k, c in enumerate(choices) if (c.every, c.view) != (1, 1))
-    assert choices[first_rung - 1].video_kbps == a.floor_kbps and choices[first_rung].reason == FLOOR
-    # a slow link's reports with nothing arrived (a frame still on the wire) count once it arrives
-    slow = StreamAdaptation(8000.0)
-    t = _steady(slow, 0.0, 3.0)
-    for i in range(10):
-        slow.report(t, 90.0 + 60.0, 600.0 if i % 2 else 0.0)
-        t += 0.2
-    c = slow.report(t, 90.0 + 300.0, 0.0)   # the last second: 300 kbit/s; this report is still open
-    assert c.reason == FLOOR and c.video_kbps / c.every == pytest.approx(300.0 * (1 - 0.3 - 0.1))
-
-
 def test_probes_stay_within_half_again_what_arrives():
     """The encoder takes a new target only at its next group of pictures: while what arrives stays
     at 3 Mbit/s, probing stops at 1.5 times it instead of climbing to the session's 16."""
