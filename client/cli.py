@@ -160,6 +160,10 @@ def add_method_knobs(parser) -> None:
     group.add_argument("--no-carve", dest="knob_carve", action="store_const", const=False, default=None,
                        help="proxy: test only the nearest proxy fragment of each pixel (one cheaper pass; proxy "
                             "surfaces no view confirms then hide what lies behind them)")
+    group.add_argument("--pair-at-once", dest="knob_pair_at_once", action="store_const", const=True, default=None,
+                       help="proxy with --stereo cyclops: draw both eyes in one pass (one LoD selection, each proxy "
+                            "drawn once per pass for both); off, each eye alone, which costs slightly less CPU on a "
+                            "software rasteriser")
     group.add_argument("--no-inpaint", dest="knob_inpaint", action="store_const", const=False, default=None,
                        help="proxy: where no view confirms any proxy fragment, show the background along the ray "
                             "(sky, or the primary view rotated) instead of the nearest fragment coloured from the "

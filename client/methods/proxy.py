@@ -112,7 +112,7 @@ class ProxyIBR(Method):
                  lod_target_px: float = DEFAULT_TARGET_PX, lod_level: str | None = None, extra_view: bool = True,
                  carve: bool = True, motion: str = DEFAULT_MOTION, poses: PoseHistory | None = None,
                  oracle_pose=None, horizon_frames: float = DEFAULT_HORIZON_FRAMES, slack_codes: float | None = None,
-                 carve_all: bool = False, cull: bool = True, inpaint: bool = True):
+                 carve_all: bool = False, cull: bool = True, inpaint: bool = True, pair_at_once: bool = False):
         """slack_codes: depth codes of transport error forgiven before the tau test (None: the
         depth codec's ``DEPTH_SLACK_CODES``); ``carve_all``: carve as before, both passes over
         every pixel with one program and the background found in the resolve (the same image,
@@ -124,7 +124,12 @@ class ProxyIBR(Method):
         coloured from the view with the lower error (Reinert et al.'s inpainting: the second
         carving pass); False: the background along the pixel's ray instead, as where no proxy
         was drawn (the sky, or the rotation-only fallback of the primary view, alpha 0), one
-        geometry pass fewer (room, 7 evaluation windows: DSSIM +0.0004, 0.80x the wall time)."""
+        geometry pass fewer (room, 7 evaluation windows: DSSIM +0.0004, 0.80x the wall time).
+        ``pair_at_once``: a stereo pair from one frame is drawn in one pass (:meth:`render_pair`);
+        off, each eye alone. On this software rasteriser a view costs its fragments, which a pair
+        has twice of: at once cost 1.01-1.02x the CPU of eye by eye in one run (pibr bench stereo,
+        docs/results/stereo.json), so it stays off; what it shares is the per-view work a GPU
+        pays for (draws, LoD selection, passes)."""
         super().__init__(ctx, output, config)
         if not proxies:
             from pibr.protocol.errors import ConfigError
@@ -246,15 +251,16 @@ class ProxyIBR(Method):
         self.last_primitives = 0
         self.last_culled = 0   # draws that skipped their back faces in the last render
         self._culling = False
+        self.pair_at_once = bool(pair_at_once)
         self.pair_passes = []   # both eyes at once (render_pair), made when first used
         self._pair_refs = None
 
     def shares_pair(self, left: Pose, right: Pose) -> bool:
-        """Whether :meth:`render_pair` draws these two eyes at once: carving's passes (neither
-        carve_all, nor carve=False, nor flow's points, which stay one view at a time), and eyes
-        that look the same way from either side of a centre, along their common x axis (as
-        protocol/stereo.py places them)."""
-        if not self.carve or self.carve_all or self.motion == "flow":
+        """Whether :meth:`render_pair` draws these two eyes at once: with ``pair_at_once``, carving's
+        passes (neither carve_all, nor carve=False, nor flow's points, which stay one view at a
+        time), and eyes that look the same way from either side of a centre, along their common x
+        axis (as protocol/stereo.py places them)."""
+        if not self.pair_at_once or not self.carve or self.carve_all or self.motion == "flow":
             return False
         r = left.rotation()
         if not np.allclose(r, right.rotation(), atol=1e-9):

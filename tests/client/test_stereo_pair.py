@@ -42,7 +42,7 @@ def test_a_pair_drawn_at_once_is_each_eye_drawn_alone(sim, options):
     most 0.07 % of pixels, by at most 2/255 (the records' uv precision); at 960x540 0.02 %, a few
     of them at a silhouette. An object one eye may draw without its back faces and the other not
     is drawn for each eye apart (before, 1 % of pixels differed at the proxy level)."""
-    m = sim.make_method("proxy", **options)
+    m = sim.make_method("proxy", pair_at_once=True, **options)
     try:
         for head, rendered_at in _poses(sim):
             frame = sim.frame_at(0.0, rendered_at)
@@ -67,7 +67,7 @@ def test_a_pair_drawn_at_once_is_each_eye_drawn_alone(sim, options):
 def test_which_pairs_are_drawn_at_once(sim):
     head = sim.scene.viewer_origin
     left, right = eye_pose(head, "left"), eye_pose(head, "right")
-    m = sim.make_method("proxy")
+    m = sim.make_method("proxy", pair_at_once=True)
     try:
         assert m.shares_pair(left, right)
         assert not m.shares_pair(right, left)   # the left eye must be on the left
@@ -75,8 +75,8 @@ def test_which_pairs_are_drawn_at_once(sim):
         assert not m.shares_pair(left, head.compose(Pose.make((0.032, 0.02, 0.0))))   # not along x
     finally:
         m.release()
-    for options in ({"carve_all": True}, {"carve": False}):
-        other = sim.make_method("proxy", **options)
+    for options in ({"carve_all": True, "pair_at_once": True}, {"carve": False, "pair_at_once": True}, {}):
+        other = sim.make_method("proxy", **options)   # the default: each eye alone
         try:
             assert not other.shares_pair(left, right)
         finally:
@@ -111,9 +111,10 @@ def test_the_union_frustum_holds_what_either_eye_sees():
 
 
 async def test_a_cyclops_client_draws_each_pair_at_once(tmp_path):
-    """``--stereo cyclops`` with proxy: both eyes drawn in one render_pair a tick (the pair's ms
-    shared out evenly, so each tick's two records carry the same ms), each half recorded as its
-    eye: every recorded image is nearer its own eye's ground truth than the other eye's."""
+    """``--stereo cyclops --pair-at-once`` with proxy: both eyes drawn in one render_pair a tick
+    (the pair's ms shared out evenly, so each tick's two records carry the same ms), each half
+    recorded as its eye: every recorded image is nearer its own eye's ground truth than the other
+    eye's."""
     from pibr.bench.evaluate import _frames
     from pibr.bench.groundtruth import GroundTruth
     from pibr.client.app import run_client
@@ -128,7 +129,8 @@ async def test_a_cyclops_client_draws_each_pair_at_once(tmp_path):
             _, host, port):
         result = await run_client(ClientConfig(host=host, port=port, trace="pred6dof-1", start_s=12.0, duration_s=0.5,
                                                rate_hz=30.0, methods=("proxy",), out_dir=str(out), width=160,
-                                               height=96, progress="none", stereo="cyclops", ipd_mm=64.0))
+                                               height=96, progress="none", stereo="cyclops", ipd_mm=64.0,
+                                               options={"pair_at_once": True}))
     assert result.ticks == 15
     info = json.load(open(out / "session.json"))
     assert info["methods"]["proxy"]["pair_drawn_at_once"] is True
