@@ -373,7 +373,7 @@ def register(sub) -> None:
                                    "truth, the binocular consistency of each pair (bench/stereo_metrics.py), client "
                                    "CPU ms per pair against one mono view, server CPU ms and bits per second per "
                                    "reference. Writes stereo.json, stereo.png, stereo-pair.png and "
-                                   "stereo-anaglyph.png. About 40 min on 2 cores with the defaults.")
+                                   "stereo-anaglyph.png. About 20 min on 2 cores with the defaults.")
     st.add_argument("--scene", type=arguments.names, default=("room", "dynamic"),
                     help="scenes (default room,dynamic)")
     st.add_argument("--windows", type=_windows, default=None,

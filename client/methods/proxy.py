@@ -127,8 +127,8 @@ class ProxyIBR(Method):
         geometry pass fewer (room, 7 evaluation windows: DSSIM +0.0004, 0.80x the wall time).
         ``pair_at_once``: a stereo pair from one frame is drawn in one pass (:meth:`render_pair`);
         off, each eye alone. On this software rasteriser a view costs its fragments, which a pair
-        has twice of: at once cost 1.01-1.02x the CPU of eye by eye in one run (pibr bench stereo,
-        docs/results/stereo.json), so it stays off; what it shares is the per-view work a GPU
+        has twice of: at once cost 1.01x (room) and 1.04x (dynamic) the CPU of eye by eye on the same
+        pairs (pibr bench stereo, docs/results/stereo.json), so it stays off; what it shares is the per-view work a GPU
         pays for (draws, LoD selection, passes)."""
         super().__init__(ctx, output, config)
         if not proxies:
