@@ -127,9 +127,9 @@ class ProxyIBR(Method):
         geometry pass fewer (room, 7 evaluation windows: DSSIM +0.0004, 0.80x the wall time).
         ``pair_at_once``: a stereo pair from one frame is drawn in one pass (:meth:`render_pair`);
         off, each eye alone. On this software rasteriser a view costs its fragments, which a pair
-        has twice of: at once cost 1.01x (room) and 1.04x (dynamic) the CPU of eye by eye on the same
-        pairs (pibr bench stereo, docs/results/stereo.json), so it stays off; what it shares is the per-view work a GPU
-        pays for (draws, LoD selection, passes)."""
+        has twice of: at once cost 1.01x (room) and 1.04x (dynamic) the CPU of eye by eye on the
+        same pairs (pibr bench stereo, docs/results/stereo.json), so it stays off; what it shares
+        is the per-view work a GPU pays for (draws, LoD selection, passes)."""
         super().__init__(ctx, output, config)
         if not proxies:
             from pibr.protocol.errors import ConfigError
@@ -296,7 +296,8 @@ class ProxyIBR(Method):
         ctx = self.ctx
         glsl = {"frame": frame_glsl(self.config), "background": shaders.BACKGROUND_GLSL}
         for main, mono in zip((shaders.ACCEPT_MAIN, shaders.FALLBACK_MAIN), self.passes):
-            prog = ctx.program(vertex_shader=shaders.PAIR_PROXY_VS, fragment_shader=shaders.PROXY_FS % (glsl | {"main": main}))
+            prog = ctx.program(vertex_shader=shaders.PAIR_PROXY_VS,
+                               fragment_shader=shaders.PROXY_FS % (glsl | {"main": main}))
             bind_frame_uniforms(prog, self.config)
             for k in ("u_slack_codes", "u_has_extra", "u_tau"):
                 if k in mono:

@@ -68,7 +68,8 @@ uniform vec2 u_out_size;
 // A stereo pair drawn side by side (PAIR_PROXY_VS) shares the eyes' rotation: the right half's
 // pixels wrap onto the left's (x exactly as it is in one view, where it is below the width).
 bool background(out vec4 rect, out vec2 uv, out float alpha) {
-    vec2 ndc = vec2(2.0 * mod(gl_FragCoord.x, u_out_size.x) / u_out_size.x - 1.0, 1.0 - 2.0 * gl_FragCoord.y / u_out_size.y);
+    float x = mod(gl_FragCoord.x, u_out_size.x);
+    vec2 ndc = vec2(2.0 * x / u_out_size.x - 1.0, 1.0 - 2.0 * gl_FragCoord.y / u_out_size.y);
     vec3 ray = normalize(vec3(ndc * u_tan_half, -1.0));
     vec3 d = u_out_to_src * ray;
     uv = wa_uv(wa_project(d).xy);
