@@ -284,16 +284,16 @@ def _run_scene(scene_name, windows, methods, modes, ipd_mm, schedule, view_size,
                         label = f"{method} {mode}"
                         shown, cpu = {}, 0.0
                         pair = instances.get((mode, method, "pair"))
-                        together = None
-                        if pair is not None and getattr(pair, "shares_pair", None) and pair.shares_pair(
-                                eyes["left"], eyes["right"]):
+                        shares = pair is not None and getattr(pair, "shares_pair", None) is not None \
+                            and pair.shares_pair(eyes["left"], eyes["right"])
+
+                        def at_once():
                             # the client's default draws eye by eye (below); both eyes at once
                             # (render_pair) timed beside it, first on every other tick (what is drawn
                             # second finds the caches warm)
-                            def at_once():
-                                return sim.display_pair_timed(pair, eyes["left"], eyes["right"],
-                                                              stream.frames[CENTRE], t, stream.textures[CENTRE])[1]
-                            together = at_once() if i % 2 else None
+                            return sim.display_pair_timed(pair, eyes["left"], eyes["right"], stream.frames[CENTRE],
+                                                          t, stream.textures[CENTRE])[1]
+                        together = at_once() if shares and i % 2 else None
                         for e in ((CENTRE,) if mode == "mono" else EYES):
                             slot = _eye_slot(stream, e)
                             inst = instances[(mode, method, "mono" if mode == "mono" else
@@ -308,10 +308,8 @@ def _run_scene(scene_name, windows, methods, modes, ipd_mm, schedule, view_size,
                             scores.add(label, window.label, dssim=m["dssim"], psnr=m["psnr"], flip=m["flip"],
                                        own_holes=own, geometric_holes=holes)
                         scores.add(label, window.label, cpu_ms=cpu)
-                        if pair is not None and together is None and getattr(pair, "shares_pair", None) \
-                                and pair.shares_pair(eyes["left"], eyes["right"]):
-                            together = at_once()
-                        if together is not None:
+                        if shares:
+                            together = at_once() if together is None else together
                             scores.add(label, window.label, cpu_ms_pair_at_once=together)
                         if mode == "mono":
                             # the one image shown to both eyes: what no disparity at all scores
