@@ -145,9 +145,6 @@ class _Scores:
                 if v is not None and not (isinstance(v, float) and np.isnan(v))]
         return float(np.mean(vals)) if vals else None
 
-    def has(self, label: str, key: str) -> bool:
-        return any(d.get(key) for d in self.values.get(label, {}).values())
-
     def median(self, label: str, key: str):
         vals = [v for d in self.values.get(label, {}).values() for v in d.get(key, [])]
         return float(np.median(vals)) if vals else None
@@ -353,8 +350,9 @@ def _scene_result(scene, bundle, windows, methods, modes, stream_of, scores, uni
             label = f"{method} {mode}"
             v = {"method": method, "mode": mode, "eyes": 1 if mode == "mono" else 2,
                  "cpu_ms_median": scores.median(label, "cpu_ms")}
-            if scores.has(label, "cpu_ms_pair_at_once"):   # the same frames, both eyes in one pass
-                v["cpu_ms_pair_at_once_median"] = scores.median(label, "cpu_ms_pair_at_once")
+            at_once = scores.median(label, "cpu_ms_pair_at_once")   # the same frames, both eyes in one pass
+            if at_once is not None:
+                v["cpu_ms_pair_at_once_median"] = at_once
             v.update({f"{k}_mean": scores.mean(label, k) for k in keys})
             v["per_window"] = {w: {f"{k}_mean": scores.mean(label, k, w) for k in ("dssim", "psnr", "inconsistent")}
                                for w in labels}

@@ -270,42 +270,54 @@ class Client:
         (eye -> Pose) from its slot's frame (``shown``: slot -> _Decoded) -> per method
         [(rgb or None, hole fraction, ms) per eye], with the wall ms of reading the images back in
         ``self._record_ms`` (``read``: for the recorders)."""
-        textures, methods, target, pair_target = self._gl_state
-        for slot, decoded in shown.items():
-            if textures[slot].frame_id != decoded.frame.frame_id:
-                textures[slot].upload(decoded.image, decoded.frame, decoded.distances, decoded.flow)
+        self._upload_newest(shown)
         out, read_ms = [], 0.0
         for name in self.cfg.methods:
-            level = chosen[name][0] if chosen else 0
-            per_eye = []
-            pair = self._pair_method(methods, name, level, poses, shown)
-            if pair is not None:
-                pair_target.begin()
-                t0 = time.perf_counter()
-                pair.render_pair(poses["left"], poses["right"], shown[CENTRE].frame, textures[CENTRE], scene_t)
-                wait_idle(ctx)
-                t1 = time.perf_counter()
-                rgba = pair_target.read() if read else None
-                read_ms += (time.perf_counter() - t1) * 1e3 if read else 0.0
-                w = self.cfg.width
-                for half in (slice(0, w), slice(w, 2 * w)):   # the pair's ms shared out evenly
-                    per_eye.append(_read_back(None if rgba is None else rgba[:, half], (t1 - t0) * 0.5e3))
-            else:
-                for eye, pose in poses.items():
-                    slot = self._slot(eye)
-                    decoded = shown.get(slot)
-                    target.begin()
-                    t0 = time.perf_counter()
-                    if decoded is not None:
-                        methods[slot][name][level].render(pose, decoded.frame, textures[slot], scene_t)
-                    wait_idle(ctx)   # the GIL released: frames arriving meanwhile are read on time
-                    t1 = time.perf_counter()
-                    per_eye.append(_read_back(target.read() if read else None, (t1 - t0) * 1e3))
-                    read_ms += (time.perf_counter() - t1) * 1e3 if read else 0.0
-            out.append(per_eye)
+            drawn, ms = self._draw_eyes(ctx, name, chosen[name][0] if chosen else 0, poses, shown, scene_t, read)
+            out.append([_read_back(rgba, eye_ms) for rgba, eye_ms in drawn])
+            read_ms += ms
         if read:
             self._record_ms.append(read_ms)
         return out
+
+    def _upload_newest(self, shown: dict) -> None:
+        """Upload each slot's newest frame (``shown``: slot -> _Decoded) where it is new."""
+        textures = self._gl_state[0]
+        for slot, decoded in shown.items():
+            if textures[slot].frame_id != decoded.frame.frame_id:
+                textures[slot].upload(decoded.image, decoded.frame, decoded.distances, decoded.flow)
+
+    def _draw_eyes(self, ctx, name: str, level: int, poses: dict, shown: dict, scene_t: float,
+                   read: bool) -> tuple[list, float]:
+        """Draw method ``name`` at ``level`` for every eye of ``poses`` from its slot's frame: both at
+        once where the method shares the pair (proxy's render_pair, the pair's ms shared out evenly),
+        else one at a time -> ([(rgba (h, w, 4) or None (``read`` false), wall ms) per eye], wall ms
+        of reading them back)."""
+        textures, methods, target, pair_target = self._gl_state
+        pair = self._pair_method(methods, name, level, poses, shown)
+        if pair is not None:
+            pair_target.begin()
+            t0 = time.perf_counter()
+            pair.render_pair(poses["left"], poses["right"], shown[CENTRE].frame, textures[CENTRE], scene_t)
+            wait_idle(ctx)
+            t1 = time.perf_counter()
+            rgba = pair_target.read() if read else None
+            w, ms = self.cfg.width, (t1 - t0) * 0.5e3
+            halves = [None if rgba is None else rgba[:, half] for half in (slice(0, w), slice(w, 2 * w))]
+            return [(half, ms) for half in halves], (time.perf_counter() - t1) * 1e3 if read else 0.0
+        drawn, read_ms = [], 0.0
+        for eye, pose in poses.items():
+            slot = self._slot(eye)
+            decoded = shown.get(slot)
+            target.begin()
+            t0 = time.perf_counter()
+            if decoded is not None:
+                methods[slot][name][level].render(pose, decoded.frame, textures[slot], scene_t)
+            wait_idle(ctx)   # the GIL released: frames arriving meanwhile are read on time
+            t1 = time.perf_counter()
+            drawn.append((target.read() if read else None, (t1 - t0) * 1e3))
+            read_ms += (time.perf_counter() - t1) * 1e3 if read else 0.0
+        return drawn, read_ms
 
     def _pair_method(self, methods, name: str, level: int, poses: dict, shown: dict):
         """The method instance that draws both eyes of ``poses`` at once (one slot's frame, and a
@@ -320,10 +332,7 @@ class Client:
         """Draw every level of every method for every eye ``renders`` times, untimed the first (it
         compiles shader variants) -> method -> [ms per level, all eyes]: the wall clock's first cost
         estimates."""
-        textures, methods, target, pair_target = self._gl_state
-        for slot, decoded in shown.items():
-            if textures[slot].frame_id != decoded.frame.frame_id:
-                textures[slot].upload(decoded.image, decoded.frame, decoded.distances, decoded.flow)
+        self._upload_newest(shown)
         costs = {name: [[] for _ in self._levels[name]] for name in self.cfg.methods}
         # Round after round of every level, not every draw of one level and then the next: what
         # else runs meanwhile (a server sharing the cores, a frame decoding) then slows every
@@ -331,23 +340,9 @@ class Client:
         for k in range(renders + 1):
             for name in self.cfg.methods:
                 for level in range(len(self._levels[name])):
-                    spent = 0.0
-                    pair = self._pair_method(methods, name, level, poses, shown)
-                    if pair is not None:
-                        pair_target.begin()
-                        t0 = time.perf_counter()
-                        pair.render_pair(poses["left"], poses["right"], shown[CENTRE].frame, textures[CENTRE], 0.0)
-                        wait_idle(ctx)
-                        spent += time.perf_counter() - t0
-                    for eye, pose in poses.items() if pair is None else ():
-                        slot = self._slot(eye)
-                        target.begin()
-                        t0 = time.perf_counter()
-                        methods[slot][name][level].render(pose, shown[slot].frame, textures[slot], 0.0)
-                        wait_idle(ctx)
-                        spent += time.perf_counter() - t0
+                    drawn, _ = self._draw_eyes(ctx, name, level, poses, shown, 0.0, read=False)
                     if k:
-                        costs[name][level].append(spent * 1e3)
+                        costs[name][level].append(sum(ms for _, ms in drawn))
         return costs
 
     def _gl_release(self, ctx):

@@ -240,8 +240,7 @@ class ProxyIBR(Method):
                     continue
                 vbo = ctx.buffer(np.ascontiguousarray(v, np.float32).tobytes())
                 ibo = ctx.buffer(np.ascontiguousarray(f, np.uint32).tobytes())
-                vaos = [ctx.vertex_array(p, [(vbo, "3f", "in_position")], index_buffer=ibo, index_element_size=4)
-                        for p in self.passes]
+                vaos = self._mesh_vaos(self.passes, vbo, ibo)
                 self._buffers += [vbo, ibo]
                 lo, hi = np.min(v, axis=0), np.max(v, axis=0)
                 corners = np.array([[x, y, z, 1.0] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
@@ -254,6 +253,11 @@ class ProxyIBR(Method):
         self.pair_at_once = bool(pair_at_once)
         self.pair_passes = []   # both eyes at once (render_pair), made when first used
         self._pair_refs = None
+
+    def _mesh_vaos(self, programs, vbo, ibo) -> list:
+        """One vertex array per program of a mesh's vertex (float32 x, y, z) and index (uint32) buffers."""
+        return [self.ctx.vertex_array(p, [(vbo, "3f", "in_position")], index_buffer=ibo, index_element_size=4)
+                for p in programs]
 
     def shares_pair(self, left: Pose, right: Pose) -> bool:
         """Whether :meth:`render_pair` draws these two eyes at once: with ``pair_at_once``, carving's
@@ -305,8 +309,7 @@ class ProxyIBR(Method):
             self.pair_passes.append(prog)
         for levels in self.vaos:
             for vaos, _, _, _, (vbo, ibo) in levels.values():
-                vaos += [ctx.vertex_array(p, [(vbo, "3f", "in_position")], index_buffer=ibo, index_element_size=4)
-                         for p in self.pair_passes]
+                vaos += self._mesh_vaos(self.pair_passes, vbo, ibo)
         size = (2 * self.output.width, self.output.height)
         refs = ctx.texture(size, 2, dtype="f4")
         refs.filter = (ctx.NEAREST, ctx.NEAREST)
