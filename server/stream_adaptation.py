@@ -42,6 +42,15 @@ decrease goes at once to the first rung whose floor fits (an outage, which measu
 rung at a time). With room, the stream climbs a rung once the rung's rate on the wire is within
 :data:`RECEIVED_CAP` of what arrives (as a probe is), and probes within its rung until then.
 
+A decrease that finds the link carrying less than :data:`DIP_SHARE` of the stream on the wire (by
+the client's measure, or by what arrived: the measure is of the frames before) is a dip, an outage
+or a handover, rather than a slower link. Once no queue is left (:data:`HOLD_S` after the last
+decrease) the stream goes back to the rate it had before the dip's decreases in a slow start, as
+at its beginning: climbing back by probes took more than 9 s after the built-in outage, each
+capped by what arrived, which a lower rung's encoder keeps under its target. A link that is slower
+queues again on the way up, which ends the slow start as it ends the first (the decrease that
+ends a slow start is no dip, whatever it finds: a slow start overshoots by design).
+
 A stream starts at the ladder's foot, its last rung at that rung's floor, and climbs in a slow
 start: a rung a report, then :data:`START_GAIN` a report, with no cap from what arrived, since
 each step restarts the encoder at once (video.py); it reaches a link with room within two
@@ -58,7 +67,9 @@ and the frames sent until the first report kept every later one 15 s old or more
 The edge codec's rate follows the colour's share of its bitrate. On the virtual clock the
 reports are taken as of each frame's time, so the choices are reproducible. The constants are
 not fitted to any trace (a declared choice, as in a delay-based congestion controller: a queue
-above one frame interval is a congestion signal).
+above one frame interval is a congestion signal). :data:`DIP_SHARE` was chosen knowing the
+built-in links: a quarter lies between their steps' drops (to 0.4 and 0.375 of the rate before)
+and a handover's (0.05); it was judged on other draws of the cellular model (README).
 """
 from __future__ import annotations
 
@@ -81,6 +92,9 @@ RECEIVED_CAP = 1.5
 RECEIVED_WINDOW_S = 1.0
 MIN_DRAIN_SHARE = 0.3
 HOLD_S = 0.6
+#: A decrease whose link carries less than this share of the stream on the wire is a dip (an
+#: outage, a handover), not a slower link: once it clears the stream comes back in a slow start.
+DIP_SHARE = 0.25
 FLOOR_SHARE = 0.1
 #: The rungs under the floor, from the top: (one frame every ``every`` ticks, the primary view
 #: rendered at 1/``view`` of its side). Each view step halves the floor.
@@ -116,6 +130,11 @@ class StreamAdaptation:
         self.choice = StreamChoice(min(self.max_kbps, self.rung_floor_kbps(self.rung)), every, START, view)
         #: in the slow start (module docstring): a new target should reach the encoder at once
         self.starting = True
+        #: the slow start's ceiling on the wire (kbit/s): the session's bitrate, or after a dip the
+        #: rate before it
+        self._start_ceiling = self.max_kbps
+        self._before_dip: float | None = None   # the rate on the wire before a dip, while it lasts
+        self._before_decreases = self.choice.video_kbps   # on the wire, before the latest run of decreases
         self._ages = AgeBaseline(BASELINE_S)   # the reports' ages (ms) over BASELINE_S
         self._received: deque = deque()   # (t, kbit arrived, span s, frames queued?) within RECEIVED_WINDOW_S
         self._sent: deque = deque()       # (frame id, t sent, bits) not known to have arrived
@@ -184,8 +203,9 @@ class StreamAdaptation:
             queue = 0.0 if after is None else max(0.0, age_ms - (after - self._acked[1]) * 1e3 - self._ages.least)
         else:
             queue = self.queue_ms(t, age_ms)
-        if queue >= QUEUE_LOW_MS or self.choice.video_kbps >= self.max_kbps:
-            self.starting = False
+        was_starting = self.starting
+        if queue >= QUEUE_LOW_MS or self.choice.video_kbps / self.choice.every >= self._start_ceiling * (1 - 1e-9):
+            self.starting = False   # (the report after the one that reached the ceiling: that one applied at once)
         kbps, every = self.choice.video_kbps, self.choice.every
         span = max(float(span_ms), 1.0) / 1e3
         self._received.append((t, delivered_kbps * span, span, queue > QUEUE_LOW_MS))
@@ -210,6 +230,14 @@ class StreamAdaptation:
             # (the hold and the queue's own length) unless the link itself got slower still.
             worse = self._last_decrease is not None and link < 0.8 * self._last_decrease[2]
             if self._last_decrease is None or t - self._last_decrease[0] >= self._last_decrease[1] or worse:
+                if self._last_decrease is None or t - self._last_decrease[0] > RECEIVED_WINDOW_S:
+                    self._before_decreases = kbps / every
+                # a dip: the rate before its decreases is the one to come back to (what arrived
+                # says too: the client's measure of the link is of the frames before). A slow
+                # start's overshoot is none: it ends the slow start.
+                dip = min(link, delivered_kbps) < DIP_SHARE * kbps / every
+                if dip and self._before_dip is None and not was_starting:
+                    self._before_dip = self._before_decreases
                 if link > 0:
                     share = max(MIN_DRAIN_SHARE, 1.0 - queue / 1000.0 - 0.1)
                     # on the wire: the stream's rate, no more than that share of the link
@@ -239,7 +267,12 @@ class StreamAdaptation:
                 self.rung, reason, self._last_rung_change = self.rung - 1, PROBE, t
                 kbps = self._target_at(self.rung, kbps, every)
             else:
-                kbps, reason = min(self.max_kbps, kbps * START_GAIN), PROBE
+                kbps, reason = min(self.max_kbps, kbps * START_GAIN, self._start_ceiling), PROBE
+        elif queue < QUEUE_LOW_MS and self._before_dip is not None and t - self._last_decrease[0] >= HOLD_S:
+            # a dip cleared (no queue left): back towards the rate before it in a slow start from
+            # the next report on
+            self.starting, self._start_ceiling, self._before_dip = True, self._before_dip, None
+            reason = RECOVERED
         elif queue < QUEUE_LOW_MS and (self._last_decrease is None or t - self._last_decrease[0] >= HOLD_S):
             # room: a rung up once its rate is within RECEIVED_CAP of what arrives, else a probe
             # within the rung (both on the wire)

@@ -6,8 +6,8 @@ import pytest
 
 from pibr.protocol.errors import MalformedMessage
 from pibr.protocol.messages import decode_stream_rate, encode_stream_rate
-from pibr.server.stream_adaptation import (CONGESTED, FLOOR, HOLD_S, LADDER, MAX_EVERY, OUTAGE, PROBE, PROBE_GAIN,
-                                           RECEIVED_CAP, RECOVERED, START_GAIN, StreamAdaptation)
+from pibr.server.stream_adaptation import (CONGESTED, DIP_SHARE, FLOOR, HOLD, HOLD_S, LADDER, MAX_EVERY, OUTAGE,
+                                           PROBE, PROBE_GAIN, RECEIVED_CAP, RECOVERED, START_GAIN, StreamAdaptation)
 
 
 #: The link of the ladder's integration test (kbit/s) and how long its client runs (s).
@@ -67,16 +67,23 @@ def test_a_link_far_under_the_floor_takes_the_stream_down_the_ladder_in_one_decr
     assert c.reason == FLOOR and (c.every, c.view) == LADDER[1] and c.video_kbps == pytest.approx(2 * 750.0)
 
 
-def test_an_outage_halves_then_steps_down_the_ladder_and_recovery_comes_back_step_by_step():
-    a = StreamAdaptation(8000.0)
-    t = _steady(a, 0.0, 2.0)
+def _outage(a, t, reports=30):
+    """``reports`` reports where nothing arrives (the newest frame ages) -> (t, colour kbit/s,
+    every, view of each choice)."""
     kbps, everies, views = [], [], []
-    for i in range(30):                           # nothing arrives; the newest frame ages
+    for i in range(reports):
         c = a.report(t, 90.0 + 200.0 + 200.0 * i, 0.0)
         kbps.append(c.video_kbps)
         everies.append(c.every)
         views.append(c.view)
         t += 0.2
+    return t, kbps, everies, views
+
+
+def test_an_outage_halves_then_steps_down_the_ladder_and_comes_back_in_a_slow_start():
+    a = StreamAdaptation(8000.0)
+    t = _steady(a, 0.0, 2.0)
+    t, kbps, everies, views = _outage(a, t)
     assert a.reasons["outage"] >= 3 and kbps[0] == 4000.0
     assert a.floor_kbps == 800.0 and kbps.index(800.0) < everies.index(2)   # the floor first, then the ladder
     # an outage measures nothing: one rung a decrease, the frame rate halving, then the view (its
@@ -86,18 +93,57 @@ def test_an_outage_halves_then_steps_down_the_ladder_and_recovery_comes_back_ste
     assert min(kbps) == a.rung_floor_kbps(len(LADDER) - 1) == 400.0
     assert everies[-1] == MAX_EVERY == 4 and views[-1] == 2
     reasons, climbed = [], []
-    for _ in range(80):                           # the link is back: nothing queued, all of it carried
+    for _ in range(20):                           # the link is back: nothing queued, all of it carried
         c = a.report(t, 90.0, a.choice.video_kbps / a.choice.every)
         reasons.append(c.reason)
         climbed.append((c.every, c.view, c.video_kbps))
         t += 0.2
-    assert reasons.count(RECOVERED) == len(LADDER) - 1 and (a.choice.every, a.choice.view) == (1, 1)
-    assert a.choice.video_kbps == 8000.0
-    # each step up, a rung or a probe, at most half again the rate on the wire (what arrives), and
-    # every rung at least its floor
+    # the outage was a dip, not a slower link: once it cleared (the hold over), back to the rate
+    # before it in a slow start, a rung a report and then START_GAIN a report, in 2 s rather than
+    # the probes' many seconds
+    cleared = reasons.index(RECOVERED)
+    assert cleared <= HOLD_S / 0.2 and set(reasons[:cleared]) == {HOLD}
+    back = next(k for k, (e, v, kb) in enumerate(climbed) if (e, v, kb) == (1, 1, 8000.0))
+    gains = int(np.ceil(np.log(8000.0 / a.rung_floor_kbps(0)) / np.log(START_GAIN)))
+    assert back == cleared + len(LADDER) - 1 + gains
+    assert all(c == (1, 1, 8000.0) for c in climbed[back:]) and not a.starting
+    # each step up at most doubles the rate on the wire (a rung: twice the frames, or the view's
+    # side twice), and every rung is at least its floor
     wire = [k / e for e, _, k in climbed]
-    assert all(after <= RECEIVED_CAP * before * (1 + 1e-9) for before, after in zip(wire, wire[1:]))
+    assert all(after <= 2.0 * before * (1 + 1e-9) for before, after in zip(wire, wire[1:]))
     assert all(k >= a.floor_kbps / v * (1 - 1e-9) for _, v, k in climbed)
+
+
+def test_a_slower_link_is_no_dip_and_the_stream_climbs_back_by_probes():
+    """A link that still carries more than DIP_SHARE of the stream when it queues got slower: after
+    the decrease the stream probes up within what arrives, one rung at a time, no slow start."""
+    a = StreamAdaptation(8000.0)
+    t = _steady(a, 0.0, 3.0)
+    c = a.report(t, 90.0 + 400.0, 3000.0, link_kbps=3000.0)
+    assert c.reason == CONGESTED and not a.starting
+    t += 1.5
+    for _ in range(30):
+        c = a.report(t, 90.0, a.choice.video_kbps / a.choice.every)
+        assert not a.starting and c.reason in (HOLD, PROBE)
+        t += 0.2
+    assert a.choice.video_kbps == 8000.0
+    # the same queue with next to nothing arriving is a dip: a slow start back once it clears
+    b = StreamAdaptation(8000.0)
+    t = _steady(b, 0.0, 3.0)
+    b.report(t, 90.0 + 400.0, DIP_SHARE * 8000.0 * 0.9, link_kbps=3000.0)
+    t += 1.5
+    assert b.report(t, 90.0, b.choice.video_kbps).reason == RECOVERED and b.starting
+    # a slow start that overshoots a slow link finds next to nothing arriving too: it ends there,
+    # no dip to come back from (else it would climb back to its own overshoot)
+    s = StreamAdaptation(8000.0)
+    t = _steady(s, 0.0, 1.0)
+    assert s.starting and s.choice.video_kbps > 1000.0
+    assert s.report(t, 90.0 + 400.0, 100.0).reason in (CONGESTED, FLOOR) and not s.starting
+    t += 1.5
+    for _ in range(10):
+        s.report(t, 90.0, s.choice.video_kbps / s.choice.every)
+        assert not s.starting
+        t += 0.2
 
 
 def test_probes_stay_within_half_again_what_arrives():
