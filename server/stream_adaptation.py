@@ -134,7 +134,7 @@ class StreamAdaptation:
         #: rate before it
         self._start_ceiling = self.max_kbps
         self._before_dip: float | None = None   # the rate on the wire before a dip, while it lasts
-        self._before_decreases = self.choice.video_kbps   # on the wire, before the latest run of decreases
+        self._before_decreases = self.choice.video_kbps / every   # on the wire, before the latest run of decreases
         self._ages = AgeBaseline(BASELINE_S)   # the reports' ages (ms) over BASELINE_S
         self._received: deque = deque()   # (t, kbit arrived, span s, frames queued?) within RECEIVED_WINDOW_S
         self._sent: deque = deque()       # (frame id, t sent, bits) not known to have arrived
