@@ -111,6 +111,23 @@ class _Progress:
             self._bar.close()
 
 
+#: The longest server stage time stream_left_us believes (ms).
+MAX_STAGE_MS = 10_000.0
+
+
+def stream_left_us(frame: Frame, wall_clock: bool) -> int:
+    """When a frame left the server, as the stream's reports count its age (issue 28): its render
+    time, plus on the wall clock the server's own stages (its ``timings_ms``: render, read back,
+    pack, encode), so that a busy server is not read as a full link (its frames leave late, but
+    no lower rate would make them younger). A stage time that is not a number from 0 to
+    :data:`MAX_STAGE_MS` counts as 0. On the virtual clock the stages take a fixed virtual time,
+    which the least age cancels."""
+    if not wall_clock:
+        return frame.render_t_us
+    stages_ms = sum(float(ms) if 0.0 <= ms <= MAX_STAGE_MS else 0.0 for ms in frame.timings_ms)
+    return frame.render_t_us + int(round(1e3 * stages_ms))
+
+
 def _read_back(rgba, ms: float) -> tuple:
     """(rgb or None, hole fraction, ms) of one eye's image read back, (h, w, 4) or None (not read)."""
     if rgba is None:
@@ -164,7 +181,7 @@ class Client:
         self._stream_urgent = False       # a frame arrived queued since the last report
         self._link_bits_us = [0.0, 0.0]   # bits of the frames that arrived behind another, and their gaps (us)
         self._newest_frame_id = -1
-        self._newest_render_us: int | None = None
+        self._newest_left_us: int | None = None
         self._stream_reported_us: int | None = None
         self._arrivals_us: list[int] = []
         self._frame_bytes: list[int] = []
@@ -569,10 +586,11 @@ class Client:
         if self._stream_log is not None:
             self._stream_log.write(f"{t_s:.6f},{len(frames)},{sum(sizes)},{decode_ms:.3f},{fps:.3f},{kbps:.3f}\n")
         if self._adapting:   # what the next stream report tells the server (_report_stream)
+            wall = self.cfg.clock == "real"
             for (f, arrival), size in sorted(zip(frames, sizes), key=lambda item: item[0][1]):
-                self._stream_arrival(arrival, arrival - f.render_t_us, size)
+                self._stream_arrival(arrival, arrival - stream_left_us(f, wall), size)
                 self._newest_frame_id = max(self._newest_frame_id, f.frame_id)
-            self._newest_render_us = max(f.render_t_us for f, _ in frames)
+            self._newest_left_us = max(stream_left_us(f, wall) for f, _ in frames)
 
     def _stream_arrival(self, arrival_us: int, age_us: int, size: int) -> None:
         """One frame of an adapting stream arrived (``size`` wire bytes, ``age_us`` after it was
@@ -670,9 +688,9 @@ class Client:
 
     async def _report_stream(self, t_us: int, vtime_us: int) -> None:
         """Tell a server whose stream adapts to the link (options["adapt"]) what arrived, every
-        STREAM_REPORT_MS of the client's clock: the frames' median age at arrival (none arrived:
-        the newest one's age now) and their bits over the interval (protocol/messages.py)."""
-        if not self._adapting or self._newest_render_us is None:
+        STREAM_REPORT_MS of the client's clock: the frames' median age at arrival (since they left
+        the server, stream_left_us; none arrived: the newest one's age now) and their bits over the interval (protocol/messages.py)."""
+        if not self._adapting or self._newest_left_us is None:
             return
         last = self._stream_reported_us
         if last is not None and t_us - last < (STREAM_URGENT_GAP_MS if self._stream_urgent else STREAM_REPORT_MS) * 1e3:
@@ -682,7 +700,7 @@ class Client:
         if arrived:
             age_ms = float(np.median([a for a, _ in arrived])) / 1e3
         else:
-            age_ms = (now - self._newest_render_us) / 1e3
+            age_ms = (now - self._newest_left_us) / 1e3
         span_ms = STREAM_REPORT_MS if last is None else (t_us - last) / 1e3
         kbps = 8.0 * sum(n for _, n in arrived) / span_ms
         values = {ARRIVAL_AGE_MS: age_ms, DELIVERED_KBPS: kbps, REPORT_SPAN_MS: span_ms,

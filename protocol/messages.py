@@ -525,7 +525,8 @@ FRAMES_DECODED = "frames_decoded"
 DISPLAY_AGE_MS = "display_age_ms"
 #: ``Stats`` keys of a session whose stream adapts to the link (SessionConfig.options["adapt"]),
 #: sent every STREAM_REPORT_MS of the client's clock: the median age (ms) at arrival of the frames
-#: that arrived since the last report (arrival less render time; if none arrived, the newest
+#: that arrived since the last report (arrival less render time, on the wall clock less the
+#: server's stage times too, client/app.py stream_left_us; if none arrived, the newest
 #: frame's age now: how old the next one will be at least), and the bits of those frames over the
 #: report's interval (kbit/s). The server compares ages with their least over the last seconds,
 #: so an offset between the two clocks cancels.
