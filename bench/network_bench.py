@@ -47,6 +47,7 @@ def _records_summary(out: str, method: str, duration_s: float) -> dict:
     on_clock = (arrivals >= 0) & (arrivals <= duration_s) if len(arrivals) == len(sizes) else slice(None)
     kbps = [r["stream_kbps"] for r in rows if r["stream_kbps"] >= 0]
     views = [r["stream_view"] for r in rows if r["stream_view"] >= 1]
+    server_levels = [r["server_level"] for r in rows if r["server_level"] >= 0]
     return {"age_ms_p50": float(np.percentile(ages, 50)) if len(ages) else None,
             "age_ms_p95": float(np.percentile(ages, 95)) if len(ages) else None,
             "stalls": int(np.count_nonzero(gaps > STALL_MS)), "longest_stall_ms": float(gaps.max()),
@@ -54,7 +55,14 @@ def _records_summary(out: str, method: str, duration_s: float) -> dict:
             "frames": int(len(changes)),
             "colour_kbps_chosen": {"min": min(kbps), "max": max(kbps), "mean": float(np.mean(kbps))} if kbps else None,
             # the share of ticks that showed a frame whose primary view the adaptation made smaller
-            "smaller_view_share": float(np.mean(np.array(views) > 1)) if views else None}
+            "smaller_view_share": float(np.mean(np.array(views) > 1)) if views else None,
+            # what each end's own deadline chose, which moves what is shown as much as the link
+            # does on the wall clock: the client's level per tick (0 its method's best) and the
+            # server's rate-control level of the frame shown (0 its best; None: no rate control),
+            # and the ticks that missed their deadline
+            "client_level_mean": float(np.mean([r["level"] for r in rows])) if rows else None,
+            "server_level_mean": float(np.mean(server_levels)) if server_levels else None,
+            "missed_ticks": int(sum(r["missed"] for r in rows))}
 
 
 def _series(out: str, method: str, duration_s: float, step_s: float = SERIES_STEP_S) -> dict:

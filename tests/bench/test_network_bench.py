@@ -24,6 +24,8 @@ def test_a_link_that_drops_ages_the_static_stream_and_not_the_adapting_one(tmp_p
     chosen = adapt["colour_kbps_chosen"]
     assert chosen["max"] > 1200 > chosen["min"] and chosen["max"] <= 2400
     assert static["smaller_view_share"] is None and 0 < adapt["smaller_view_share"] < 1   # the start's foot
+    for run in (static, adapt):   # on the virtual clock neither end chooses by a deadline
+        assert (run["client_level_mean"], run["server_level_mean"], run["missed_ticks"]) == (0.0, None, 0)
     assert 0 < static["arrived_kbps"] <= 20000 * 1 / 3 + 1200 * 2 / 3 + 1
     for run in (static, adapt):
         assert len(run["dssim_by_segment"]) == 3 and 0 < run["dssim_mean"] < 1
@@ -58,6 +60,8 @@ def test_on_the_wall_clock_the_link_starts_with_the_clients_first_tick(tmp_path)
     for name, run in r["links"][str(link)]["runs"].items():
         ages = run["series"]["age_ms_max"]            # the oldest frame shown every 0.25 s
         assert run["frames"] > 0 and run["longest_stall_ms"] >= 400.0
+        # on the wall clock the server's rate control chooses each frame's level, and it is recorded
+        assert run["server_level_mean"] is not None and run["server_level_mean"] >= 0.0
         oldest = max(range(len(ages)), key=lambda k: ages[k] or 0.0)
         assert 6 <= oldest <= 10                      # at 1.5-2.5 s
         if name.startswith("static"):
