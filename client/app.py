@@ -689,7 +689,8 @@ class Client:
     async def _report_stream(self, t_us: int, vtime_us: int) -> None:
         """Tell a server whose stream adapts to the link (options["adapt"]) what arrived, every
         STREAM_REPORT_MS of the client's clock: the frames' median age at arrival (since they left
-        the server, stream_left_us; none arrived: the newest one's age now) and their bits over the interval (protocol/messages.py)."""
+        the server, stream_left_us; none arrived: the newest one's age now) and their bits over
+        the interval (protocol/messages.py)."""
         if not self._adapting or self._newest_left_us is None:
             return
         last = self._stream_reported_us
