@@ -586,11 +586,13 @@ class Client:
         if self._stream_log is not None:
             self._stream_log.write(f"{t_s:.6f},{len(frames)},{sum(sizes)},{decode_ms:.3f},{fps:.3f},{kbps:.3f}\n")
         if self._adapting:   # what the next stream report tells the server (_report_stream)
-            wall = self.cfg.clock == "real"
+            wall, newest_left = self.cfg.clock == "real", None
             for (f, arrival), size in sorted(zip(frames, sizes), key=lambda item: item[0][1]):
-                self._stream_arrival(arrival, arrival - stream_left_us(f, wall), size)
+                left = stream_left_us(f, wall)
+                self._stream_arrival(arrival, arrival - left, size)
                 self._newest_frame_id = max(self._newest_frame_id, f.frame_id)
-            self._newest_left_us = max(stream_left_us(f, wall) for f, _ in frames)
+                newest_left = left if newest_left is None else max(newest_left, left)
+            self._newest_left_us = newest_left
 
     def _stream_arrival(self, arrival_us: int, age_us: int, size: int) -> None:
         """One frame of an adapting stream arrived (``size`` wire bytes, ``age_us`` after it was
