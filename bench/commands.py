@@ -147,9 +147,16 @@ def cmd_bench_network(args) -> int:
 
     from .network_bench import print_network, run_network_bench
 
+    from pibr.protocol.errors import ConfigError
+    from pibr.server.stream_adaptation import STARTS
+
     for link in args.links:
         load_bandwidth_trace(link)   # a bad name or file refused before any process starts
+    for start in args.adapt_start:
+        if start not in STARTS:
+            raise ConfigError(f"--adapt-start: {start!r} is not one of {', '.join(STARTS)}")
     r = run_network_bench(out_dir=args.out, links=args.links, static_kbps=args.static_kbps,
+                          adapt_starts=tuple(args.adapt_start),
                           adapt_kbps=args.adapt_kbps, method=args.method, trace=args.trace, start_s=args.start,
                           duration_s=args.duration, rate_hz=args.rate, size=args.size, view_size=args.view_size,
                           clock=args.clock, placement=args.placement)

@@ -100,7 +100,7 @@ def run_network_bench(out_dir="out/bench", links=tuple(BUILTIN),
                       duration_s: float = 30.0, rate_hz: float = 30.0, size=(480, 270), view_size=(512, 512),
                       latency_ms: float = 128.0, server_fps: float = 10.0, segment_s: float = SEGMENT_S,
                       clock: str = "virtual", placement: str = "split", progress: bool = True,
-                      plot: bool = True) -> dict:
+                      plot: bool = True, adapt_starts=("foot",)) -> dict:
     """Every link trace x (each static bitrate, the adapting stream); writes ``out_dir/network.json``
     (and ``network.png`` with ``plot``: per link, its rate and the stream's choice, and the frame
     age shown, over time).
@@ -110,7 +110,9 @@ def run_network_bench(out_dir="out/bench", links=tuple(BUILTIN),
     busy to keep up makes frames wait as a full link does, which the adapting stream reads as
     congestion); on the real clock ``placement`` says which cores each process may use
     (bench/processes.py: ``split``, the server and relay on one core and the client on the other,
-    as on two machines)."""
+    as on two machines). ``adapt_starts``: one adapting run per start (``pibr serve --adapt-start``;
+    the first is the ``adapt KBPS`` row the verdict reads, the others ``adapt KBPS START``, each
+    with a verdict of its own in ``verdicts``)."""
     if clock not in CLOCKS:
         raise ValueError(f"clock must be one of {', '.join(CLOCKS)}, got {clock!r}")
     from .evaluate import evaluate_run
@@ -119,12 +121,15 @@ def run_network_bench(out_dir="out/bench", links=tuple(BUILTIN),
     half = latency_ms / 2.0
     root = os.path.join(out_dir, "network")
     settings = [(f"static {k:g}", ["--bitrate-kbps", f"{k:g}", "--adapt", "off"]) for k in static_kbps]
-    settings.append((f"adapt {adapt_kbps:g}", ["--bitrate-kbps", f"{adapt_kbps:g}", "--adapt", "on"]))
+    for k, start in enumerate(adapt_starts):
+        settings.append((f"adapt {adapt_kbps:g}" + ("" if k == 0 else f" {start}"),
+                         ["--bitrate-kbps", f"{adapt_kbps:g}", "--adapt", "on", "--adapt-start", start]))
     result = {"benchmark": "network", "machine": {"cpus": os.cpu_count(), "platform": platform.platform()},
               "settings": {"scene": scene, "trace": trace, "start_s": start_s, "duration_s": duration_s,
                            "rate_hz": rate_hz, "size": list(size), "view_size": list(view_size),
                            "latency_ms": latency_ms, "server_fps": server_fps, "method": method,
                            "links": list(links), "static_kbps": list(static_kbps), "adapt_kbps": adapt_kbps,
+                           "adapt_starts": list(adapt_starts),
                            "stall_ms": STALL_MS, "segment_s": segment_s, "clock": clock,
                            "placement": placement if clock == "real" else None,
                            "window": f"{trace} from {start_s:g} s (an evaluation window; nothing is fitted here)"},
@@ -152,6 +157,8 @@ def run_network_bench(out_dir="out/bench", links=tuple(BUILTIN),
                                "series": _series(out, method, duration_s)}
     for link, entry in result["links"].items():
         entry["verdict"] = _verdict(entry["runs"], latency_ms)
+        if len(adapt_starts) > 1:
+            entry["verdicts"] = {k: _verdict(entry["runs"], latency_ms, k) for k in entry["runs"] if k.startswith("adapt")}
     write_result(out_dir, "network.json", result)
     if plot:
         from .plots import plot_network
@@ -160,16 +167,58 @@ def run_network_bench(out_dir="out/bench", links=tuple(BUILTIN),
     return result
 
 
+def compare_starts(results: list, provenance: str = "") -> dict:
+    """The adapting stream's two starts (``--adapt-start foot`` and ``probe``) side by side, from
+    run_network_bench results made with ``adapt_starts=("foot", "probe")`` (one per head-trace
+    window, statics not needed): per window and link, each start's age p50 / p95, stalls, DSSIM
+    and its first segment's (the seconds the start decides), and how often probe came out ahead."""
+    rows = []
+    for r in results:
+        st = r["settings"]
+        window = f"{st['trace']} from {st['start_s']:g} s"
+        foot_key, probe_key = f"adapt {st['adapt_kbps']:g}", f"adapt {st['adapt_kbps']:g} probe"
+        for link, entry in r["links"].items():
+            pair = {}
+            for start, key in (("foot", foot_key), ("probe", probe_key)):
+                v = entry["runs"][key]
+                pair[start] = {"age_ms_p50": v["age_ms_p50"], "age_ms_p95": v["age_ms_p95"], "stalls": v["stalls"],
+                               "longest_stall_ms": v["longest_stall_ms"], "arrived_kbps": v["arrived_kbps"],
+                               "dssim_mean": v["dssim_mean"], "dssim_first_segment": v["dssim_by_segment"][0],
+                               "dssim_by_segment": v["dssim_by_segment"]}
+            rows.append({"window": window, "link": link, **pair})
+    n = len(rows)
+    count = lambda f: sum(1 for row in rows if f(row["foot"], row["probe"]))
+    summary = {"runs": n,
+               "first_segment_lower_with_probe": count(lambda a, b: b["dssim_first_segment"] < a["dssim_first_segment"]),
+               "dssim_lower_with_probe": count(lambda a, b: b["dssim_mean"] < a["dssim_mean"]),
+               "age_p95_higher_with_probe": count(lambda a, b: b["age_ms_p95"] > a["age_ms_p95"]),
+               "age_p95_lower_with_probe": count(lambda a, b: b["age_ms_p95"] < a["age_ms_p95"]),
+               "first_segment_ratio_mean": float(np.mean([row["probe"]["dssim_first_segment"]
+                                                          / row["foot"]["dssim_first_segment"] for row in rows])),
+               "dssim_ratio_mean": float(np.mean([row["probe"]["dssim_mean"] / row["foot"]["dssim_mean"]
+                                                  for row in rows]))}
+    first = results[0]["settings"]
+    settings = {k: first[k] for k in ("scene", "duration_s", "rate_hz", "size", "view_size", "latency_ms",
+                                      "server_fps", "method", "adapt_kbps", "segment_s", "clock")}
+    settings["windows"] = sorted({row["window"] for row in rows})
+    settings["links"] = sorted({row["link"] for row in rows})
+    settings["purpose"] = ("reporting: evaluation windows and links nothing was fitted on (PROBE_SHARE is a "
+                           "declared half, not a fit)")
+    return {"benchmark": "network-start", "machine": results[0]["machine"], "settings": settings, "rows": rows,
+            "summary": summary, "provenance": provenance}
+
+
 def run_label(link: str, setting: str) -> str:
     """The folder of one run under ``out_dir/network``: the link's name (a file's base name, so a
     link given as a path stays under ``out_dir``) and the setting."""
     return f"{os.path.basename(os.path.normpath(link))}-{setting.replace(' ', '-')}"
 
 
-def _verdict(runs: dict, rtt_ms: float) -> dict:
-    """The adapting stream against the goals: age p95 over the round trip, the longest stall, and
-    per segment its DSSIM over the best static setting's in hindsight."""
-    adapt = next((v for k, v in runs.items() if k.startswith("adapt")), None)
+def _verdict(runs: dict, rtt_ms: float, adapt_key: str | None = None) -> dict:
+    """The adapting stream (the first adapting run, or ``adapt_key``'s) against the goals: age p95
+    over the round trip, the longest stall, and per segment its DSSIM over the best static setting's
+    in hindsight."""
+    adapt = runs.get(adapt_key) if adapt_key else next((v for k, v in runs.items() if k.startswith("adapt")), None)
     statics = {k: v for k, v in runs.items() if k.startswith("static")}
     if adapt is None or not statics:
         return {}

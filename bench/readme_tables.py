@@ -313,6 +313,18 @@ def network(r: dict) -> list[str]:
                   rows)
 
 
+def network_start(r: dict) -> list[str]:
+    """bench/network_bench.py compare_starts: the adapting stream from its ladder's foot against
+    from half the link its proxies measured, per head-trace window and link."""
+    rows = []
+    for row in r["rows"]:
+        a, b = row["foot"], row["probe"]
+        rows.append([row["window"], row["link"], f"{a['age_ms_p95']:.0f} / {b['age_ms_p95']:.0f}",
+                     f"{a['stalls']} / {b['stalls']}", f"{a['dssim_first_segment']:.4f} / {b['dssim_first_segment']:.4f}",
+                     f"{a['dssim_mean']:.4f} / {b['dssim_mean']:.4f}"])
+    return _table(["window", "link", "age p95 ms (foot / probe)", "stalls", "first 5 s DSSIM", "DSSIM"], rows)
+
+
 def live(r: dict) -> list[str]:
     """``pibr bench live``: the client alone and watched by the live page, and the page's share."""
     s = r["summary"]
@@ -358,7 +370,7 @@ RENDERERS = {"realtime": realtime, "levels": levels, "upsampling": upsampling, "
              "split": split, "server-projection": server_projection, "server-edges": server_edges,
              "codec-matched": codec_matched, "codec-end-to-end": codec_end_to_end, "lod-target": lod_target,
              "stereo": stereo, "stereo-server": stereo_server, "predict": predict,
-             "predict-quality": predict_quality, "network": network, "live": live,
+             "predict-quality": predict_quality, "network": network, "network-start": network_start, "live": live,
              "cluster": cluster, "scoring": scoring, "scoring-stages": scoring_stages}
 
 

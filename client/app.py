@@ -38,7 +38,7 @@ from pibr.common.quality import OFF, DeadlineController, read_cost_table
 from pibr.protocol.age_baseline import AgeBaseline
 from pibr.protocol.errors import ConfigError, MalformedMessage, UnexpectedMessage
 from pibr.protocol.messages import (ARRIVAL_AGE_MS, DELIVERED_KBPS, DISPLAY_AGE_MS, FRAMES_DECODED, LINK_KBPS,
-                                    NEWEST_FRAME, REPORT_SPAN_MS, STREAM_BASELINE_S, STREAM_QUEUE_HIGH_MS,
+                                    NEWEST_FRAME, PROBE_KBPS, REPORT_SPAN_MS, STREAM_BASELINE_S, STREAM_QUEUE_HIGH_MS,
                                     STREAM_REPORT_MS, STREAM_URGENT_GAP_MS, WARMUP_SEQ,
                                     Clock, Frame, Hello, OutputConfig, PayloadKind, PoseMsg, Stats, decode_eye,
                                     decode_frame_level, decode_stream_rate)
@@ -498,8 +498,10 @@ class Client:
 
         assembler = self.conn.side.proxies
         info = assembler.info
+        last = None
         while not assembler.complete:
-            await self.conn.recv()
+            env = await self.conn.recv()
+            last = (env.vtime_us, asyncio.get_running_loop().time())
         t_received = time.monotonic()
         chunks = assembler.chunks()
         assembler.release()
@@ -514,10 +516,24 @@ class Client:
         self.proxies = await loop.run_in_executor(None, decode, chunks)
         self.proxy_stats = {"bytes": compressed, "chunks": assembler.count, "objects": len(self.proxies),
                             "transfer_ms": (t_received - t_welcome) * 1e3,
-                            "decode_ms": (time.monotonic() - t_received) * 1e3}
+                            "decode_ms": (time.monotonic() - t_received) * 1e3,
+                            "probe_kbps": self._probe_kbps(compressed, last)}
         log.info("proxies: %d objects, %.2f MB in %d chunks, received in %.0f ms, decoded in %.0f ms",
                  len(self.proxies), compressed / 1e6, assembler.count, self.proxy_stats["transfer_ms"],
                  self.proxy_stats["decode_ms"])
+
+    def _probe_kbps(self, nbytes: int, last) -> float | None:
+        """The link's rate (kbit/s) the proxy bundle measured: its ``nbytes`` over the time from the
+        Welcome's arrival to its last chunk's (``last``: (virtual us, loop s)), on the session's
+        clock (the virtual one as a relay stamps it); None without a time to measure (no relay on
+        the virtual clock: everything is stamped at once)."""
+        if last is None or self.conn.welcome_arrival is None:
+            return None
+        if self.cfg.clock == "virtual":
+            seconds = (last[0] - self.conn.welcome_arrival[0]) / 1e6
+        else:
+            seconds = last[1] - self.conn.welcome_arrival[1]
+        return 8.0 * nbytes / seconds / 1e3 if seconds > 0 else None
 
     def _pose_history(self):
         """Where the frames' object transforms are kept (the proxies' rest transforms and boxes
@@ -768,9 +784,18 @@ class Client:
             raise MalformedMessage(f"frame {frame.frame_id} names server level {level}, but the session has {count}")
         return level
 
+    async def _send_probe(self, vtime_us: int) -> None:
+        """An adapting session's link measured on the proxies (PROBE_KBPS), where its stream may
+        start, sent before the first pose (on the virtual clock stamped as the first tick is: a
+        link's messages arrive in order, so a later stamp would hold the first poses back)."""
+        probe = (self.proxy_stats or {}).get("probe_kbps")
+        if self._adapting and probe is not None:
+            await self.conn.send(Stats({PROBE_KBPS: probe}), vtime_us=vtime_us)
+
     async def _run_virtual(self, trace, interval_us, n_ticks, preroll, progress) -> None:
         side = self.conn.side   # side.horizon_us: every later server message has a virtual time >= this
         inbox: deque = deque()
+        await self._send_probe(-preroll * interval_us)
         for tick in range(-preroll, n_ticks):
             t_us = tick * interval_us
             pose = self._pose_at(trace, t_us / 1e6)
@@ -802,6 +827,7 @@ class Client:
         switch_interval = sys.getswitchinterval()
         sys.setswitchinterval(SWITCH_INTERVAL_S)
         loop = asyncio.get_running_loop()
+        await self._send_probe(0)
         origin = loop.time()
         receiver = asyncio.create_task(self._receive_real(origin), name="client-receiver")
         try:

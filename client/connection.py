@@ -44,6 +44,7 @@ class ClientConnection:
         self.receive_timeout_s = receive_timeout_s
         self.peer = peer
         self.session_timeout_s = session_timeout_s
+        self.welcome_arrival: tuple | None = None   # (virtual us, loop s) when the Welcome arrived
         self._session_deadline = (None if session_timeout_s is None
                                   else asyncio.get_running_loop().time() + session_timeout_s)
 
@@ -125,7 +126,7 @@ class ClientConnection:
         self.writer.write(self.conn.data_to_send())
         await self.writer.drain()
         try:
-            await self.recv(timeout)
+            welcome = await self.recv(timeout)
         except PeerTimeout as exc:
             raise PeerTimeout(f"{exc} after our Hello: no Welcome") from None
         except RemoteError as exc:
@@ -137,6 +138,8 @@ class ClientConnection:
                 raise ServerClosed("server closed the connection without answering the Hello; if it serves TLS, "
                                    "connect with --tls-ca FILE or --tls-pin SHA256") from None
             raise
+        # when the Welcome arrived: on the server's virtual clock as a relay stamps it, and here
+        self.welcome_arrival = (welcome.vtime_us, asyncio.get_running_loop().time())
         return self.config
 
     async def _flush_quietly(self) -> None:

@@ -549,6 +549,11 @@ STREAM_URGENT_GAP_MS = 50.0
 REPORT_SPAN_MS = "report_span_ms"
 LINK_KBPS = "link_kbps"
 NEWEST_FRAME = "newest_frame"
+#: ``Stats`` key a client of an adapting session sends once, before its first pose: the link's
+#: rate (kbit/s) measured on the proxy bundle sent ahead of the stream (its bits over the time from
+#: the Welcome's arrival to its last chunk's), where the stream may start instead of at its
+#: slowest (server/stream_adaptation.py).
+PROBE_KBPS = "probe_kbps"
 
 
 @dataclass(frozen=True)

@@ -67,6 +67,7 @@ class ServerConfig:
     max_pending: int = 64               # connections yet to send a Hello; beyond, the oldest is dropped
     predict: str = "kalman"             # render for the head pose predicted at display (server/pose_prediction.py; pibr bench predict)
     adapt: str = "off"                  # the stream follows the link the client reports (server/stream_adaptation.py)
+    adapt_start: str = "foot"           # where it starts: its ladder's foot, or half the link its proxies measured
     silent_slot_s: float = 2.0          # a session without a pose this long after its Welcome yields its slot to a waiting client
     hello_timeout_s: float = 10.0       # from connecting to a whole Hello
     idle_timeout_s: float = 15.0        # real clock: longest wait for the client's next pose or clock
@@ -128,6 +129,10 @@ class ServerConfig:
             raise ConfigError(f"unknown pose predictor {self.predict!r}; choose from {', '.join(PREDICTORS)}")
         if self.adapt not in ("on", "off"):
             raise ConfigError(f"stream adaptation must be on or off, got {self.adapt!r}")
+        from .stream_adaptation import STARTS
+
+        if self.adapt_start not in STARTS:
+            raise ConfigError(f"the adapting stream starts at {' or '.join(STARTS)}, got {self.adapt_start!r}")
         if not (0 < self.silent_slot_s <= 3600):
             raise ConfigError(f"--silent-slot-s must be in (0, 3600] s, got {self.silent_slot_s}")
         if not (0 <= self.admit_wait_s <= 3600):

@@ -8,7 +8,9 @@ clock:
 * **virtual**: frames are forwarded at once, their header ``vtime_us`` rewritten to the
   modelled arrival time (deterministic: jitter comes from a seeded generator); the
   handshake (``Hello``, ``Welcome``, the proxies' ``ProxyChunk``) precedes the simulated
-  timeline and passes unchanged;
+  timeline: the Hello passes unchanged, the server's answers are stamped with their arrival
+  through a downlink of their own (the same link, its trace from the start, all sent at 0), so
+  that the client can measure the link on the proxies before the stream starts;
 * **real**: frames are held until their modelled arrival on the wall clock, unchanged.
 
 **Bandwidth.** Each direction has a fixed cap (``--kbps``) or replays a bandwidth trace
@@ -196,6 +198,8 @@ class _Pair:
         origin = 0 if self.clock == "virtual" else int(asyncio.get_running_loop().time() * 1e6)
         self.up_model = LinkModel(cfg.up, seed=up_seed, origin_us=origin)
         self.down_model = LinkModel(cfg.down, seed=down_seed, origin_us=origin)
+        # virtual: the handshake's own pass through the downlink, before the simulated timeline
+        self.handshake_model = LinkModel(cfg.down, seed=down_seed, origin_us=0)
         from pibr.common.tls import open_connection
 
         try:
@@ -259,7 +263,12 @@ class _Pair:
         if self.clock == "virtual":
             if f.type in (Hello.TYPE, Welcome.TYPE, ProxyChunk.TYPE):
                 # The handshake and the proxies sent with it come before the simulated timeline
-                # starts; through the link model they would push the link's FIFO clock past the first ticks.
+                # starts; through the session's link model they would push the link's FIFO clock
+                # past the first ticks. The downlink's are stamped with their arrival through a
+                # model of their own (the trace from its start, sent at 0): the client measures
+                # the link on them.
+                if model is self.down_model and f.type != Hello.TYPE:
+                    return None, encode_frame(f.type, f.payload, self.handshake_model.arrival_us(0, f.wire_size))
                 return None, encode_frame(f.type, f.payload, f.vtime_us)
             return None, encode_frame(f.type, f.payload, model.arrival_us(f.vtime_us, f.wire_size, is_clock))
         loop = asyncio.get_running_loop()

@@ -24,7 +24,7 @@ from collections import deque
 from pibr.protocol.connection import Envelope
 from pibr.protocol.errors import ClientClosed, ConfigError, PeerTimeout, ProtocolError, SceneError
 from pibr.protocol.messages import (ARRIVAL_AGE_MS, DELIVERED_KBPS, DISPLAY_AGE_MS, FRAMES_DECODED, LINK_KBPS,
-                                    NEWEST_FRAME, REPORT_SPAN_MS, STREAM_REPORT_MS, Bye, Clock, Error,
+                                    NEWEST_FRAME, PROBE_KBPS, REPORT_SPAN_MS, STREAM_REPORT_MS, Bye, Clock, Error,
                                     Hello, PoseMsg, Welcome, encode_stream_rate)
 from pibr.protocol.sides import ServerSide
 from pibr.protocol.stereo import CENTRE, eye_pose, frame_eyes
@@ -272,9 +272,20 @@ class Session:
         reproducible), the pipeline told when the colour's target moves."""
         adaptation, stats = self.adaptation, self.side.stats_log
         virtual = self.side.hello.clock == "virtual"
-        before = adaptation.choice
-        while stats and (not virtual or stats[0][0] <= t_us):
+        before, probed = adaptation.choice, False
+        # (the handshake's probe is taken whenever it comes: it was measured before the stream)
+        while stats and (not virtual or stats[0][0] <= t_us or PROBE_KBPS in stats[0][1]):
             vtime_us, values = stats.popleft()
+            if PROBE_KBPS in values:
+                if self.server.config.adapt_start == "probe":
+                    c, probed = adaptation.probe(float(values[PROBE_KBPS])), True
+                    log.info("session %d: the link measured %.0f kbit/s on the proxies: the stream starts at colour "
+                             "%.0f kbit/s, a frame every %d ticks, view 1/%d", self.id, values[PROBE_KBPS],
+                             c.video_kbps, c.every, c.view)
+                else:
+                    log.info("session %d: the link measured %.0f kbit/s on the proxies; the stream starts at its "
+                             "ladder's foot (--adapt-start foot)", self.id, values[PROBE_KBPS])
+                continue
             age, delivered = values.get(ARRIVAL_AGE_MS), values.get(DELIVERED_KBPS)
             if age is None or delivered is None:
                 continue
@@ -286,7 +297,7 @@ class Session:
                       "a frame every %d ticks (%s)", self.id, t, age, delivered, c.video_kbps, c.every, c.reason_name)
         choice = adaptation.choice
         if choice.video_kbps != before.video_kbps:
-            self.pipeline.adapt_stream(choice.video_kbps, adaptation.share, at_once=adaptation.starting)
+            self.pipeline.adapt_stream(choice.video_kbps, adaptation.share, at_once=adaptation.starting or probed)
         return choice
 
     def _take_pose(self, msg: PoseMsg) -> None:

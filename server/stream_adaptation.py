@@ -64,6 +64,15 @@ link before the first frame arrives: the frames sent meanwhile are all queued on
 than them (starting at a quarter of 16 Mbit/s on a 300 kbit/s link, the first frame took 2.7 s
 and the frames sent until the first report kept every later one 15 s old or more).
 
+Where the client measured the link before the stream (the proxy bundle sent ahead of it, its bits
+over the time from the Welcome's arrival to its last chunk's: PROBE_KBPS), with ``--adapt-start
+probe`` the stream starts at
+:data:`PROBE_SHARE` of that rate instead, on the first rung from the top whose floor fits it, and
+probes from there as on any link with room (:meth:`StreamAdaptation.probe`): a known rate is a
+start that does not queue, half of it leaves room for what one measure gets wrong, and a slow
+start is for a link nothing is known of. Without proxies, or on the virtual clock without a
+relay, nothing is measured.
+
 The edge codec's rate follows the colour's share of its bitrate. On the virtual clock the
 reports are taken as of each frame's time, so the choices are reproducible. The constants are
 not fitted to any trace (a declared choice, as in a delay-based congestion controller: a queue
@@ -73,6 +82,7 @@ and a handover's (0.05); it was judged on other draws of the cellular model (REA
 """
 from __future__ import annotations
 
+import math
 from collections import deque
 from dataclasses import dataclass
 
@@ -91,6 +101,11 @@ START_GAIN = 1.5
 RECEIVED_CAP = 1.5
 RECEIVED_WINDOW_S = 1.0
 MIN_DRAIN_SHARE = 0.3
+#: The share of the link's rate measured on the handshake (the proxy bundle) a stream starts at.
+PROBE_SHARE = 0.5
+#: Where a stream starts (``pibr serve --adapt-start``): its ladder's foot, or, where the client
+#: measured the link on the proxies, PROBE_SHARE of it (StreamAdaptation.probe).
+STARTS = ("foot", "probe")
 HOLD_S = 0.6
 #: A decrease whose link carries less than this share of the stream on the wire is a dip (an
 #: outage, a handover), not a slower link: once it clears the stream comes back in a slow start.
@@ -185,6 +200,25 @@ class StreamAdaptation:
     def _least_s(self) -> float:
         # (on the real clock the least age holds the two clocks' offset too: never below 0)
         return max(0.0, self._ages.least / 1e3)
+
+    def probe(self, link_kbps: float) -> StreamChoice:
+        """Before the first report: the link's rate (kbit/s) measured on the handshake (the proxy
+        bundle's bits over their time, PROBE_KBPS) -> where the stream starts: the first rung from
+        the top whose floor fits :data:`PROBE_SHARE` of it on the wire, at that share, with no slow
+        start (module docstring). A later probe, or one that measured nothing, changes nothing."""
+        if self.reports or not math.isfinite(link_kbps) or link_kbps <= 0:
+            return self.choice
+        wanted = PROBE_SHARE * float(link_kbps)
+        rung = 0
+        while rung + 1 < len(LADDER) and self.rung_floor_kbps(rung) > wanted * LADDER[rung][0]:
+            rung += 1
+        every, view = LADDER[rung]
+        kbps = min(self.max_kbps, max(wanted * every, self.rung_floor_kbps(rung)))
+        self.rung = rung
+        self.choice = StreamChoice(kbps, every, START, view)
+        self._before_decreases = kbps / every
+        self.starting = False   # the link is known: probes from here, each within what arrives
+        return self.choice
 
     def report(self, t: float, age_ms: float, delivered_kbps: float, span_ms: float = STREAM_REPORT_MS,
                link_kbps: float | None = None, newest_frame: int | None = None) -> StreamChoice:

@@ -14,9 +14,16 @@ def test_a_link_that_drops_ages_the_static_stream_and_not_the_adapting_one(tmp_p
     link.write_text("t,kbps\n0,20000\n1,1200\n60,1200\n")
     r = run_network_bench(str(tmp_path), links=(str(link),), static_kbps=(2400.0,), adapt_kbps=2400.0,
                           method="rotation", duration_s=3.0, size=(96, 64), view_size=(192, 192), segment_s=1.0,
-                          progress=False)
+                          progress=False, adapt_starts=("foot", "probe"))
     runs = r["links"][str(link)]["runs"]
     static, adapt = runs["static 2400"], runs["adapt 2400"]
+    # a start of its own per adapting run, each with its verdict; rotation asks for no proxies, so
+    # nothing measured the link and the probe start is the foot's, run for run
+    probe = runs["adapt 2400 probe"]
+    assert r["settings"]["adapt_starts"] == ["foot", "probe"]
+    assert set(r["links"][str(link)]["verdicts"]) == {"adapt 2400", "adapt 2400 probe"}
+    assert r["links"][str(link)]["verdicts"]["adapt 2400"] == r["links"][str(link)]["verdict"]
+    assert probe["series"] == adapt["series"] and probe["dssim_mean"] == adapt["dssim_mean"]
     assert static["age_ms_p95"] > 1000.0                      # the queue behind a link at half the stream
     assert adapt["age_ms_p95"] < 0.7 * static["age_ms_p95"]
     assert static["colour_kbps_chosen"] is None

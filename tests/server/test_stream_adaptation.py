@@ -7,7 +7,8 @@ import pytest
 from pibr.protocol.errors import MalformedMessage
 from pibr.protocol.messages import decode_stream_rate, encode_stream_rate
 from pibr.server.stream_adaptation import (CONGESTED, DIP_SHARE, FLOOR, HOLD, HOLD_S, LADDER, MAX_EVERY, OUTAGE,
-                                           PROBE, PROBE_GAIN, RECEIVED_CAP, RECOVERED, START_GAIN, StreamAdaptation)
+                                           PROBE, PROBE_GAIN, PROBE_SHARE, RECEIVED_CAP, RECOVERED, START,
+                                           START_GAIN, StreamAdaptation)
 
 
 #: The link of the ladder's integration test (kbit/s) and how long its client runs (s).
@@ -291,6 +292,31 @@ def test_small_steps_that_add_up_far_from_the_running_target_restart_x264():
     assert enc.encode(grey)[1] and enc.applied_kbps == kbps * 1.2
 
 
+def test_a_link_measured_on_the_proxies_starts_the_stream_at_half_its_rate():
+    """StreamAdaptation.probe: the stream starts at PROBE_SHARE of the rate the proxy bundle
+    measured, on the first rung from the top whose floor fits it, with no slow start (the link is
+    known): it probes from there within what arrives. A probe after the first report, or one that
+    measured nothing, changes nothing."""
+    a = StreamAdaptation(16000.0)
+    c = a.probe(10000.0)
+    assert (c.every, c.view, c.reason) == (1, 1, START) and c.video_kbps == pytest.approx(PROBE_SHARE * 10000.0)
+    assert not a.starting and a.rung == 0
+    up = a.report(0.0, 90.0, 5000.0)           # nothing queued: a probe, not the slow start's half again
+    assert up.reason == PROBE and up.video_kbps == pytest.approx(5000.0 * PROBE_GAIN)
+    assert a.probe(1000.0) == up               # reports came first: the probe is too late
+    assert StreamAdaptation(16000.0).probe(40000.0).video_kbps == 16000.0   # never past the session's bitrate
+    # a link slower than the floor (1600 kbit/s): down the ladder to the first rung that fits
+    slow = StreamAdaptation(16000.0)
+    c = slow.probe(1000.0)
+    rung = LADDER.index((c.every, c.view))
+    assert rung > 0 and slow.rung_floor_kbps(rung - 1) > PROBE_SHARE * 1000.0 * LADDER[rung - 1][0]
+    assert c.video_kbps == pytest.approx(max(PROBE_SHARE * 1000.0 * c.every, slow.rung_floor_kbps(rung)))
+    # measured nothing, or a client's nonsense: the ladder's foot, as without a probe
+    for bad in (0.0, -5.0, float("nan"), float("inf")):
+        none = StreamAdaptation(16000.0)
+        assert none.probe(bad) == StreamAdaptation(16000.0).choice and (none.choice.every, none.choice.view) == LADDER[-1]
+
+
 def test_a_stream_starts_at_the_ladders_foot_and_climbs_at_once_until_frames_queue():
     """The slow start: from the ladder's last rung at its floor, a rung up each report that finds
     nothing queued, then the target half again each report, with no cap from what arrived (each
@@ -355,6 +381,49 @@ async def test_through_a_link_that_drops_the_adapting_stream_keeps_its_frames_yo
     assert kbps[0] == 240 / LADDER[-1][1] and max(kbps) > 240 and max(kbps[-10:]) < 1200
     strip = lambda rows: [{k: v for k, v in r.items() if k != "client_ms"} for r in rows]
     assert strip(on) == strip(again)
+
+
+@pytest.mark.gl
+async def test_the_link_measured_on_the_proxies_is_where_the_stream_starts(tmp_path):
+    """Server, relay and client on the virtual clock, the downlink at 6 Mbit/s: the relay stamps the
+    Welcome and the proxy bundle with their arrival through the link, the client measures the link
+    on them (the bundle's bits over the time from the Welcome's arrival to its last chunk's) and
+    tells the server. With --adapt-start probe the stream starts at PROBE_SHARE of that rate on the
+    whole view; with the default, foot, at the ladder's foot all the same."""
+    import json
+
+    from pibr.client.app import run_client
+    from pibr.client.config import ClientConfig
+    from pibr.client.recorder import read_records
+    from pibr.common.bandwidth import parse_rate_csv
+    from pibr.server.config import ServerConfig
+
+    from ..loopback import server_behind_relay
+
+    trace = parse_rate_csv("0,6000\n")
+    first, probes = {}, {}
+    for start in ("probe", "foot"):
+        config = ServerConfig(port=0, scene="room", view_size=(192, 192), bitrate_kbps=16000, adapt="on",
+                              adapt_start=start)
+        out = tmp_path / start
+        async with server_behind_relay(config, down_trace=trace) as (host, port):
+            await run_client(ClientConfig(host=host, port=port, trace="pred6dof-1", start_s=12.0, duration_s=1.0,
+                                          rate_hz=30.0, methods=("proxy",), out_dir=str(out), width=96, height=64,
+                                          progress="none"))
+        first[start] = next(r for r in read_records(out / "proxy.records.csv") if r["frame_id"] >= 0)
+        probes[start] = json.loads((out / "session.json").read_text())["proxies"]["probe_kbps"]
+    assert probes["probe"] == pytest.approx(6000.0, rel=0.05) and probes["foot"] == pytest.approx(probes["probe"])
+    assert first["probe"]["stream_kbps"] == round(PROBE_SHARE * probes["probe"]) and first["probe"]["stream_view"] == 1
+    assert first["foot"]["stream_kbps"] == 1600 / LADDER[-1][1] and first["foot"]["stream_view"] == 2
+
+
+def test_the_adapting_streams_start_is_checked():
+    from pibr.protocol.errors import ConfigError
+    from pibr.server.config import ServerConfig
+
+    assert ServerConfig(adapt="on", adapt_start="probe").adapt_start == "probe"
+    with pytest.raises(ConfigError, match="starts at foot or probe, got 'top'"):
+        ServerConfig(adapt="on", adapt_start="top")
 
 
 @pytest.mark.gl
