@@ -12,6 +12,7 @@ from pibr.protocol.motion_flow import DEFAULT_FLOW_CODER, FLOW_CODERS
 
 from .config import DEFAULT_PORT, RATE_CONTROL_MODES
 from .relay import DEFAULT_BUFFER_BYTES, DEFAULT_MAX_CONNECTIONS
+from .stream_adaptation import STARTS
 
 
 def _announce(what: str):
@@ -137,7 +138,7 @@ def register(sub) -> None:
                         "young (server/stream_adaptation.py; default off: 'pibr bench network' finds it far ahead of "
                         "a static 16 Mbit/s on changing links but behind the best static rate in hindsight, and "
                         "short of its goals on the wall clock)")
-    p.add_argument("--adapt-start", choices=("foot", "probe"), default="foot",
+    p.add_argument("--adapt-start", choices=STARTS, default=STARTS[0],
                    help="with --adapt on, where the stream starts: foot (a frame every 4 ticks, the primary view at "
                         "half its side, the default) or probe (half the link's rate the client measured on the "
                         "proxy bundle, when it asked for proxies; 'pibr bench network --adapt-start foot,probe' "
