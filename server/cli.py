@@ -138,7 +138,7 @@ def register(sub) -> None:
                         "young (server/stream_adaptation.py; default off: 'pibr bench network' finds it far ahead of "
                         "a static 16 Mbit/s on changing links but behind the best static rate in hindsight, and "
                         "short of its goals on the wall clock)")
-    p.add_argument("--adapt-start", choices=STARTS, default=STARTS[0],
+    p.add_argument("--adapt-start", choices=STARTS, default="foot",
                    help="with --adapt on, where the stream starts: foot (a frame every 4 ticks, the primary view at "
                         "half its side, the default) or probe (half the link's rate the client measured on the "
                         "proxy bundle, when it asked for proxies; 'pibr bench network --adapt-start foot,probe' "
