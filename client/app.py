@@ -38,8 +38,8 @@ from pibr.common.quality import OFF, DeadlineController, read_cost_table
 from pibr.protocol.age_baseline import AgeBaseline
 from pibr.protocol.errors import ConfigError, MalformedMessage, UnexpectedMessage
 from pibr.protocol.messages import (ARRIVAL_AGE_MS, DELIVERED_KBPS, DISPLAY_AGE_MS, FRAMES_DECODED, LINK_KBPS,
-                                    NEWEST_FRAME, PROBE_KBPS, REPORT_AT_US, REPORT_SPAN_MS, STREAM_BASELINE_S,
-                                    STREAM_QUEUE_HIGH_MS, STREAM_REPORT_MS, STREAM_URGENT_GAP_MS, WARMUP_SEQ,
+                                    NEWEST_FRAME, PROBE_KBPS, REPORT_SPAN_MS, STREAM_BASELINE_S, STREAM_QUEUE_HIGH_MS,
+                                    STREAM_REPORT_MS, STREAM_URGENT_GAP_MS, WARMUP_SEQ,
                                     Clock, Frame, Hello, OutputConfig, PayloadKind, PoseMsg, Stats, decode_eye,
                                     decode_frame_level, decode_stream_rate)
 from pibr.protocol.pose import Pose
@@ -723,7 +723,7 @@ class Client:
         span_ms = STREAM_REPORT_MS if last is None else (t_us - last) / 1e3
         kbps = 8.0 * sum(n for _, n in arrived) / span_ms
         values = {ARRIVAL_AGE_MS: age_ms, DELIVERED_KBPS: kbps, REPORT_SPAN_MS: span_ms,
-                  NEWEST_FRAME: float(self._newest_frame_id), REPORT_AT_US: float(now)}
+                  NEWEST_FRAME: float(self._newest_frame_id)}
         bits, gaps_us = self._link_bits_us
         if gaps_us > 0:
             values[LINK_KBPS] = 1e3 * bits / gaps_us

@@ -545,13 +545,10 @@ STREAM_URGENT_GAP_MS = 50.0
 #: (kbit/s) measured from the frames that arrived while the link was busy with them, each one's
 #: bits over the time since the frame before it arrived (packet-pair dispersion, a frame a pair;
 #: absent when none did); and the newest frame id arrived so far (the server counts what it sent
-#: after it as still on its way); and when the client made the report (us, on the clock of its
-#: frames' arrival times, which their ages are measured on: the server counts as overdue only
-#: what had time to arrive by then, not by the report's arrival, an uplink's delay later).
+#: after it as still on its way).
 REPORT_SPAN_MS = "report_span_ms"
 LINK_KBPS = "link_kbps"
 NEWEST_FRAME = "newest_frame"
-REPORT_AT_US = "report_at_us"
 #: ``Stats`` key a client of an adapting session sends once, before its first pose: the link's
 #: rate (kbit/s) measured on the proxy bundle sent ahead of the stream (its bits over the time from
 #: the Welcome's arrival to its last chunk's), where the stream may start instead of at its

@@ -24,8 +24,8 @@ from collections import deque
 from pibr.protocol.connection import Envelope
 from pibr.protocol.errors import ClientClosed, ConfigError, PeerTimeout, ProtocolError, SceneError
 from pibr.protocol.messages import (ARRIVAL_AGE_MS, DELIVERED_KBPS, DISPLAY_AGE_MS, FRAMES_DECODED, LINK_KBPS,
-                                    NEWEST_FRAME, PROBE_KBPS, REPORT_AT_US, REPORT_SPAN_MS, STREAM_REPORT_MS, Bye,
-                                    Clock, Error, Hello, PoseMsg, Welcome, encode_stream_rate)
+                                    NEWEST_FRAME, PROBE_KBPS, REPORT_SPAN_MS, STREAM_REPORT_MS, Bye, Clock, Error,
+                                    Hello, PoseMsg, Welcome, encode_stream_rate)
 from pibr.protocol.sides import ServerSide
 from pibr.protocol.stereo import CENTRE, eye_pose, frame_eyes
 
@@ -291,10 +291,8 @@ class Session:
                 continue
             t = vtime_us / 1e6 if virtual else t_us / 1e6
             span, link, newest = values.get(REPORT_SPAN_MS, STREAM_REPORT_MS), values.get(LINK_KBPS), values.get(NEWEST_FRAME)
-            made = values.get(REPORT_AT_US)
             c = adaptation.report(t, float(age), max(0.0, float(delivered)), float(span),
-                                  None if link is None else float(link), None if newest is None else int(newest),
-                                  None if made is None else float(made) / 1e6)
+                                  None if link is None else float(link), None if newest is None else int(newest))
             log.debug("session %d: stream report at %.3f s: age %.0f ms, %.0f kbit/s arrived -> colour %.0f kbit/s, "
                       "a frame every %d ticks (%s)", self.id, t, age, delivered, c.video_kbps, c.every, c.reason_name)
         choice = adaptation.choice
@@ -348,10 +346,7 @@ class Session:
                                (produced.render_ms, produced.readback_ms, produced.pack_ms, encode_ms))
         self.conn.send(frame, vtime_us=vtime_us)
         if self.adaptation is not None:
-            # when it left, as the client's ages count it (client/app.py stream_left_us): on the
-            # wall clock after the server's stages
-            left_us = t_us + (0.0 if self.side.hello.clock == "virtual" else 1e3 * sum(frame.timings_ms))
-            self.adaptation.sent(frame_id, left_us / 1e6, 8 * encoded.nbytes)
+            self.adaptation.sent(frame_id, t_us / 1e6, 8 * encoded.nbytes)
         self.frames_sent += 1
         self.server.record_frame_timings(frame.timings_ms, encoded.nbytes)
 

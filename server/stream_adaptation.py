@@ -187,13 +187,10 @@ class StreamAdaptation:
             self._sent.popleft()
 
     def overdue_bits(self, t: float, newest_frame: int) -> int:
-        """Bits of the frames sent after ``newest_frame`` (the newest the client has at ``t``, when
-        it made its report, on the clock its ages are measured on) that would have arrived by ``t``
-        had they not queued (sent more than the least age before it), less the first of them: on
-        the wire, not waiting (on a slow link a frame's own transmission outlasts the least age,
-        measured when the link was fast). Taken at the report's arrival instead, the frames sent
-        in the uplink's delay before it count too: on a link with room, a frame in flight read as
-        a backlog of that frame's length, which cut the stream (docs/results/network-queue-tried.json)."""
+        """Bits of the frames sent after ``newest_frame`` (the newest the client has at ``t``) that
+        would have arrived by ``t`` had they not queued (sent more than the least age before it),
+        less the first of them: on the wire, not waiting (on a slow link a frame's own
+        transmission outlasts the least age, measured when the link was fast)."""
         while self._sent and self._sent[0][0] <= newest_frame:
             frame = self._sent.popleft()
             if frame[0] == newest_frame:
@@ -225,14 +222,12 @@ class StreamAdaptation:
         return self.choice
 
     def report(self, t: float, age_ms: float, delivered_kbps: float, span_ms: float = STREAM_REPORT_MS,
-               link_kbps: float | None = None, newest_frame: int | None = None,
-               made_at: float | None = None) -> StreamChoice:
+               link_kbps: float | None = None, newest_frame: int | None = None) -> StreamChoice:
         """Take one report of the client (at ``t`` s, over its last ``span_ms``; ``link_kbps``: its
-        measure of the link, if any; ``newest_frame``: the newest frame id it has; ``made_at``: when
-        it made the report, s on its frames' arrival clock, else ``t``) -> the choice for the frames
-        that follow. Rates on the wire (what arrived, the link) are kbit/s of the stream as sent;
-        the colour's target is the encoder's, made one frame every ``every`` ticks."""
-        overdue = None if newest_frame is None else self.overdue_bits(t if made_at is None else made_at, newest_frame)
+        measure of the link, if any; ``newest_frame``: the newest frame id it has) -> the choice for
+        the frames that follow. Rates on the wire (what arrived, the link) are kbit/s of the
+        stream as sent; the colour's target is the encoder's, made one frame every ``every`` ticks."""
+        overdue = None if newest_frame is None else self.overdue_bits(t, newest_frame)
         if overdue is not None and delivered_kbps <= 0 and self._acked is not None and self._acked[0] == newest_frame:
             # Nothing arrived: the newest frame's age now tells how long ago it was made (at a
             # frame every few ticks, the gap between frames too), not how long frames queue. The

@@ -1,14 +1,13 @@
 """What a client of an adapting stream measures for its reports (client/app.py, issue 28): the
 link's rate from frames that arrived while the link was busy with them, and whether a frame
 arrived queued past the threshold (the report then goes at once)."""
-import asyncio
 from types import SimpleNamespace
 
 import pytest
 
 from pibr.client.app import MAX_STAGE_MS, Client, stream_left_us
 from pibr.protocol.age_baseline import AgeBaseline
-from pibr.protocol.messages import NEWEST_FRAME, REPORT_AT_US, STREAM_BASELINE_S, STREAM_QUEUE_HIGH_MS
+from pibr.protocol.messages import STREAM_BASELINE_S, STREAM_QUEUE_HIGH_MS
 
 
 def _client():
@@ -81,20 +80,3 @@ def test_the_virtual_clock_counts_from_the_render_and_bogus_stage_times_count_as
     bogus = _frame(500, (float("nan"), float("inf"), -5.0, 20_000.0))
     assert stream_left_us(bogus, wall_clock=True) == 500_000
     assert stream_left_us(_frame(500, (MAX_STAGE_MS, 0.0, 0.0, 0.0)), wall_clock=True) == 500_000 + 1000 * MAX_STAGE_MS
-
-
-def test_a_report_carries_when_it_was_made_on_the_arrivals_clock():
-    """The server counts frames as overdue from when the client made its report (REPORT_AT_US),
-    not from its arrival an uplink's delay later: the stamp is on the clock of the arrival times."""
-    sent = []
-
-    async def send(msg, vtime_us=0, flush=True):
-        sent.append(msg)
-
-    c = _client()
-    c.__dict__.update(_adapting=True, _newest_left_us=1_000_000, _stream_reported_us=None, _time_base_us=7_000_000,
-                      _newest_frame_id=12, conn=SimpleNamespace(send=send))
-    _arrive(c, 900, 1_090, 50_000)
-    asyncio.run(Client._report_stream(c, 1_300_000, 1_300_000))
-    values = sent[0].values
-    assert values[REPORT_AT_US] == 8_300_000.0 and values[NEWEST_FRAME] == 12.0

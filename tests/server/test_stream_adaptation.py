@@ -188,35 +188,6 @@ def test_frames_sent_that_are_overdue_make_the_backlog_the_arrived_ones_do_not_y
     assert arrived_only.video_kbps == pytest.approx(8000.0 * (1 - 0.12 - 0.1))
 
 
-def test_frames_sent_in_the_uplinks_delay_before_a_report_are_not_overdue():
-    """A link with room: 10 fps, 800 kbit frames, each 146 ms old on arrival (60 over the least
-    age of the small first frames: its own transmission), and the reports reach the server 64 ms
-    after the client made them. Counted from a report's arrival, the frame sent in those 64 ms
-    was overdue too and, over the stream's own rate, 114 ms of backlog: the stream was cut on a
-    link with room. Counted from when the client made it (``made_at``), the one frame not
-    arrived is on the wire."""
-    def reasons(stamped):
-        a = StreamAdaptation(16000.0)
-        for frame in range(3):
-            a.sent(frame, 0.1 * frame, 40_000)
-        a.report(0.314, 86.0, 400.0, newest_frame=2, made_at=0.25 if stamped else None)
-        arrives = {2: 0.286}
-        for frame in range(3, 21):
-            a.sent(frame, 0.1 * frame, 800_000)
-            arrives[frame] = 0.1 * frame + 0.146
-        out = []
-        for k in range(8):
-            made = round(0.43 + 0.2 * k, 6)
-            newest = max(f for f, at in arrives.items() if at <= made)
-            out.append(a.report(made + 0.064, 146.0, 7000.0, newest_frame=newest,
-                                made_at=made if stamped else None).reason)
-        return out
-
-    stamped, unstamped = reasons(True), reasons(False)
-    assert CONGESTED not in stamped and OUTAGE not in stamped, stamped
-    assert CONGESTED in unstamped, unstamped
-
-
 def test_a_report_with_no_arrival_reads_the_queue_from_the_frame_sent_after_the_newest_not_its_age():
     """At a frame every 4 ticks, a report between two frames finds nothing arrived and the newest
     frame 300 ms old: that is the gap between frames, not a queue (it once read as congestion and
