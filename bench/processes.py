@@ -43,13 +43,15 @@ def chromium_path() -> str | None:
     return os.environ.get("PIBR_CHROMIUM") or shutil.which("chromium") or shutil.which("chromium-browser")
 
 
-def _child_setup(cpus) -> None:
-    """In the child before it runs: Ctrl-C (SIGINT) stops it as from a terminal, even where this
-    process was started ignoring it (a background job of a script ignores SIGINT, and children
-    inherit that), since :meth:`PibrProcess.stop` asks with SIGINT first; and its CPUs."""
-    signal.signal(signal.SIGINT, signal.SIG_DFL)
-    if cpus is not None:
-        os.sched_setaffinity(0, cpus)
+#: Environment variables ``python -m pibr`` reads at start-up (cli/__main__.py), set by
+#: :class:`PibrProcess` for its child: ``1``: Ctrl-C (SIGINT) stops it as from a terminal, even
+#: where this process was started ignoring it (a background job of a script ignores SIGINT, and
+#: children inherit that), since :meth:`PibrProcess.stop` asks with SIGINT first; and the CPU
+#: numbers it may run on, comma-separated. The child sets both itself, before any thread starts:
+#: Python code run between fork and exec (``preexec_fn``) can deadlock in a parent with threads
+#: (a soak's clients, started from threads, hung at fork, holding a lock another thread had).
+CHILD_SIGINT_ENV = "PIBR_CHILD_SIGINT"
+CHILD_CPUS_ENV = "PIBR_CHILD_CPUS"
 
 
 class PibrProcess:
@@ -66,13 +68,15 @@ class PibrProcess:
         self._tail: deque[str] = deque(maxlen=30)
         self._on_progress = on_progress
         full_env = dict(os.environ, PYTHONUNBUFFERED="1", **(env or {}))
+        full_env[CHILD_SIGINT_ENV] = "1"
+        full_env.pop(CHILD_CPUS_ENV, None)
         if cpus is not None:
             cpus = sorted(cpus)
             full_env["LP_NUM_THREADS"] = str(len(cpus))      # llvmpipe's rasteriser threads
+            full_env[CHILD_CPUS_ENV] = ",".join(str(c) for c in cpus)
         self.cpus = cpus
         self.proc = subprocess.Popen([sys.executable, "-m", "pibr", *args], stdout=subprocess.PIPE,
-                                     stderr=subprocess.STDOUT, text=True, bufsize=1, env=full_env,
-                                     preexec_fn=lambda: _child_setup(cpus))
+                                     stderr=subprocess.STDOUT, text=True, bufsize=1, env=full_env)
         self._pump = threading.Thread(target=self._read, name=f"{name}-output", daemon=True)
         self._pump.start()
 
