@@ -432,9 +432,9 @@ def register(sub) -> None:
                     metavar="KBPS,...", help="static bitrates to compare (default 2000,4000,8000,16000)")
     nw.add_argument("--adapt-kbps", type=arguments.positive, default=16000.0, metavar="KBPS",
                     help="the adapting stream's most (default 16000)")
-    nw.add_argument("--adapt-start", type=arguments.names, default=("foot",), metavar="START,...",
+    nw.add_argument("--adapt-start", type=arguments.names_or_none, default=("foot",), metavar="START,...",
                     help="one adapting run per start (pibr serve --adapt-start: foot, probe), the first the one "
-                         "the verdict reads (default foot)")
+                         "the verdict reads (default foot; '' for the static settings alone)")
     nw.add_argument("--method", default="proxy", help="the client's method (default proxy)")
     nw.add_argument("--trace", default="pred6dof-1", help="head trace (default pred6dof-1)")
     nw.add_argument("--start", type=arguments.non_negative, default=30.0, metavar="S", help="window start (default 30)")

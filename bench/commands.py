@@ -155,6 +155,8 @@ def cmd_bench_network(args) -> int:
     for start in args.adapt_start:
         if start not in STARTS:
             raise ConfigError(f"--adapt-start: {start!r} is not one of {', '.join(STARTS)}")
+    if not args.static_kbps and not args.adapt_start:
+        raise ConfigError("nothing to run: --static-kbps and --adapt-start are both empty")
     r = run_network_bench(out_dir=args.out, links=args.links, static_kbps=args.static_kbps,
                           adapt_starts=tuple(args.adapt_start),
                           adapt_kbps=args.adapt_kbps, method=args.method, trace=args.trace, start_s=args.start,

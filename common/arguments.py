@@ -97,6 +97,11 @@ def names(text: str) -> tuple:
     return out
 
 
+def names_or_none(text: str) -> tuple:
+    """Names separated by commas ('' for none)."""
+    return tuple(_parts(text))
+
+
 def offset(text: str) -> tuple[float, float, float]:
     """The extra view's offset ``FORWARD,UP,TILT_DEG`` (metres, metres, degrees)."""
     try:

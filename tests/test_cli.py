@@ -147,6 +147,26 @@ def test_demo_refuses_bad_names_before_starting_anything(capsys, tmp_path, argv,
     assert not out.exists()        # refused before any process started or anything was written
 
 
+def test_bench_network_runs_the_static_settings_alone_with_an_empty_adapt_start():
+    args = build_parser().parse_args(["bench", "network", "--adapt-start", ""])
+    assert args.adapt_start == () and args.static_kbps == (2000.0, 4000.0, 8000.0, 16000.0)
+    assert build_parser().parse_args(["bench", "network"]).adapt_start == ("foot",)
+    assert build_parser().parse_args(["bench", "network", "--adapt-start", "foot,probe"]).adapt_start == ("foot", "probe")
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--static-kbps", "", "--adapt-start", ""], "nothing to run: --static-kbps and --adapt-start are both empty"),
+    (["--adapt-start", "foot,fast"], "--adapt-start: 'fast' is not one of foot, probe"),
+    (["--links", "no-such-link"], "no-such-link"),
+])
+def test_bench_network_refuses_before_starting_anything(capsys, tmp_path, argv, message):
+    out = tmp_path / "out"
+    assert main(["bench", "network", *argv, "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert message in err and err.count("\n") == 1 and "Traceback" not in err
+    assert not out.exists()
+
+
 @pytest.mark.parametrize("argv", [["serve", "--port", "0"], ["demo", "--duration", "1"]])
 def test_missing_egl_is_one_line_naming_the_fix(tmp_path, argv):
     """A libEGL that cannot be loaded (an empty file first on the library path, as on a machine
