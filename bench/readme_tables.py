@@ -325,6 +325,19 @@ def network_start(r: dict) -> list[str]:
     return _table(["window", "link", "age p95 ms (foot / probe)", "stalls", "first 5 s DSSIM", "DSSIM"], rows)
 
 
+def network_repeats(r: dict) -> list[str]:
+    """docs/results/network-real-repeats.json: the adapting and static 16000 rows of the wall-clock
+    run again, each run's DSSIM and, in brackets, its age p95, per link."""
+    def cells(v) -> str:
+        ages = {round(a) for a in v["age_ms_p95"]}
+        age = f"{ages.pop()} each" if len(ages) == 1 and len(v["age_ms_p95"]) > 1 else \
+            ", ".join(f"{a:.0f}" for a in v["age_ms_p95"])
+        return ", ".join(f"{d:.4f}" for d in v["dssim_mean"]) + f" ({age})"
+
+    rows = [[link, cells(s["adapt 16000"]), cells(s["static 16000"])] for link, s in r["summary"].items()]
+    return _table(["link", "adapt 16000: DSSIM (age p95 ms)", "static 16000: DSSIM (age p95 ms)"], rows)
+
+
 def live(r: dict) -> list[str]:
     """``pibr bench live``: the client alone and watched by the live page, and the page's share."""
     s = r["summary"]
@@ -370,7 +383,8 @@ RENDERERS = {"realtime": realtime, "levels": levels, "upsampling": upsampling, "
              "split": split, "server-projection": server_projection, "server-edges": server_edges,
              "codec-matched": codec_matched, "codec-end-to-end": codec_end_to_end, "lod-target": lod_target,
              "stereo": stereo, "stereo-server": stereo_server, "predict": predict,
-             "predict-quality": predict_quality, "network": network, "network-start": network_start, "live": live,
+             "predict-quality": predict_quality, "network": network, "network-start": network_start,
+             "network-repeats": network_repeats, "live": live,
              "cluster": cluster, "scoring": scoring, "scoring-stages": scoring_stages}
 
 
