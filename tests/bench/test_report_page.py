@@ -106,8 +106,10 @@ def test_every_readme_table_of_a_benchmarks_own_file_is_in_its_report(tmp_path):
     # tables of files no single bench run writes under that name: upsampling-edge/-h264.json (one run
     # per depth codec, renamed), lod-target.json (five runs merged), server-edges (bench_server.json
     # of another command line, whose own table is server-projection's), network-start.json (a network
-    # run per head-trace window, merged by network_bench.compare_starts)
-    assert set(readme_tables.RENDERERS) - shown == {"upsampling", "lod-target", "server-edges", "network-start"}
+    # run per head-trace window, merged by network_bench.compare_starts), network-real-repeats.json
+    # (wall-clock network runs repeated, merged)
+    assert set(readme_tables.RENDERERS) - shown == {"upsampling", "lod-target", "server-edges", "network-start",
+                                                    "network-repeats"}
     shutil.copy(os.path.join(ROOT, "docs", "results", "cluster.json"), tmp_path / "cluster.json")
     assert "<td>Ray, 2 workers</td>" in build_report(str(tmp_path))
 
