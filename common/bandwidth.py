@@ -34,6 +34,8 @@ PACKET_BITS = 1500 * 8
 MAX_ROWS = 10_000_000
 MAX_PERIOD_S = 24 * 3600.0
 MAX_KBPS = 1e7
+#: The least shortfall of a message's bits that float rounding may leave it at (BandwidthTrace.finish_us).
+ROUNDING_BITS = 1e-6
 
 
 @dataclass(frozen=True, eq=False)
@@ -103,10 +105,15 @@ class BandwidthTrace:
         if rem == 0.0:               # exactly at a period's end, not the next one's start
             q2, rem = q2 - 1, per_period
         i = max(1, int(np.searchsorted(self._cum_bits, rem, side="left")))
-        t = self.times_us[i - 1] + (rem - self._cum_bits[i - 1]) / (self.rates_kbps[i - 1] / 1e3)
-        # the bits before ``s`` carry float rounding: a time a hair past a whole microsecond is that
-        # microsecond, not the next (a message must not leave 1 us late)
-        return max(int(start_us), int(math.ceil((q + q2) * period + t - 1e-6)))
+        bits_per_us = self.rates_kbps[i - 1] / 1e3
+        t = self.times_us[i - 1] + (rem - self._cum_bits[i - 1]) / bits_per_us
+        # The cumulative bits carry float rounding, a few units in the last place of the period's
+        # bits, which a slow segment stretches into time (at 1 kbit/s, 1e-8 bit is 1e-5 us): a time
+        # that far past a whole microsecond is that microsecond, not the next (a message must not
+        # leave 1 us late); it leaves at most ROUNDING_BITS early.
+        slack_bits = max(ROUNDING_BITS, 64 * np.finfo(float).eps * per_period)
+        slack_us = max(1e-6, slack_bits / bits_per_us)
+        return max(int(start_us), int(math.ceil((q + q2) * period + t - slack_us)))
 
     def summary(self, window_ms: float = 100.0) -> dict:
         """Statistics a user reads (``pibr link show``), of the rate averaged over ``window_ms``

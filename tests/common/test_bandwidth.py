@@ -61,6 +61,7 @@ def test_the_link_queues_messages_behind_each_other_on_the_trace():
 @given(st.lists(st.tuples(st.integers(1, 3000), st.floats(0, 50_000, allow_nan=False)), min_size=1, max_size=12),
        st.integers(-10_000_000, 10_000_000), st.integers(1, 3_000_000))
 @example(segments=[(375, 32.0)], start=-1, nbytes=1)   # float rounding made it leave 1 us late
+@example(segments=[(1039, 32295.0), (136, 1.0)], start=-135583, nbytes=1)   # so did a slow segment after a fast one
 def test_a_message_leaves_when_the_trace_has_carried_its_bits(segments, start, nbytes):
     lengths = np.array([s[0] for s in segments], dtype=np.int64) * 1000
     rates = np.array([round(s[1]) for s in segments], dtype=float)
