@@ -34,7 +34,8 @@ PACKET_BITS = 1500 * 8
 MAX_ROWS = 10_000_000
 MAX_PERIOD_S = 24 * 3600.0
 MAX_KBPS = 1e7
-#: The least shortfall of a message's bits that float rounding may leave it at (BandwidthTrace.finish_us).
+#: How many bits short of its size a message may leave at, so that float rounding never makes it
+#: leave a microsecond late (BandwidthTrace.finish_us).
 ROUNDING_BITS = 1e-6
 
 
