@@ -163,18 +163,8 @@ class Session:
             self._hello_deadline.reschedule(asyncio.get_running_loop().time())
 
     async def _close(self) -> None:
-        try:
-            await asyncio.wait_for(self._flush(), 2.0)
-        except (ConnectionError, ssl.SSLError, asyncio.TimeoutError, RuntimeError):
-            pass  # the peer is gone; nothing more to tell it
-        self.writer.close()
-        try:
-            await asyncio.wait_for(self.writer.wait_closed(), 2.0)
-        except (ConnectionError, ssl.SSLError, asyncio.TimeoutError):
-            pass  # TLS: the client may still have been sending when we closed
-        if self.pipeline is not None:
-            pipeline, self.pipeline = self.pipeline, None
-            await self.server.gl.run(lambda ctx: pipeline.release())
+        # The session's summary first: its counts are final, and a server shutting down cancels
+        # this coroutine at its first wait (the flush, the socket's close, the GL release).
         log.info("session %d: closed after %d frames (%d skipped for a slow connection, %d held while the client "
                  "decoded, %d tick overruns)", self.id, self.frames_sent, self.frames_skipped, self.frames_held,
                  self.tick_overruns)
@@ -189,6 +179,18 @@ class Session:
             made = self.rate.summary()["frames_at_level"]
             log.info("session %d: frames by rate-control level: %s", self.id,
                      "; ".join(f"{name}: {n}" for name, n in made.items() if n) or "none")
+        try:
+            await asyncio.wait_for(self._flush(), 2.0)
+        except (ConnectionError, ssl.SSLError, asyncio.TimeoutError, RuntimeError):
+            pass  # the peer is gone; nothing more to tell it
+        self.writer.close()
+        try:
+            await asyncio.wait_for(self.writer.wait_closed(), 2.0)
+        except (ConnectionError, ssl.SSLError, asyncio.TimeoutError):
+            pass  # TLS: the client may still have been sending when we closed
+        if self.pipeline is not None:
+            pipeline, self.pipeline = self.pipeline, None
+            await self.server.gl.run(lambda ctx: pipeline.release())
 
     async def _receive_hello(self) -> Hello:
         """The client's Hello, whole within ``hello_timeout_s`` of connecting, however it trickles in

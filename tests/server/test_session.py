@@ -211,3 +211,43 @@ async def test_real_clock_keeps_at_most_max_in_flight_frames_ahead_of_the_client
         task.cancel()
         await asyncio.gather(task, return_exceptions=True)
         await srv.close()
+
+
+async def test_a_session_closed_by_a_shutting_down_server_still_logs_its_summary(caplog):
+    """The server's close cancels every handler, a session's among them while it closes its
+    socket: its summary (frames, the stream adaptation's reasons) is logged before that wait."""
+    import logging
+    from types import SimpleNamespace
+
+    from pibr.server.session import Session
+    from pibr.server.stream_adaptation import StreamAdaptation
+
+    class StuckWriter:             # a socket whose close never completes
+        def get_extra_info(self, name):
+            return ("127.0.0.1", 1)
+
+        def write(self, data):
+            pass
+
+        async def drain(self):
+            pass
+
+        def close(self):
+            pass
+
+        async def wait_closed(self):
+            await asyncio.Event().wait()
+
+    server = SimpleNamespace(config=ServerConfig(port=0))
+    session = Session(server, None, StuckWriter(), 7)
+    session.frames_sent = 12
+    session.adaptation = StreamAdaptation(8000.0)
+    with caplog.at_level(logging.INFO, logger="pibr.server.session"):
+        closing = asyncio.create_task(session._close())
+        await asyncio.sleep(0.05)
+        assert not closing.done()   # waiting for the socket to close
+        closing.cancel()
+        await asyncio.gather(closing, return_exceptions=True)
+    messages = caplog.messages
+    assert any("session 7: closed after 12 frames" in m for m in messages)
+    assert any(m.startswith("session 7: stream adaptation: 0 reports") for m in messages)
