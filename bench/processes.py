@@ -16,6 +16,7 @@ import threading
 import time
 from collections import deque
 
+from pibr.common.child_setup import CHILD_CPUS_ENV, child_env
 from pibr.protocol.errors import PibrError
 
 _LISTENING = re.compile(r"listening on (\S+):(\d+)")
@@ -43,17 +44,6 @@ def chromium_path() -> str | None:
     return os.environ.get("PIBR_CHROMIUM") or shutil.which("chromium") or shutil.which("chromium-browser")
 
 
-#: Environment variables ``python -m pibr`` reads at start-up (cli/__main__.py), set by
-#: :class:`PibrProcess` for its child: ``1``: Ctrl-C (SIGINT) stops it as from a terminal, even
-#: where this process was started ignoring it (a background job of a script ignores SIGINT, and
-#: children inherit that), since :meth:`PibrProcess.stop` asks with SIGINT first; and the CPU
-#: numbers it may run on, comma-separated. The child sets both itself, before any thread starts:
-#: Python code run between fork and exec (``preexec_fn``) can deadlock in a parent with threads
-#: (a soak's clients, started from threads, hung at fork, holding a lock another thread had).
-CHILD_SIGINT_ENV = "PIBR_CHILD_SIGINT"
-CHILD_CPUS_ENV = "PIBR_CHILD_CPUS"
-
-
 class PibrProcess:
     """One ``python -m pibr ARGS`` child with its output pumped to ``log_path``."""
 
@@ -68,12 +58,12 @@ class PibrProcess:
         self._tail: deque[str] = deque(maxlen=30)
         self._on_progress = on_progress
         full_env = dict(os.environ, PYTHONUNBUFFERED="1", **(env or {}))
-        full_env[CHILD_SIGINT_ENV] = "1"
+        # Ctrl-C and the CPUs set by the child itself (common/child_setup.py), not by a preexec_fn
         full_env.pop(CHILD_CPUS_ENV, None)
+        full_env.update(child_env(cpus))
         if cpus is not None:
             cpus = sorted(cpus)
             full_env["LP_NUM_THREADS"] = str(len(cpus))      # llvmpipe's rasteriser threads
-            full_env[CHILD_CPUS_ENV] = ",".join(str(c) for c in cpus)
         self.cpus = cpus
         self.proc = subprocess.Popen([sys.executable, "-m", "pibr", *args], stdout=subprocess.PIPE,
                                      stderr=subprocess.STDOUT, text=True, bufsize=1, env=full_env)

@@ -7,6 +7,7 @@
 - :mod:`.quality`: quality levels chosen against a deadline (the client's ticks, the server's frames);
 - :mod:`.tls`: optional TLS for the TCP connections (contexts, certificate pins, connecting);
 - :mod:`.address` and :mod:`.arguments`: the command lines' text forms and argparse types.
+- :mod:`.child_setup`: what a ``python -m pibr`` child sets itself at start-up (Ctrl-C, its CPUs).
 
 Imports only :mod:`pibr.protocol` (DESIGN.md, Layout).
 """

@@ -89,17 +89,17 @@ def positive_ints(text: str) -> tuple:
     return tuple(positive_int(part) for part in _parts(text))
 
 
-def names(text: str) -> tuple:
-    """Names separated by commas, at least one."""
-    out = tuple(_parts(text))
-    if not out:
-        raise argparse.ArgumentTypeError("name at least one")
-    return out
-
-
 def names_or_none(text: str) -> tuple:
     """Names separated by commas ('' for none)."""
     return tuple(_parts(text))
+
+
+def names(text: str) -> tuple:
+    """Names separated by commas, at least one."""
+    out = names_or_none(text)
+    if not out:
+        raise argparse.ArgumentTypeError("name at least one")
+    return out
 
 
 def offset(text: str) -> tuple[float, float, float]:

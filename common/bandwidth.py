@@ -112,7 +112,7 @@ class BandwidthTrace:
         # bits, which a slow segment stretches into time (at 1 kbit/s, 1e-8 bit is 1e-5 us): a time
         # that far past a whole microsecond is that microsecond, not the next (a message must not
         # leave 1 us late); it leaves at most ROUNDING_BITS early.
-        slack_bits = max(ROUNDING_BITS, 64 * np.finfo(float).eps * per_period)
+        slack_bits = max(ROUNDING_BITS, 64 * math.ulp(per_period))
         slack_us = max(1e-6, slack_bits / bits_per_us)
         return max(int(start_us), int(math.ceil((q + q2) * period + t - slack_us)))
 

@@ -1,5 +1,5 @@
 """The children bench/processes.py starts: their CPUs and Ctrl-C set by the child itself at start-up
-(cli/__main__.py), not by Python code run between fork and exec, which can deadlock a parent with
+(common/child_setup.py, from cli/__main__.py), not by Python code run between fork and exec, which can deadlock a parent with
 threads."""
 import os
 import signal
@@ -7,7 +7,8 @@ import subprocess
 
 import pytest
 
-from pibr.bench.processes import CHILD_CPUS_ENV, PibrProcess
+from pibr.bench.processes import PibrProcess
+from pibr.common.child_setup import CHILD_CPUS_ENV
 
 pytestmark = pytest.mark.integration
 
