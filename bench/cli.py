@@ -145,6 +145,9 @@ def register(sub) -> None:
     d.add_argument("--ipd-mm", type=arguments.positive, default=None, help="with --stereo: the eyes' distance "
                                                                             "(default 64)")
     d.add_argument("--anaglyph", action="store_true", help="with --stereo: also a red-cyan anaglyph video per method")
+    d.add_argument("--eye-fov-deg", type=arguments.eye_fov, default=None, metavar="OUTER,INNER,UP,DOWN",
+                   help="with --stereo: each eye's asymmetric frustum (see 'pibr client --help'), each scored "
+                        "against ground truth through it")
     d.add_argument("--live", type=arguments.non_negative_int, default=None, metavar="PORT",
                    help="show the client's session live at http://127.0.0.1:PORT/ while it runs (0: any free port)")
     d.set_defaults(func=commands.cmd_demo)
@@ -386,6 +389,10 @@ def register(sub) -> None:
     st.add_argument("--modes", type=arguments.names, default=("mono", "cyclops", "alternate", "per-eye"),
                     help="server references, mono among them (default mono,cyclops,alternate,per-eye)")
     st.add_argument("--ipd-mm", type=arguments.positive, default=64.0, help="interpupillary distance (default 64)")
+    st.add_argument("--eye-fov-deg", type=arguments.eye_fov, default=None, metavar="OUTER,INNER,UP,DOWN",
+                    help="each eye's asymmetric frustum, as a headset's: the left eye's degrees to its outer, inner, "
+                         "top and bottom edges, the right eye mirrored; each eye drawn and scored through its own "
+                         "(default: 90 degrees, symmetric)")
     _latency(st)
     _rate(st)
     st.add_argument("--stride", type=arguments.positive_int, default=4, help="score every Nth displayed tick (default 4)")

@@ -125,7 +125,7 @@ def cmd_bench_stereo(args) -> int:
     r = run_stereo_bench(windows=args.windows, dynamic_windows=args.dynamic_windows, methods=args.method,
                          modes=args.modes, ipd_mm=args.ipd_mm, latency_ms=args.latency_ms, rate_hz=args.rate,
                          view_size=args.view_size, out_size=args.size, stride=args.stride, flip_every=args.flip_every,
-                         scenes=args.scene, out_dir=args.out)
+                         scenes=args.scene, out_dir=args.out, eye_fov_deg=args.eye_fov_deg)
     print_stereo(r)
     print(f"written: {args.out}/stereo.json, stereo.png, stereo-pair.png, stereo-anaglyph.png")
     return 0
@@ -239,13 +239,16 @@ def demo_client_args(args) -> tuple:
     """The client options ``pibr demo`` passes on: only those the user set."""
     from pibr.protocol.errors import ConfigError
 
-    if (args.ipd_mm is not None or args.anaglyph) and not args.stereo:
-        raise ConfigError("--ipd-mm and --anaglyph need two eyes: add --stereo cyclops, alternate or per-eye")
+    if (args.ipd_mm is not None or args.anaglyph or args.eye_fov_deg is not None) and not args.stereo:
+        raise ConfigError("--ipd-mm, --anaglyph and --eye-fov-deg need two eyes: add --stereo cyclops, alternate "
+                          "or per-eye")
     out = ("--motion", args.motion) if args.motion else ()
     if args.stereo:
         out += ("--stereo", args.stereo)
     if args.ipd_mm is not None:
         out += ("--ipd-mm", str(args.ipd_mm))
+    if args.eye_fov_deg is not None:
+        out += ("--eye-fov-deg", ",".join(f"{a:g}" for a in args.eye_fov_deg))
     if args.live is not None:
         from .processes import free_port
 

@@ -38,6 +38,7 @@ import numpy as np
 from pibr.protocol import bounded_json
 from pibr.protocol.errors import ConfigError, JSONError
 from pibr.protocol.pose import Pose
+from pibr.protocol.stereo import EYES
 
 from .metrics import nearly_uniform, pixels_per_degree, tick_metrics
 from .results import write_result
@@ -240,6 +241,7 @@ def evaluate_run(run_dir: str, scene_spec: str | None = None, flip_every: int = 
     eyes = list(dict.fromkeys(r["eye"] for r in recordings.values()))   # the eyes' ground truths, in order
     first_of = {eye: next(m for m in methods if recordings[m]["eye"] == eye) for eye in eyes}
     width, height, fov = int(client["width"]), int(client["height"]), float(client["fov_deg"])
+    frustums = _eye_frustums(client, eyes)   # eye -> its tangents, None: symmetric in fov
     scene = load_scene(scene_spec or info["session"]["scene"]["name"])
     records = {m: read_records(os.path.join(run_dir, f"{m}.records.csv")) for m in methods}
     n = min(len(r) for r in records.values())
@@ -251,7 +253,8 @@ def evaluate_run(run_dir: str, scene_spec: str | None = None, flip_every: int = 
     # Decoding the recordings (PyAV lets go of the GIL) runs ahead in a thread of its own.
     shown_images = _Ahead(_shown_images(run_dir, methods, records, n), depth=3)
     gt = GroundTruth(scene, width, height, fov)
-    transmitted = ({eye: TransmittedViews(scene, info["session"], (width, height), fov) for eye in eyes}
+    transmitted = ({eye: TransmittedViews(scene, info["session"], (width, height), fov, frustum=frustums[eye])
+                    for eye in eyes}
                    if workers == 0 else {})
     pairs_of = _stereo_pairs(recordings)   # method -> (left recording, right recording)
     consistency = {m: [] for m in pairs_of}
@@ -259,7 +262,7 @@ def evaluate_run(run_dir: str, scene_spec: str | None = None, flip_every: int = 
     if pairs_of:
         from pibr.server.coverage import camera_rays
 
-        rays = camera_rays(width, height, fov)
+        rays = camera_rays(width, height, fov, frustums.get("left"))
     uses_extra = {m: bool((info.get("methods") or {}).get(m, {}).get("uses_extra_view", False)) for m in methods}
     geometric = {eye: [] for eye in eyes}   # per eye, per tick: {"primary": fraction, "both": fraction}
     uniform = 0      # ticks whose ground truth is nearly one colour
@@ -280,7 +283,7 @@ def evaluate_run(run_dir: str, scene_spec: str | None = None, flip_every: int = 
         spec = scene_spec or info["session"]["scene"]["name"]
         for eye in eyes:
             holes_of[eye] = holes_pool.apply_async(geometric_holes, (spec, info["session"], records[first_of[eye]][:n],
-                                                                     (width, height), fov))
+                                                                     (width, height), fov, frustums[eye]))
     writer = None
     if side_by_side:
         from .video_writer import VideoWriter
@@ -308,7 +311,7 @@ def evaluate_run(run_dir: str, scene_spec: str | None = None, flip_every: int = 
                 rec = records[first_of[eye]][i]
                 pose = truth_pose[eye] = Pose.make([rec["px"], rec["py"], rec["pz"]],
                                                    [rec["qw"], rec["qx"], rec["qy"], rec["qz"]])
-                truth[eye] = gt.render(pose, rec["scene_t"])
+                truth[eye] = gt.render(pose, rec["scene_t"], frustums[eye])
                 if pairs_of:
                     truth_distance[eye] = gt.distance()
                 if holes_pool is None:
@@ -336,7 +339,8 @@ def evaluate_run(run_dir: str, scene_spec: str | None = None, flip_every: int = 
                 from .stereo_metrics import binocular_pairs, stereo_consistency
 
                 pairs = binocular_pairs(rays, (width, height), fov, truth_pose["left"], truth_pose["right"],
-                                        truth_distance["left"], truth_distance["right"])
+                                        truth_distance["left"], truth_distance["right"],
+                                        right_frustum=frustums.get("right"))
                 for m, (left, right) in pairs_of.items():
                     consistency[m].append(stereo_consistency(displayed[left], displayed[right], truth["left"],
                                                              truth["right"], pairs))
@@ -396,7 +400,8 @@ def evaluate_run(run_dir: str, scene_spec: str | None = None, flip_every: int = 
            "flip_every": flip_every, "nearly_uniform_frames": uniform, "methods": summary}
     if pairs_of:
         out["stereo"] = {"reference": (info.get("stereo") or {}).get("reference"),
-                         "ipd_mm": (info.get("stereo") or {}).get("ipd_mm"), "methods": {}}
+                         "ipd_mm": (info.get("stereo") or {}).get("ipd_mm"),
+                         "eye_fov_deg": client.get("eye_fov_deg"), "methods": {}}
         for m, values in consistency.items():
             scored = [c for c in values if c["inconsistent"] is not None]
             out["stereo"]["methods"][m] = {
@@ -422,6 +427,20 @@ def evaluate_run(run_dir: str, scene_spec: str | None = None, flip_every: int = 
 
         plot_quality_over_time(rows_out, os.path.join(run_dir, "quality.png"))
     return out
+
+
+def _eye_frustums(client: dict, eyes) -> dict:
+    """eye -> the (left, right, down, up) tangents the client showed it through (its
+    ``eye_fov_deg``, protocol/frustum.py), None for a symmetric one of its ``fov_deg``."""
+    from pibr.protocol.frustum import eye_tangents
+
+    eye_fov = client.get("eye_fov_deg")
+    if eye_fov is None:
+        return {eye: None for eye in eyes}
+    try:
+        return {eye: eye_tangents(eye, eye_fov) if eye in EYES else None for eye in eyes}
+    except ConfigError as exc:
+        raise ConfigError(f"session.json: client.eye_fov_deg: {exc}") from None
 
 
 def _stereo_pairs(recordings: dict) -> dict:
@@ -464,14 +483,15 @@ def _environment(**values):
                 os.environ[k] = v
 
 
-def geometric_holes(scene_spec: str, session: dict, records: list, out_size, fov_deg: float) -> list[dict]:
+def geometric_holes(scene_spec: str, session: dict, records: list, out_size, fov_deg: float,
+                    frustum=None) -> list[dict]:
     """:meth:`TransmittedViews.holes` of every tick of one eye's ``records`` (its poses and frames),
     in this process: a task for a worker of its own. Its worker runs with one BLAS thread: the
     (n, 3) @ (3, 3) products of the coverage test gain nothing from more, and idle BLAS threads
     spin, taking CPU from the other workers (measured: half of this test's CPU time)."""
     from pibr.scenes.registry import load_scene
 
-    views = TransmittedViews(load_scene(scene_spec), session, out_size, fov_deg)
+    views = TransmittedViews(load_scene(scene_spec), session, out_size, fov_deg, frustum=frustum)
     try:
         return [views.holes(Pose.make([r["px"], r["py"], r["pz"]], [r["qw"], r["qx"], r["qy"], r["qz"]]), r)
                 for r in records]
@@ -486,7 +506,7 @@ class TransmittedViews:
     methods that use only it, both views otherwise). Counted on every second pixel of every
     second row (a quarter of the pixels) to keep evaluation quick."""
 
-    def __init__(self, scene, session: dict, out_size, fov_deg: float, subsample: int = 2):
+    def __init__(self, scene, session: dict, out_size, fov_deg: float, subsample: int = 2, frustum=None):
         from pibr.protocol.session import SessionConfig
 
         from pibr.server.coverage import CoverageProbe
@@ -496,7 +516,7 @@ class TransmittedViews:
         size = (max(1, out_size[0] // subsample), max(1, out_size[1] // subsample))
         self.probe = CoverageProbe(scene, (config.primary.width, config.primary.height), size, fov_deg,
                                    projection=config.options.get("projection", "vertex"),
-                                   mark_peeled=bool(config.options.get("peel_marker")))
+                                   mark_peeled=bool(config.options.get("peel_marker")), frustum=frustum)
         self._frame = None     # (frame_id, views)
 
     def holes(self, pose: Pose, rec: dict) -> dict:

@@ -23,10 +23,11 @@ class GroundTruth:
         self.renderer = Renderer(self.ctx, scene, wide=False)
         self.target = RenderTarget(self.ctx, width, height)
 
-    def render(self, pose: Pose, t: float) -> np.ndarray:
-        """(height, width, 3) uint8 view at ``pose`` and scene time ``t`` seconds."""
+    def render(self, pose: Pose, t: float, frustum=None) -> np.ndarray:
+        """(height, width, 3) uint8 view at ``pose`` and scene time ``t`` seconds, through ``frustum``
+        ((left, right, down, up) tangents: an eye's, protocol/frustum.py) when given."""
         with self.ctx:  # another context may have been made current on this thread since
-            self.renderer.render_perspective(self.target, pose, t, self.fov_deg)
+            self.renderer.render_perspective(self.target, pose, t, self.fov_deg, frustum)
             return self.target.read_color().copy()
 
     def distance(self) -> np.ndarray:

@@ -347,8 +347,10 @@ class Simulation:
                 for half in (slice(0, w), slice(w, 2 * w))]
         return eyes, (time.process_time() - c0) * 1e3
 
-    def ground_truth(self, pose, t):
-        self.renderer.render_perspective(self.gt, pose, t, self.output.fov_deg)
+    def ground_truth(self, pose, t, frustum=None):
+        """(h, w, 3) uint8 ground truth at ``pose`` and scene time ``t`` (through ``frustum``, an
+        eye's (left, right, down, up) tangents, when given)."""
+        self.renderer.render_perspective(self.gt, pose, t, self.output.fov_deg, frustum)
         return self.gt.read_color().copy()
 
     def ground_truth_moving(self) -> np.ndarray:

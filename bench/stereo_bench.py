@@ -35,6 +35,7 @@ import time
 import numpy as np
 
 from pibr.common.link import SessionSchedule
+from pibr.protocol.frustum import eye_tangents
 from pibr.protocol.stereo import CENTRE, DEFAULT_IPD_MM, EYES, eye_pose, frame_eyes
 
 from .results import write_result
@@ -153,16 +154,23 @@ class _Scores:
 def run_stereo_bench(windows=None, dynamic_windows=None, methods=DEFAULT_METHODS, modes=MODES,
                      ipd_mm=DEFAULT_IPD_MM, latency_ms=128.0, rate_hz=30.0, view_size=None, out_size=(960, 540),
                      stride=4, flip_every=4, scenes=("room", "dynamic"), out_dir="out/bench", progress=True,
-                     pair_png=True) -> dict:
+                     pair_png=True, eye_fov_deg=None) -> dict:
     """Every mode x method on the room's windows (default :data:`ROOM_WINDOWS` and
     :func:`rest_window`) and the dynamic scene's (:data:`DYNAMIC_WINDOWS`). Writes stereo.json,
-    stereo.png and (``pair_png``) stereo-pair.png, stereo-anaglyph.png under ``out_dir``."""
+    stereo.png and (``pair_png``) stereo-pair.png, stereo-anaglyph.png under ``out_dir``.
+    ``eye_fov_deg``: (outer, inner, up, down) degrees of the left eye's asymmetric frustum, the
+    right eye mirrored (protocol/frustum.py; each eye drawn and scored through its own), mono at
+    the symmetric 90 degrees; None: both eyes see 90 degrees symmetrically."""
     from pibr.protocol.errors import ConfigError
     from pibr.protocol.stereo import check_ipd_mm
 
     from .simulation import BENCH_VIEW_SIZE, blas_on_one_thread
 
     check_ipd_mm(ipd_mm)
+    if eye_fov_deg is not None:
+        from pibr.protocol.frustum import check_eye_fov_deg
+
+        eye_fov_deg = check_eye_fov_deg(eye_fov_deg)
     unknown = [m for m in modes if m not in MODES]
     if unknown or "mono" not in modes:
         raise ConfigError(f"modes must include mono (the baseline) and come from {', '.join(MODES)}; got "
@@ -180,6 +188,8 @@ def run_stereo_bench(windows=None, dynamic_windows=None, methods=DEFAULT_METHODS
     result = {"ipd_mm": ipd_mm, "latency_ms": latency_ms, "rate_hz": rate_hz, "view_size": list(view_size),
               "output": list(out_size), "stride": stride, "flip_every": flip_every, "modes": list(modes),
               "methods": list(methods), "scenes": {}}
+    if eye_fov_deg is not None:
+        result["eye_fov_deg"] = list(eye_fov_deg)
     all_windows = [w for ws in plan.values() for w in ws]
     result["windows"] = windows_json(all_windows, "reporting")
     bar = None
@@ -195,7 +205,8 @@ def run_stereo_bench(windows=None, dynamic_windows=None, methods=DEFAULT_METHODS
             for scene_name, scene_windows in plan.items():
                 result["scenes"][scene_name] = _run_scene(scene_name, scene_windows, methods, modes, ipd_mm,
                                                           schedule, view_size, out_size, stride, flip_every, bar,
-                                                          pictures if pair_png and not pictures else None)
+                                                          pictures if pair_png and not pictures else None,
+                                                          eye_fov_deg)
     finally:
         if bar is not None:
             bar.close()
@@ -211,7 +222,7 @@ def run_stereo_bench(windows=None, dynamic_windows=None, methods=DEFAULT_METHODS
 
 
 def _run_scene(scene_name, windows, methods, modes, ipd_mm, schedule, view_size, out_size, stride, flip_every,
-               bar, pictures) -> dict:
+               bar, pictures, eye_fov_deg=None) -> dict:
     from pibr.common.replay import trace_ticks
     from pibr.common.traces.loading import load_trace
     from pibr.scenes.registry import load_scene
@@ -227,7 +238,9 @@ def _run_scene(scene_name, windows, methods, modes, ipd_mm, schedule, view_size,
     stream_of = {m: ("centre" if m in ("mono", "cyclops") else m) for m in modes}
     scores = _Scores()
     ppd = pixels_per_degree(out_size[0], 90.0)
-    rays = camera_rays(*out_size, 90.0)
+    # each eye's frustum (None: the symmetric 90 degrees) and camera rays
+    frustums = {CENTRE: None, **{e: None if eye_fov_deg is None else eye_tangents(e, eye_fov_deg) for e in EYES}}
+    rays_of = {e: camera_rays(*out_size, 90.0, f) for e, f in frustums.items()}
     interval_us = schedule.interval_us
     uniform = {}
     for window in windows:
@@ -259,10 +272,11 @@ def _run_scene(scene_name, windows, methods, modes, ipd_mm, schedule, view_size,
                 truth = {CENTRE: gt_sim.ground_truth(head, t)}
                 truth_distance = {CENTRE: gt_sim.ground_truth_distance()}
                 for e in EYES:
-                    truth[e] = gt_sim.ground_truth(eyes[e], t)
+                    truth[e] = gt_sim.ground_truth(eyes[e], t, frustums[e])
                     truth_distance[e] = gt_sim.ground_truth_distance()
-                pairs = binocular_pairs(rays, out_size, 90.0, eyes["left"], eyes["right"],
-                                        truth_distance["left"], truth_distance["right"])
+                pairs = binocular_pairs(rays_of["left"], out_size, 90.0, eyes["left"], eyes["right"],
+                                        truth_distance["left"], truth_distance["right"],
+                                        right_frustum=frustums["right"])
                 uniform[window.label] = uniform.get(window.label, 0) + nearly_uniform(truth[CENTRE])
                 with_flip = flip_every > 0 and i % flip_every == 0
                 geo = {}
@@ -272,7 +286,7 @@ def _run_scene(scene_name, windows, methods, modes, ipd_mm, schedule, view_size,
                         slot = _eye_slot(stream, e)
                         frame = stream.frames[slot]
                         pose = head if e == CENTRE else eyes[e]
-                        geo[(mode, e)] = geometric_holes(rays, pose, truth_distance[e], frame,
+                        geo[(mode, e)] = geometric_holes(rays_of[e], pose, truth_distance[e], frame,
                                                          stream.distances[slot], peel[stream_of[mode]])
                 for mode in modes:
                     stream = streams[stream_of[mode]]
@@ -282,7 +296,7 @@ def _run_scene(scene_name, windows, methods, modes, ipd_mm, schedule, view_size,
                         shown, cpu = {}, 0.0
                         pair = instances.get((mode, method, "pair"))
                         shares = pair is not None and getattr(pair, "shares_pair", None) is not None \
-                            and pair.shares_pair(eyes["left"], eyes["right"])
+                            and eye_fov_deg is None and pair.shares_pair(eyes["left"], eyes["right"])
 
                         def at_once():
                             # the client's default draws eye by eye (below); both eyes at once
@@ -296,6 +310,7 @@ def _run_scene(scene_name, windows, methods, modes, ipd_mm, schedule, view_size,
                             inst = instances[(mode, method, "mono" if mode == "mono" else
                                               ("pair" if mode == "cyclops" else e))]
                             pose = head if e == CENTRE else eyes[e]
+                            inst.look_through(frustums[e])
                             rgb, own, ms, cpu_ms = sim.display_timed(inst, pose, stream.frames[slot], t,
                                                                      stream.textures[slot])
                             cpu += cpu_ms

@@ -25,6 +25,7 @@ import math
 
 import numpy as np
 
+from pibr.protocol.frustum import to_pixels
 from pibr.protocol.pose import Pose
 from pibr.server.coverage import COVERAGE_TOLERANCE, displayed_points
 
@@ -36,11 +37,13 @@ MISMATCH_LEVELS = 24
 
 def binocular_pairs(rays: np.ndarray, size: tuple[int, int], fov_deg: float, left: Pose, right: Pose,
                     left_distance: np.ndarray, right_distance: np.ndarray,
-                    tolerance: float = COVERAGE_TOLERANCE) -> tuple[np.ndarray, np.ndarray]:
+                    tolerance: float = COVERAGE_TOLERANCE, right_frustum=None) -> tuple[np.ndarray, np.ndarray]:
     """Flat pixel indices (m,), (m,) of the left and right ground truths that show one surface point.
 
-    rays : (w * h, 3) camera rays of the output (server.coverage.camera_rays); size : (w, h);
-    left, right : the eyes' poses; *_distance : (h, w) ground-truth radial distances, 0 = sky."""
+    rays : (w * h, 3) camera rays of the left eye's output (server.coverage.camera_rays); size :
+    (w, h); left, right : the eyes' poses; *_distance : (h, w) ground-truth radial distances, 0 =
+    sky; ``right_frustum``: the right eye's (left, right, down, up) tangents when its frustum is
+    not the symmetric one of ``fov_deg`` (protocol/frustum.py)."""
     w, h = size
     if left_distance.shape != (h, w) or right_distance.shape != (h, w):
         raise ValueError(f"need two ({h}, {w}) distance maps, got {left_distance.shape} and {right_distance.shape}")
@@ -48,12 +51,15 @@ def binocular_pairs(rays: np.ndarray, size: tuple[int, int], fov_deg: float, lef
     idx = np.flatnonzero(~sky)
     local = (points[idx] - right.p) @ right.rotation()
     depth = -local[:, 2]
-    tan_x = math.tan(math.radians(fov_deg) / 2)
-    tan_y = tan_x * h / w
     front = depth > 1e-6
-    safe = np.where(front, depth, 1.0)
-    col = np.floor((local[:, 0] / (safe * tan_x) + 1.0) * 0.5 * w).astype(np.int64)
-    row = np.floor((1.0 - local[:, 1] / (safe * tan_y)) * 0.5 * h).astype(np.int64)
+    if right_frustum is None:
+        tan_x = math.tan(math.radians(fov_deg) / 2)
+        tan_y = tan_x * h / w
+        safe = np.where(front, depth, 1.0)
+        col = np.floor((local[:, 0] / (safe * tan_x) + 1.0) * 0.5 * w).astype(np.int64)
+        row = np.floor((1.0 - local[:, 1] / (safe * tan_y)) * 0.5 * h).astype(np.int64)
+    else:
+        col, row = (np.floor(c).astype(np.int64) for c in to_pixels(local, right_frustum, w, h))
     inside = front & (col >= 0) & (col < w) & (row >= 0) & (row < h)
     col, row = np.clip(col, 0, w - 1), np.clip(row, 0, h - 1)
     shown = right_distance[row, col]

@@ -37,6 +37,7 @@ from pibr.common.priority import background_executor
 from pibr.common.quality import OFF, DeadlineController, read_cost_table
 from pibr.protocol.age_baseline import AgeBaseline
 from pibr.protocol.errors import ConfigError, MalformedMessage, UnexpectedMessage
+from pibr.protocol.frustum import eye_tangents
 from pibr.protocol.messages import (ARRIVAL_AGE_MS, DELIVERED_KBPS, DISPLAY_AGE_MS, FRAMES_DECODED, LINK_KBPS,
                                     NEWEST_FRAME, PROBE_KBPS, REPORT_SPAN_MS, STREAM_BASELINE_S, STREAM_QUEUE_HIGH_MS,
                                     STREAM_REPORT_MS, STREAM_URGENT_GAP_MS, WARMUP_SEQ,
@@ -152,6 +153,9 @@ class Client:
         #: frames serve both eyes, except with alternate and per-eye references: one slot per eye)
         self._eyes: tuple = EYES if config.stereo else (CENTRE,)
         self._slots: tuple = EYES if config.stereo in ("alternate", "per-eye") else (CENTRE,)
+        #: eye -> the (left, right, down, up) tangents it sees through (--eye-fov-deg), None: symmetric
+        self._frustums: dict = {eye: eye_tangents(eye, config.eye_fov_deg) if config.eye_fov_deg and eye in EYES
+                                else None for eye in self._eyes}
         self._shown: dict[str, _Decoded] = {}            # slot -> the newest decoded frame for it
         self.frames_received = 0
         self.missed = 0
@@ -261,8 +265,9 @@ class Client:
                    for slot in self._slots}
         target = OutputTarget(ctx, self.cfg.width, self.cfg.height)
         # both eyes side by side, for the methods that draw a pair at once from one slot's frame
+        # (through one symmetric frustum: a pair drawn at once shares its projection)
         pair_target = OutputTarget(ctx, 2 * self.cfg.width, self.cfg.height) if len(self._eyes) == 2 \
-            and len(self._slots) == 1 else None
+            and len(self._slots) == 1 and self.cfg.eye_fov_deg is None else None
         self._gl_state = (textures, methods, target, pair_target)
         first = methods[self._slots[0]]
         self._method_info = {name: {"uses_extra_view": bool(ms[0].uses_extra_view)} for name, ms in first.items()}
@@ -272,6 +277,9 @@ class Client:
             for name, ms in first.items():
                 shares = getattr(ms[0], "shares_pair", None)
                 self._method_info[name]["pair_drawn_at_once"] = bool(shares and shares(eyes["left"], eyes["right"]))
+        elif len(self._eyes) == 2 and len(self._slots) == 1:   # eyes with frustums of their own: one by one
+            for info in self._method_info.values():
+                info["pair_drawn_at_once"] = False
 
     def _slot(self, eye: str) -> str:
         return eye if eye in self._slots else CENTRE
@@ -329,7 +337,9 @@ class Client:
             target.begin()
             t0 = time.perf_counter()
             if decoded is not None:
-                methods[slot][name][level].render(pose, decoded.frame, textures[slot], scene_t)
+                method = methods[slot][name][level]
+                method.look_through(self._frustums[eye])
+                method.render(pose, decoded.frame, textures[slot], scene_t)
             wait_idle(ctx)   # the GIL released: frames arriving meanwhile are read on time
             t1 = time.perf_counter()
             drawn.append((target.read() if read else None, (t1 - t0) * 1e3))
@@ -998,7 +1008,10 @@ class Client:
             # against the ground truth at the pose its records hold)
             "recordings": {name: {"method": m, "eye": eye} for name, (m, eye) in self._recorded.items()},
             "stereo": None if not self.cfg.stereo else {"reference": self.cfg.stereo, "ipd_mm": self.cfg.ipd_mm,
-                                                        "slots": list(self._slots)},
+                                                        "slots": list(self._slots),
+                                                        # eye -> its frustum's tangents; None: symmetric
+                                                        "frustums": {e: None if f is None else list(f)
+                                                                     for e, f in self._frustums.items()}},
             # the quality levels chosen and why (client/deadline.py); None with --deadline off
             "deadline": None if self.deadline is None else self._deadline_summary(),
             # what recording cost each tick on the client's clock (reading the images back and

@@ -8,6 +8,7 @@ import sys
 from pibr.common import arguments
 from pibr.common.address import parse_host_port
 from pibr.protocol.depth_codecs import DEPTH_CODECS
+from pibr.protocol.errors import ConfigError
 from pibr.protocol.messages import CLOCKS
 from pibr.protocol.stereo import DEFAULT_IPD_MM, STEREO_REFERENCES
 
@@ -40,7 +41,8 @@ def register(sub) -> None:
                    help="re-rendering method(s), comma-separated: none, rotation, ... (default rotation)")
     p.add_argument("--out", dest="out_dir", default="out", help="output directory (default out)")
     p.add_argument("--size", type=arguments.size, default=(960, 540), metavar="WxH", help="output size (default 960x540)")
-    p.add_argument("--fov", dest="fov_deg", type=float, default=90.0, help="horizontal field of view in degrees (default 90)")
+    p.add_argument("--fov", dest="fov_deg", type=float, default=None,
+                   help="horizontal field of view in degrees (default 90; see --eye-fov-deg)")
     p.add_argument("--start", dest="start_s", type=float, default=0.0, help="start this many seconds into the trace")
     p.add_argument("--duration", dest="duration_s", type=float, default=None, help="seconds of trace to replay (default: all)")
     p.add_argument("--anchor", choices=("start", "origin", "none"), default="start",
@@ -63,6 +65,11 @@ def register(sub) -> None:
                    help=f"with --stereo: interpupillary distance in mm (default {DEFAULT_IPD_MM:g})")
     p.add_argument("--anaglyph", action="store_true",
                    help="with --stereo: also a red-cyan anaglyph video per method (METHOD.anaglyph.mp4)")
+    p.add_argument("--eye-fov-deg", type=arguments.eye_fov, default=None, metavar="OUTER,INNER,UP,DOWN",
+                   help="with --stereo: each eye's own asymmetric frustum, as a headset's (OpenXR's four angles): "
+                        "the left eye's degrees from its axis to its outer (left), inner, top and bottom edges, "
+                        "the right eye mirrored, over the --size pixels, instead of --fov (default: both eyes see "
+                        "--fov symmetrically)")
     p.add_argument("--live", dest="live_port", type=int, default=None, metavar="PORT",
                    help="while the session runs, show it on a page at http://127.0.0.1:PORT/ (0: any free port, "
                         "printed): frame age, missed ticks, server frames/s, bitrate, decode and render ms over "
@@ -207,8 +214,11 @@ def cmd_client(args) -> int:
         from pibr.common.tls import ClientTLS
 
         tls = ClientTLS(args.tls_ca, args.tls_pin)
+    if args.fov_deg is not None and args.eye_fov_deg is not None:
+        raise ConfigError("give --fov or --eye-fov-deg, not both: the eyes' frustums set the field of view")
     cfg = arguments.config_from_args(
         ClientConfig, args, host=host, port=port, width=args.size[0], height=args.size[1],
+        fov_deg=90.0 if args.fov_deg is None else args.fov_deg,
         depth_codec=args.depth_codec or "", lossless=not args.no_lossless, video=not args.no_video,
         options=method_knobs(args), token=resolve_token(args.token, args.token_file), tls=tls)
     from .connection import ServerClosed

@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 from pibr.common.tls import ClientTLS
 from pibr.protocol.errors import ConfigError
 from pibr.protocol.messages import MAX_BANDWIDTH_KBPS, OutputConfig
+from pibr.protocol.frustum import check_eye_fov_deg, equivalent_fov_deg, eye_tangents
 from pibr.protocol.stereo import DEFAULT_IPD_MM, STEREO_REFERENCES, check_ipd_mm
 
 from .deadline import DEADLINE_MODES
@@ -55,6 +56,10 @@ class ClientConfig:
     stereo: str = ""         # two eyes from frames rendered this way (protocol/stereo.py); "": one view
     ipd_mm: float = DEFAULT_IPD_MM   # with stereo: the eyes' distance along the head's x axis
     anaglyph: bool = False   # with stereo: also a red-cyan anaglyph video per method
+    #: with stereo: the left eye's (outer, inner, up, down) degrees from its axis to its frustum's
+    #: edges, the right eye mirrored (protocol/frustum.py), over width x height pixels; fov_deg is
+    #: then the symmetric one of the same pixels per radian. None: both eyes see fov_deg symmetrically
+    eye_fov_deg: tuple | None = None
     live_port: int | None = None   # serve the live page on 127.0.0.1:PORT (0: any free port; None: no page)
 
     def __post_init__(self):
@@ -100,6 +105,15 @@ class ClientConfig:
         check_ipd_mm(self.ipd_mm)
         if self.anaglyph and not self.stereo:
             raise ConfigError("an anaglyph needs two eyes: add --stereo cyclops, alternate or per-eye")
+        if self.eye_fov_deg is not None:
+            if not self.stereo:
+                raise ConfigError("an eye's field of view needs two eyes: add --stereo cyclops, alternate or per-eye")
+            self.eye_fov_deg = check_eye_fov_deg(self.eye_fov_deg)
+            if self.options.get("pair_at_once"):
+                raise ConfigError("--pair-at-once draws both eyes through one projection: it cannot with "
+                                  "--eye-fov-deg, whose eyes each have their own")
+            # the eyes' pixels per radian at their centres, for the server's views and FLIP
+            self.fov_deg = equivalent_fov_deg(eye_tangents("left", self.eye_fov_deg))
         if self.live_port is not None and not (0 <= self.live_port <= 65535):
             raise ConfigError(f"--live takes a TCP port 0..65535 (0: any free one), got {self.live_port}")
         if self.progress not in ("bar", "lines", "none"):

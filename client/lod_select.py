@@ -19,7 +19,6 @@ the room about 1 % at 960x540 for more triangles.
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -72,8 +71,6 @@ class LodSelector:
             raise ValueError(f"level must be one of {', '.join(LEVELS)}")
         self.objects, self.output, self.target_px, self.cull = objects, output, target_px, cull
         self.force_level = force_level
-        self.tan_x = math.tan(math.radians(output.fov_deg) / 2)
-        self.tan_y = self.tan_x * output.height / output.width
         #: (n, 2): per object the distance below which its original mesh, then its proxy, is used
         self.thresholds = switch_distances(objects, target_px)
         #: (n, 8, 4) box corners of every object, object space and (at rest) world space, homogeneous
@@ -102,9 +99,10 @@ class LodSelector:
         visible = np.ones(len(world), dtype=bool)
         if self.cull:
             b = half_baseline
+            left, right, down, up = self.output.tangents()
             visible = ~(np.all(z < near, axis=1)
-                        | np.all(x > self.tan_x * z + b, axis=1) | np.all(x < -self.tan_x * z - b, axis=1)
-                        | np.all(y > self.tan_y * z, axis=1) | np.all(y < -self.tan_y * z, axis=1))
+                        | np.all(x > right * z + b, axis=1) | np.all(x < left * z - b, axis=1)
+                        | np.all(y > up * z, axis=1) | np.all(y < down * z, axis=1))
         lo, hi = world[:, :, :3].min(axis=1), world[:, :, :3].max(axis=1)
         side = half_baseline * pose.rotation()[:, 0]
         eyes = (pose.p,) if half_baseline == 0.0 else (pose.p - side, pose.p + side)

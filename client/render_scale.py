@@ -34,9 +34,10 @@ _UNIT = 15
 
 
 def scaled_output(output: OutputConfig, scale: float) -> OutputConfig:
-    """``output`` at ``scale`` of its width and height (at least 16 pixels each), same field of view and rate."""
+    """``output`` at ``scale`` of its width and height (at least 16 pixels each), same field of view
+    (frustum, when it has one) and rate."""
     w, h = (max(16, int(round(side * scale))) for side in (output.width, output.height))
-    return OutputConfig(w, h, output.fov_deg, output.rate_hz)
+    return OutputConfig(w, h, output.fov_deg, output.rate_hz, output.frustum)
 
 
 def make_level(ctx, level, output: OutputConfig, config, proxies=None, **options):

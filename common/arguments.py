@@ -23,6 +23,16 @@ def size(text: str) -> tuple[int, int]:
         raise argparse.ArgumentTypeError(str(exc)) from None
 
 
+def eye_fov(text: str) -> tuple[float, float, float, float]:
+    """``OUTER,INNER,UP,DOWN`` degrees of the left eye's frustum (protocol/frustum.py)."""
+    from pibr.protocol.frustum import check_eye_fov_deg
+
+    try:
+        return check_eye_fov_deg(text)
+    except ConfigError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
 def number(text: str, kind=float) -> float:
     """A finite number (``kind`` int: a whole one)."""
     try:

@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 from typing import ClassVar
 
 from . import bounded_json
+from . import frustum as frustum_tangents
 from .errors import ConfigError, InvalidPose, JSONError, MalformedMessage
 from .pose import Pose
 from .stereo import EYES, MAX_IPD_MM, STEREO_REFERENCES, check_ipd_mm
@@ -106,23 +107,45 @@ def _get(name: str, obj: dict, key: str, kind, default=_MISSING, lo=None, hi=Non
 
 @dataclass(frozen=True)
 class OutputConfig:
-    """The client's display: ``width`` x ``height`` pixels, horizontal field of view, output rate."""
+    """The client's display: ``width`` x ``height`` pixels, horizontal field of view, output rate.
+
+    ``frustum``: None for a camera through the image's centre (``fov_deg`` and square pixels),
+    else the (left, right, down, up) tangents of an eye's asymmetric frustum (protocol/frustum.py),
+    which then sets the view alone; left out of the JSON when None."""
 
     width: int = 960
     height: int = 540
     fov_deg: float = 90.0
     rate_hz: float = 60.0
+    frustum: tuple | None = None
+
+    def tangents(self) -> tuple[float, float, float, float]:
+        """(left, right, down, up) tangents of the camera's frustum."""
+        return frustum_tangents.symmetric(self.fov_deg, self.width, self.height) if self.frustum is None \
+            else self.frustum
 
     def to_json(self) -> dict:
-        return {"width": self.width, "height": self.height, "fov_deg": self.fov_deg, "rate_hz": self.rate_hz}
+        out = {"width": self.width, "height": self.height, "fov_deg": self.fov_deg, "rate_hz": self.rate_hz}
+        if self.frustum is not None:
+            out["frustum"] = list(self.frustum)
+        return out
 
     @classmethod
     def from_json(cls, name: str, o: dict) -> "OutputConfig":
+        frustum = _get(name, o, "frustum", list, default=None)
+        if frustum is not None:
+            if len(frustum) != 4 or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in frustum):
+                raise MalformedMessage(f"{name}: field 'frustum' must be four numbers, got {frustum!r:.80}")
+            try:
+                frustum = frustum_tangents.check_tangents(frustum)
+            except (ConfigError, OverflowError) as e:
+                raise MalformedMessage(f"{name}: field 'frustum': {e}") from None
         return cls(
             width=_get(name, o, "width", int, lo=16, hi=8192),
             height=_get(name, o, "height", int, lo=16, hi=8192),
             fov_deg=_get(name, o, "fov_deg", float, lo=1.0, hi=170.0),
             rate_hz=_get(name, o, "rate_hz", float, lo=1.0, hi=1000.0),
+            frustum=frustum,
         )
 
 

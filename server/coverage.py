@@ -19,6 +19,7 @@ import math
 import numpy as np
 from numba import njit
 
+from pibr.protocol.frustum import rays as frustum_rays
 from pibr.protocol.pose import Pose
 from pibr.protocol.projection import EPS, FORWARD
 
@@ -94,9 +95,12 @@ def sky_in_view(directions: np.ndarray, view_pose: Pose, distance: np.ndarray) -
     return _sky(np.ascontiguousarray(local, np.float64), distance)
 
 
-def camera_rays(width: int, height: int, fov_deg: float) -> np.ndarray:
+def camera_rays(width: int, height: int, fov_deg: float, frustum=None) -> np.ndarray:
     """Unit directions (width * height, 3) of a perspective camera's pixel centres, row 0 on top,
-    in camera space (looking along -Z); ``fov_deg`` is horizontal."""
+    in camera space (looking along -Z); ``fov_deg`` is horizontal, or ``frustum`` ((left, right,
+    down, up) tangents, protocol/frustum.py) sets the view when given."""
+    if frustum is not None:
+        return frustum_rays(frustum, width, height)
     tan_x = math.tan(math.radians(fov_deg) / 2)
     tan_y = tan_x * height / width
     xs = ((np.arange(width) + 0.5) / width * 2 - 1) * tan_x
@@ -148,9 +152,11 @@ class CoverageProbe:
     """Renders ground truth and wide-angle views of one scene at small sizes, on this thread."""
 
     def __init__(self, scene, view_size=(512, 512), out_size=(320, 180), fov_deg=90.0, projection="vertex",
-                 tolerance=COVERAGE_TOLERANCE, ctx=None, mark_peeled: bool = True, renderer=None):
+                 tolerance=COVERAGE_TOLERANCE, ctx=None, mark_peeled: bool = True, renderer=None, frustum=None):
         """``renderer``: a :class:`~pibr.server.renderer.Renderer` of ``scene`` on ``ctx`` to share (the
-        server's); it stays its owner's to release. None: the probe makes its own."""
+        server's); it stays its owner's to release. None: the probe makes its own. ``frustum``: the
+        displayed camera's (left, right, down, up) tangents (an eye's, protocol/frustum.py), else
+        ``fov_deg`` sets it."""
         from pibr.common.gl import create_context
         from pibr.server.render_target import RenderTarget
         from pibr.server.renderer import PEEL_TOLERANCE, Renderer
@@ -167,7 +173,8 @@ class CoverageProbe:
             self.primary = RenderTarget(self.ctx, *view_size)
             self.extra = RenderTarget(self.ctx, view_size[0] // 2, view_size[1] // 2)
             self.gt = RenderTarget(self.ctx, *out_size)
-        self._dirs = camera_rays(*out_size, fov_deg)
+        self.frustum = frustum
+        self._dirs = camera_rays(*out_size, fov_deg, frustum)
 
     # Every GL entry point makes this probe's own context current first (``with self.ctx``):
     # another context created on the same thread since would otherwise receive the calls. A
@@ -181,7 +188,7 @@ class CoverageProbe:
     def display_points(self, pose: Pose, t: float):
         """Ground truth at the displayed pose: world points (n, 3), sky mask (n,), world directions (n, 3)."""
         with self._current():
-            self.renderer.render_perspective(self.gt, pose, t, self.fov_deg)
+            self.renderer.render_perspective(self.gt, pose, t, self.fov_deg, self.frustum)
             distance = self.gt.read_distance()
         return displayed_points(self._dirs, pose, distance)
 

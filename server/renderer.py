@@ -26,6 +26,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from pibr.protocol.frustum import projection as frustum_projection
 from pibr.protocol.pose import Pose
 from pibr.protocol.projection import GLSL as PROJECTION_GLSL
 from pibr.scenes.scene import Scene
@@ -552,11 +553,15 @@ class Renderer:
         self._resample_vao.render(ctx.TRIANGLE_STRIP)
         ctx.enable(ctx.DEPTH_TEST)
 
-    def render_perspective(self, target: RenderTarget, pose: Pose, t: float, fov_x_deg: float) -> None:
-        """Perspective view (ground truth) at ``pose`` and scene time ``t``, horizontal FOV ``fov_x_deg``.
-        A target with motion also gets which moving object each pixel shows (RenderTarget.read_moving_index)."""
+    def render_perspective(self, target: RenderTarget, pose: Pose, t: float, fov_x_deg: float,
+                           frustum=None) -> None:
+        """Perspective view (ground truth) at ``pose`` and scene time ``t``, horizontal FOV ``fov_x_deg``,
+        or through ``frustum`` ((left, right, down, up) tangents, protocol/frustum.py: an eye's
+        asymmetric one) when given. A target with motion also gets which moving object each pixel
+        shows (RenderTarget.read_moving_index)."""
         self._begin(target)
-        proj = perspective_matrix(fov_x_deg, target.width / target.height, self.scene.near, self.scene.far)
+        proj = perspective_matrix(fov_x_deg, target.width / target.height, self.scene.near, self.scene.far) \
+            if frustum is None else frustum_projection(frustum, self.scene.near, self.scene.far)
         self._draw("perspective", pose.view_matrix(), pose.p, t, {"u_projection": proj.T},
                    motion_dt=0.0 if target.motion is not None else None, target=target)
 

@@ -1,10 +1,12 @@
 """What every client re-rendering method provides."""
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
 
+from pibr.protocol.frustum import half_and_centre
 from pibr.protocol.messages import OutputConfig
 from pibr.protocol.pose import Pose
 from pibr.protocol.session import SessionConfig
@@ -17,9 +19,18 @@ void main() { gl_Position = vec4(in_pos, 0.0, 1.0); }
 
 
 def output_tan_half(output: OutputConfig) -> tuple[float, float]:
-    """tan of half the horizontal and vertical field of view of the output camera."""
-    tx = math.tan(math.radians(output.fov_deg) / 2.0)
-    return tx, tx * output.height / output.width
+    """Half the width and height of the output camera's image plane at distance 1 (for a
+    symmetric frustum, tan of half its horizontal and vertical field of view)."""
+    if output.frustum is None:
+        tx = math.tan(math.radians(output.fov_deg) / 2.0)
+        return tx, tx * output.height / output.width
+    return half_and_centre(output.frustum)[0]
+
+
+def output_tan_centre(output: OutputConfig) -> tuple[float, float]:
+    """Where the output camera's image centre lies on its image plane at distance 1: (0, 0) for
+    a symmetric frustum (a ray through ndc (x, y) is (centre + (x, y) * tan_half, -1))."""
+    return (0.0, 0.0) if output.frustum is None else half_and_centre(output.frustum)[1]
 
 
 class Method:
@@ -47,6 +58,19 @@ class Method:
 
     def __init__(self, ctx, output: OutputConfig, config: SessionConfig):
         self.ctx, self.output, self.config = ctx, output, config
+
+    def look_through(self, frustum) -> None:
+        """Draw the renders that follow through ``frustum`` ((left, right, down, up) tangents: one
+        eye's, protocol/frustum.py; None: the output's symmetric one), on the same pixels."""
+        frustum = None if frustum is None else tuple(float(v) for v in frustum)
+        if frustum != self.output.frustum:
+            self.output = dataclasses.replace(self.output, frustum=frustum)
+            self._frustum_changed()
+
+    def _frustum_changed(self) -> None:
+        """Bring what depends on the output camera's frustum (projection, ray uniforms) to
+        ``self.output``; every method whose drawing depends on it says how."""
+        raise NotImplementedError(f"{self.name} cannot draw through an asymmetric frustum")
 
     def set_motion(self, motion: str) -> None:
         """Take the ``motion`` knob: ``flow``, or a per-object mode (static, velocity, accel,

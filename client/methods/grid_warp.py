@@ -189,7 +189,7 @@ class GridWarp(Method):
         try:
             for view in self.views:
                 self.grids.append(_ViewGrid(ctx, self.prog, view))
-            self.projection = output_projection(output, config.near, config.far)
+            self._frustum_changed()
             self.sky_distance = SKY_FRACTION * config.far
             # The depth transport: code = code_scale / distance, DEPTH_SLACK_CODES codes of error.
             self.code_scale = config.near * float((1 << config.depth_bits) - 1 - config.depth_min_code)
@@ -210,6 +210,9 @@ class GridWarp(Method):
         self.last_primitives = 0
         self.last_build_ms = 0.0   # CPU grid construction + upload for the newest frame
         self.builds = 0
+
+    def _frustum_changed(self) -> None:
+        self.projection = output_projection(self.output, self.config.near, self.config.far)
 
     # -- per server frame ------------------------------------------------------------------
 

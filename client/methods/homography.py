@@ -31,12 +31,13 @@ uniform mat3 u_out_to_src;    // output camera -> primary camera rotation
 uniform vec3 u_eye;           // output camera position in the primary camera's space
 uniform float u_plane;        // plane z = -u_plane in the primary camera's space
 uniform vec2 u_tan_half;
+uniform vec2 u_tan_centre;  // the image centre on the plane at distance 1 (0: symmetric frustum)
 uniform vec2 u_out_size;
 uniform vec4 u_color_rect;
 out vec4 f_color;
 void main() {
     vec2 ndc = vec2(2.0 * gl_FragCoord.x / u_out_size.x - 1.0, 1.0 - 2.0 * gl_FragCoord.y / u_out_size.y);
-    vec3 d = u_out_to_src * normalize(vec3(ndc * u_tan_half, -1.0));
+    vec3 d = u_out_to_src * normalize(vec3(u_tan_centre + ndc * u_tan_half, -1.0));
     float t = d.z < 0.0 ? (-u_plane - u_eye.z) / d.z : -1.0;
     vec3 p = t > 0.0 ? u_eye + t * d : d;       // on the plane, or along the ray's direction
     if (p.z > 0.0) { f_color = vec4(0.0); return; }

@@ -38,7 +38,7 @@ from pibr.protocol.errors import ConfigError
 from pibr.protocol.pose import Pose
 
 from ..frame_textures import bind_frame_uniforms, frame_glsl
-from .base import FULLSCREEN_VS, Method, fullscreen_quad, output_tan_half
+from .base import FULLSCREEN_VS, Method, fullscreen_quad, output_tan_centre, output_tan_half
 from .mesh_warp import DEFAULT_SPLIT, MeshWarpProgram, check_split
 from .quadtree_warp import DEFAULT_THRESHOLD, QuadtreeMesh, check_threshold
 from .view_warp import SKY_FRACTION, VOID_MARGIN, output_projection
@@ -71,6 +71,7 @@ uniform sampler2D u_dist0;      // the primary view's distances (R32F, 0 = sky)
 uniform sampler2D u_dist1;      // the extra view's (negative where void)
 uniform vec2 u_out_size;
 uniform vec2 u_tan_half;
+uniform vec2 u_tan_centre;  // the image centre on the plane at distance 1 (0: symmetric frustum)
 uniform mat3 u_out_to_src[2];   // rotation: output camera space -> view camera space
 uniform vec3 u_out_centre[2];   // the output camera's centre in view camera space
 uniform vec4 u_color_rect[2];
@@ -108,7 +109,7 @@ vec2 dir_uv(vec3 s) { return clamp(wa_uv(wa_project(s).xy), 0.0, 1.0); }
 void main() {
     vec2 px = gl_FragCoord.xy;   // row 0 on top, as every output image
     vec2 ndc = vec2(2.0 * px.x / u_out_size.x - 1.0, 1.0 - 2.0 * px.y / u_out_size.y);
-    vec3 ray = normalize(vec3(ndc * u_tan_half, -1.0));
+    vec3 ray = normalize(vec3(u_tan_centre + ndc * u_tan_half, -1.0));
     vec4 ref = texelFetch(u_refs, ivec2(px), 0);
     int v = 0;
     vec3 s;
@@ -130,7 +131,7 @@ void main() {
     vec3 q = transpose(u_out_to_src[v]) * (s * view_distance(v, uv, nearest) - c);   // output camera space
     float residual = 1e30;
     if (q.z < -1e-9) {
-        vec2 n = q.xy / (-q.z * u_tan_half);
+        vec2 n = (q.xy + q.z * u_tan_centre) / (-q.z * u_tan_half);
         if (all(lessThan(abs(n), vec2(1e6)))) {
             vec2 qpx = vec2(0.5 * (n.x + 1.0) * u_out_size.x, 0.5 * (1.0 - n.y) * u_out_size.y);
             residual = length(qpx - px);
@@ -176,7 +177,7 @@ class IterativeWarp(Method):
         rects += rects[:1] * (2 - len(rects))
         sizes += sizes[:1] * (2 - len(sizes))
         values = {"u_refs": _UNIT_REFS, "u_dist0": _UNIT_DIST[0], "u_dist1": _UNIT_DIST[1],
-                  "u_out_size": (float(output.width), float(output.height)), "u_tan_half": output_tan_half(output),
+                  "u_out_size": (float(output.width), float(output.height)),
                   "u_sky_distance": SKY_FRACTION * config.far, "u_split": self.split,
                   "u_iterations": self.iterations, "u_damping": self.damping, "u_max_residual": MAX_RESIDUAL_PX}
         for k, v in values.items():
@@ -200,9 +201,14 @@ class IterativeWarp(Method):
             t.repeat_x = t.repeat_y = False
             self.distances.append(t)
         self._distances_key = None
-        self.projection = output_projection(output, config.near, config.far)
+        self._frustum_changed()
         self.sky_distance = SKY_FRACTION * config.far
         self.last_primitives = 0
+
+    def _frustum_changed(self) -> None:
+        self.prog["u_tan_half"].value = output_tan_half(self.output)
+        self.prog["u_tan_centre"].value = output_tan_centre(self.output)
+        self.projection = output_projection(self.output, self.config.near, self.config.far)
 
     def _iterate_uniforms(self, out_pose: Pose, frame) -> None:
         rots, centres = [], []

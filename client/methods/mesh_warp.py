@@ -174,9 +174,12 @@ class _GridWarp(Method):
             ibo = ctx.buffer(indices.tobytes())
             vao = ctx.vertex_array(self.program.prog, [], index_buffer=ibo, index_element_size=4)
             self.grids.append((vao, ibo, grid_width, quads))
-        self.projection = output_projection(output, config.near, config.far)
+        self._frustum_changed()
         self.sky_distance = SKY_FRACTION * config.far
         self.last_primitives = 0
+
+    def _frustum_changed(self) -> None:
+        self.projection = output_projection(self.output, self.config.near, self.config.far)
 
     def render(self, out_pose: Pose, frame, textures, scene_t: float = 0.0) -> None:
         ctx, prog = self.ctx, self.program.prog

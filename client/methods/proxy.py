@@ -86,7 +86,7 @@ from ..frame_textures import bind_frame_uniforms, frame_glsl, has_extra_depth, r
 from ..lod_select import DEFAULT_TARGET_PX, LodSelector
 from ..object_motion import DEFAULT_HORIZON_FRAMES, DEFAULT_MOTION, ObjectPlacer, PoseHistory
 from . import proxy_shaders as shaders
-from .base import FULLSCREEN_VS, Method, fullscreen_quad, output_tan_half
+from .base import FULLSCREEN_VS, Method, fullscreen_quad, output_tan_centre, output_tan_half
 from .view_warp import mat4_bytes, output_projection
 
 DEFAULT_TAU = 0.1
@@ -193,7 +193,6 @@ class ProxyIBR(Method):
         self.refs_fbo = ctx.framebuffer(color_attachments=[self.refs], depth_attachment=self.refs_depth)
         self.refs_depth_fbo = ctx.framebuffer(depth_attachment=self.refs_depth)
         self.resolve["u_refs" if self.carve else "u_pos"].value = 5
-        self.finds_background["u_tan_half"].value = output_tan_half(output)
         self.finds_background["u_out_size"].value = (float(output.width), float(output.height))
         for p in {self.resolve, self.finds_background}:
             for k, rect in (("u_primary_color", "primary.color"), ("u_extra_color", "extra.color")):
@@ -216,18 +215,11 @@ class ProxyIBR(Method):
             bind_frame_uniforms(self.points, config)
             self.points["u_view_size"].value = (float(config.primary.width), float(config.primary.height))
             self.points["u_position"].value = not self.carve
-            self.points["u_tan_half"].value = output_tan_half(output)
             self.points["u_out_size"].value = (float(output.width), float(output.height))
             self.points_vbo = ctx.buffer(reserve=12 * 1024, dynamic=True)
             self.points_vao = ctx.vertex_array(self.points, [(self.points_vbo, "2f 1f", "in_px", "in_distance")])
-            # source pixels per output pixel at the centres of both: a point covers its pixel's footprint
-            src_px_per_rad = config.primary.width / np.pi
-            out_px_per_rad = output.width / (2.0 * output_tan_half(output)[0])
-            self.point_size = float(np.ceil(1.5 * out_px_per_rad / src_px_per_rad))
         self.near, self.far = config.near, config.far
-        # how far from the camera the near plane reaches: a mesh closer than that may be cut open
-        self._near_reach = self.near * float(np.sqrt(1.0 + np.sum(np.square(output_tan_half(output)))))
-        self.projection = output_projection(output, self.near, self.far)
+        self._frustum_changed()
         self._buffers = []
         # per object: level -> (one vao per program of self.passes, triangles, (8, 4) box corners,
         # when it may skip its back faces)
@@ -253,6 +245,23 @@ class ProxyIBR(Method):
         self.pair_at_once = bool(pair_at_once)
         self.pair_passes = []   # both eyes at once (render_pair), made when first used
         self._pair_refs = None
+
+    def _frustum_changed(self) -> None:
+        output = self.output
+        for p in (self.finds_background, self.points):
+            if p is not None:
+                p["u_tan_half"].value = output_tan_half(output)
+                p["u_tan_centre"].value = output_tan_centre(output)
+        if self.points is not None:
+            # source pixels per output pixel at the centres of both: a point covers its pixel's footprint
+            src_px_per_rad = self.config.primary.width / np.pi
+            out_px_per_rad = output.width / (2.0 * output_tan_half(output)[0])
+            self.point_size = float(np.ceil(1.5 * out_px_per_rad / src_px_per_rad))
+        # how far from the camera the near plane reaches: a mesh closer than that may be cut open
+        left, right, down, up = output.tangents()
+        self._near_reach = self.near * float(np.sqrt(1.0 + (max(left * left, right * right) + max(down * down, up * up))))
+        self.projection = output_projection(output, self.near, self.far)
+        self.selector.output = output
 
     def _mesh_vaos(self, programs, vbo, ibo) -> list:
         """One vertex array per program of a mesh's vertex (float32 x, y, z) and index (uint32) buffers."""

@@ -59,6 +59,7 @@ uniform mat3 u_out_to_src;   // output camera -> primary camera rotation
 uniform mat3 u_out_to_extra; // output camera -> extra camera rotation
 uniform bool u_extra_sky;    // the extra view's sky may fill in (it marks peeled pixels apart)
 uniform vec2 u_tan_half;
+uniform vec2 u_tan_centre;  // the image centre on the plane at distance 1 (0: symmetric frustum)
 uniform vec2 u_out_size;
 // Where no proxy fragment landed: the sky along this pixel's ray. Sky is at infinity, so any
 // view shows it in the same direction: the primary view's if it shows sky there, else the
@@ -70,7 +71,7 @@ uniform vec2 u_out_size;
 bool background(out vec4 rect, out vec2 uv, out float alpha) {
     float x = mod(gl_FragCoord.x, u_out_size.x);
     vec2 ndc = vec2(2.0 * x / u_out_size.x - 1.0, 1.0 - 2.0 * gl_FragCoord.y / u_out_size.y);
-    vec3 ray = normalize(vec3(ndc * u_tan_half, -1.0));
+    vec3 ray = normalize(vec3(u_tan_centre + ndc * u_tan_half, -1.0));
     vec3 d = u_out_to_src * ray;
     uv = wa_uv(wa_project(d).xy);
     rect = u_primary_color;
@@ -378,10 +379,11 @@ uniform mat3 u_out_to_primary;    // output camera rotation -> primary camera sp
 uniform vec3 u_eye;               // output camera position in primary camera space
 uniform mat4 u_primary_to_world;
 uniform vec2 u_tan_half;
+uniform vec2 u_tan_centre;  // the image centre on the plane at distance 1 (0: symmetric frustum)
 uniform vec2 u_out_size;
 void main() {
     vec2 ndc = vec2(2.0 * gl_FragCoord.x / u_out_size.x - 1.0, 1.0 - 2.0 * gl_FragCoord.y / u_out_size.y);
-    vec3 r = u_out_to_primary * normalize(vec3(ndc * u_tan_half, -1.0));
+    vec3 r = u_out_to_primary * normalize(vec3(u_tan_centre + ndc * u_tan_half, -1.0));
     float b = dot(u_eye, r), c = dot(u_eye, u_eye) - v_d * v_d;
     float disc = b * b - c;
     if (disc < 0.0) discard;

@@ -161,9 +161,12 @@ class QuadtreeWarp(Method):
         self.program = MeshWarpProgram(ctx, config, self.split, grid=False)
         self.mesh = QuadtreeMesh(ctx, config, self.program.prog, self.name)
         self.uses_extra_view = len(self.mesh.views) > 1
-        self.projection = output_projection(output, config.near, config.far)
+        self._frustum_changed()
         self.sky_distance = SKY_FRACTION * config.far
         self.last_primitives = 0
+
+    def _frustum_changed(self) -> None:
+        self.projection = output_projection(self.output, self.config.near, self.config.far)
 
     def render(self, out_pose: Pose, frame, textures, scene_t: float = 0.0) -> None:
         ctx = self.ctx

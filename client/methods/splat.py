@@ -46,9 +46,12 @@ class PointSplat(Method):
         self.views = source_views(config)
         self.uses_extra_view = len(self.views) > 1
         self.point_size = float(point_size)
-        self.projection = output_projection(output, config.near, config.far)
+        self._frustum_changed()
         self.sky_distance = SKY_FRACTION * config.far
         self.last_primitives = 0
+
+    def _frustum_changed(self) -> None:
+        self.projection = output_projection(self.output, self.config.near, self.config.far)
 
     def render(self, out_pose: Pose, frame, textures, scene_t: float = 0.0) -> None:
         ctx = self.ctx

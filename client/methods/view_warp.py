@@ -26,6 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from pibr.protocol.frustum import projection as frustum_projection
 from pibr.protocol.pose import Pose
 from pibr.protocol.session import SessionConfig
 
@@ -90,7 +91,9 @@ void main() { f_color = vec4(atlas_rgb(u_color_rect, v_uv), 1.0); }
 
 
 def output_projection(output, near: float, far: float) -> np.ndarray:
-    """(4, 4) OpenGL perspective matrix of the output camera."""
+    """(4, 4) OpenGL perspective matrix of the output camera (its frustum's, when it has one)."""
+    if output.frustum is not None:
+        return frustum_projection(output.frustum, near, far)
     tx, ty = output_tan_half(output)
     m = np.zeros((4, 4))
     m[0, 0], m[1, 1] = 1 / tx, 1 / ty

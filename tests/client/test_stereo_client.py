@@ -64,6 +64,33 @@ def test_stereo_settings_are_checked():
         ClientConfig(stereo="both")
     with pytest.raises(ConfigError, match="interpupillary"):
         ClientConfig(stereo="cyclops", ipd_mm=0)
+    with pytest.raises(ConfigError, match="field of view needs two eyes"):
+        ClientConfig(eye_fov_deg=(52, 38, 40, 50))
+    with pytest.raises(ConfigError, match="up angle must be in"):
+        ClientConfig(stereo="cyclops", eye_fov_deg=(52, 38, 95, 50))
+    with pytest.raises(ConfigError, match="cannot with --eye-fov-deg"):
+        ClientConfig(stereo="cyclops", eye_fov_deg=(52, 38, 40, 50), options={"pair_at_once": True})
+    # the eyes' frustums set the field of view: the symmetric one of the same pixels per radian
+    assert ClientConfig(stereo="cyclops", eye_fov_deg=(45, 45, 30, 30)).fov_deg == pytest.approx(90.0)
+
+
+def test_the_eyes_fov_on_the_command_line(capsys):
+    from pibr.cli import build_parser, main
+
+    with pytest.raises(SystemExit):
+        build_parser().parse_args(["client", "--eye-fov-deg", "52,38,40"])
+    assert "four angles" in capsys.readouterr().err
+    assert main(["client", "--stereo", "cyclops", "--fov", "100", "--eye-fov-deg", "52,38,40,50",
+                 "--connect", "127.0.0.1:1"]) == 2
+    assert "give --fov or --eye-fov-deg, not both" in capsys.readouterr().err
+    assert main(["demo", "--eye-fov-deg", "52,38,40,50"]) == 2
+    assert "need two eyes" in capsys.readouterr().err
+    from pibr.bench.commands import demo_client_args
+
+    args = build_parser().parse_args(["demo", "--stereo", "cyclops", "--eye-fov-deg", "52,38.5,40,50"])
+    assert demo_client_args(args)[-2:] == ("--eye-fov-deg", "52,38.5,40,50")
+    args = build_parser().parse_args(["bench", "stereo", "--eye-fov-deg", "52,38,40,50"])
+    assert args.eye_fov_deg == (52.0, 38.0, 40.0, 50.0)
 
 
 def test_colour_at_a_quarter_cannot_interleave_the_eyes():
