@@ -272,8 +272,10 @@ class ProxyIBR(Method):
         """Whether :meth:`render_pair` draws these two eyes at once: with ``pair_at_once``, carving's
         passes (neither carve_all, nor carve=False, nor flow's points, which stay one view at a
         time), and eyes that look the same way from either side of a centre, along their common x
-        axis (as protocol/stereo.py places them)."""
-        if not self.pair_at_once or not self.carve or self.carve_all or self.motion == "flow":
+        axis (as protocol/stereo.py places them), through the output's symmetric frustum (the eyes
+        share one projection)."""
+        if not self.pair_at_once or not self.carve or self.carve_all or self.motion == "flow" \
+                or self.output.frustum is not None:
             return False
         r = left.rotation()
         if not np.allclose(r, right.rotation(), atol=1e-9):

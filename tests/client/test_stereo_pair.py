@@ -7,6 +7,7 @@ import pytest
 
 from pibr.bench.simulation import Simulation, bench_server_config, load_proxies
 from pibr.client.lod_select import LodSelector
+from pibr.protocol.frustum import eye_tangents
 from pibr.protocol.messages import OutputConfig
 from pibr.protocol.pose import Pose, quat_from_axis_angle
 from pibr.protocol.proxy import ProxyObject, closed_box
@@ -73,6 +74,10 @@ def test_which_pairs_are_drawn_at_once(sim):
         assert not m.shares_pair(right, left)   # the left eye must be on the left
         assert not m.shares_pair(left, right.compose(Pose.make((0.0, 0.0, 0.0), quat_from_axis_angle([0, 1, 0], 0.01))))
         assert not m.shares_pair(left, head.compose(Pose.make((0.032, 0.02, 0.0))))   # not along x
+        m.look_through(eye_tangents("left", (52.0, 42.0, 30.0, 33.0)))   # an eye's own frustum: one by one
+        assert not m.shares_pair(left, right)
+        m.look_through(None)
+        assert m.shares_pair(left, right)
     finally:
         m.release()
     for options in ({"carve_all": True, "pair_at_once": True}, {"carve": False, "pair_at_once": True}, {}):
