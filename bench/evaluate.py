@@ -567,6 +567,8 @@ def summary_table(metrics: dict) -> str:
     if stereo:
         for m, c in stereo["methods"].items():
             share = "-" if c["inconsistent_mean"] is None else f"{100 * c['inconsistent_mean']:.2f} %"
-            body.append(f"stereo {m} ({stereo['reference']}, {stereo['ipd_mm']:g} mm): {share} of the points both "
-                        f"eyes see shown inconsistently")
+            eyes = "" if not stereo.get("eye_fov_deg") else \
+                ", eyes " + "/".join(f"{a:g}" for a in stereo["eye_fov_deg"]) + " degrees out/in/up/down"
+            body.append(f"stereo {m} ({stereo['reference']}, {stereo['ipd_mm']:g} mm{eyes}): {share} of the points "
+                        f"both eyes see shown inconsistently")
     return "\n".join([line, "-" * len(line), *body])

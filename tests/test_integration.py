@@ -188,6 +188,9 @@ def test_two_eyes_through_a_headsets_asymmetric_frustums(tmp_path):
         gt.close()
     metrics = evaluate_run(out, flip_every=0, workers=1, progress=False, side_by_side=False, plot=False)
     assert metrics["stereo"]["eye_fov_deg"] == [52.0, 38.0, 40.0, 50.0]
+    from pibr.bench.evaluate import summary_table
+
+    assert "stereo proxy (cyclops, 64 mm, eyes 52/38/40/50 degrees out/in/up/down)" in summary_table(metrics)
     for eye in ("left", "right"):
         # scored through the eye's own frustum: measured DSSIM 0.073 (left) and 0.087 (right)
         assert metrics["methods"][f"proxy.{eye}"]["dssim_mean"] < 0.12
