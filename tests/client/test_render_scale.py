@@ -50,6 +50,27 @@ def test_a_scaled_output_keeps_the_field_of_view():
     assert (scaled_output(OutputConfig(32, 18, 60.0, 60.0), 0.25).width,) == (16,)
 
 
+def test_a_scaled_level_draws_through_an_eyes_frustum(sim, sample):
+    """A level drawn smaller looks through the eye's frustum too (the scaled output keeps its
+    tangents, and look_through reaches the method inside)."""
+    from pibr.protocol.frustum import eye_tangents
+
+    eye = eye_tangents("left", (52.0, 42.0, 30.0, 33.0))
+    assert scaled_output(OutputConfig(960, 540, 90.0, 30.0, eye), 0.5).frustum == eye
+    t_disp, display, t_render, rendered = sample
+    frame = sim.frame_at(t_render, rendered)
+    truth = sim.ground_truth(display, t_disp, eye)
+    for level in (Level("full", "proxy"), Level("1/2", "proxy", 0.5)):
+        method = make_level(sim.ctx, level, sim.output, sim.session, sim.proxies, poses=sim.poses)
+        try:
+            straight, _, _ = sim.display(method, display, frame, t_disp)
+            method.look_through(eye)
+            through, _, _ = sim.display(method, display, frame, t_disp)
+        finally:
+            method.release()
+        assert psnr(truth, through) > psnr(truth, straight) + 4.0, level.name
+
+
 def test_half_resolution_upsampled_looks_like_full_resolution(sim, sample):
     full, full_holes, _ = _draw(sim, sample, Level("full", "rotation"))
     half, half_holes, alpha = _draw(sim, sample, Level("1/2", "rotation", 0.5))
