@@ -129,6 +129,16 @@ def stream_left_us(frame: Frame, wall_clock: bool) -> int:
     return frame.render_t_us + int(round(1e3 * stages_ms))
 
 
+def live_image(per_eye: list) -> np.ndarray | None:
+    """What the live page shows of one method's tick, ``per_eye`` [(rgb (h, w, 3) or None, hole
+    fraction, ms) per eye]: its one view, or both eyes side by side (as ``M.stereo.mp4``); None
+    before a frame."""
+    images = [rgb for rgb, _, _ in per_eye]
+    if any(rgb is None for rgb in images):
+        return None
+    return images[0] if len(images) == 1 else side_by_side(*images)
+
+
 def _read_back(rgba, ms: float) -> tuple:
     """(rgb or None, hole fraction, ms) of one eye's image read back, (h, w, 4) or None (not read)."""
     if rgba is None:
@@ -708,8 +718,10 @@ class Client:
         self.series.tick(t_us / 1e6, age, False, {m: sum(ms for _, _, ms in per_eye)
                                                   for m, per_eye in zip(self.cfg.methods, results)},
                          {m: level for m, (level, _) in chosen.items()})
-        if watched and results[0][0][0] is not None:
-            self.live.set_image(results[0][0][0])
+        if watched:
+            image = live_image(results[0])
+            if image is not None:
+                self.live.set_image(image)
         if self.live is not None:
             self.live.account((time.thread_time() - t0) * 1e3)
         return drawn

@@ -143,3 +143,17 @@ async def test_a_port_in_use_is_named():
             await LiveServer(LiveSeries(["proxy"], 30.0), port).start()
     finally:
         await first.close()
+
+
+def test_the_live_image_of_two_eyes_is_the_pair_side_by_side():
+    import numpy as np
+
+    from pibr.client.app import live_image
+    from pibr.client.recorder import PAIR_GAP
+
+    left, right = np.full((4, 6, 3), 10, np.uint8), np.full((4, 6, 3), 200, np.uint8)
+    assert live_image([(left, 0.0, 1.0)]) is left
+    pair = live_image([(left, 0.0, 1.0), (right, 0.0, 1.0)])
+    assert pair.shape == (4, 12 + PAIR_GAP, 3)
+    assert np.all(pair[:, :6] == 10) and np.all(pair[:, -6:] == 200) and np.all(pair[:, 6:6 + PAIR_GAP] == 0)
+    assert live_image([(left, 0.0, 1.0), (None, 0.0, 1.0)]) is None   # not read back this tick
