@@ -6,8 +6,8 @@ from dataclasses import dataclass, field
 
 from pibr.common.tls import ClientTLS
 from pibr.protocol.errors import ConfigError
-from pibr.protocol.messages import MAX_BANDWIDTH_KBPS, OutputConfig
 from pibr.protocol.frustum import check_eye_fov_deg, equivalent_fov_deg, eye_tangents
+from pibr.protocol.messages import MAX_BANDWIDTH_KBPS, OutputConfig
 from pibr.protocol.stereo import DEFAULT_IPD_MM, STEREO_REFERENCES, check_ipd_mm
 
 from .deadline import DEADLINE_MODES

@@ -155,3 +155,16 @@ def test_frames_written_behind_keep_their_order_and_errors_surface():
         behind.write(np.full((2, 2, 3), i, np.uint8))
     with pytest.raises(ValueError, match="disk full"):
         behind.close()
+
+
+def test_a_sessions_eye_frustums_are_read_and_bad_ones_named():
+    from pibr.bench.evaluate import _eye_frustums
+    from pibr.protocol.errors import ConfigError
+    from pibr.protocol.frustum import eye_tangents
+
+    assert _eye_frustums({"eye_fov_deg": None}, ["left", "right"]) == {"left": None, "right": None}
+    got = _eye_frustums({"eye_fov_deg": [52, 42, 30, 33]}, ["left", "right"])
+    assert got == {e: eye_tangents(e, (52, 42, 30, 33)) for e in ("left", "right")}
+    for bad in ([52, 42, 30], "wide", [52, 42, 30, 95], {"outer": 52}):
+        with pytest.raises(ConfigError, match="session.json: client.eye_fov_deg"):
+            _eye_frustums({"eye_fov_deg": bad}, ["left", "right"])
