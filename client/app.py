@@ -39,8 +39,8 @@ from pibr.protocol.age_baseline import AgeBaseline
 from pibr.protocol.errors import ConfigError, MalformedMessage, UnexpectedMessage
 from pibr.protocol.frustum import eye_tangents
 from pibr.protocol.messages import (ARRIVAL_AGE_MS, DELIVERED_KBPS, DISPLAY_AGE_MS, FRAMES_DECODED, LINK_KBPS,
-                                    NEWEST_FRAME, PROBE_KBPS, REPORT_SPAN_MS, STREAM_BASELINE_S, STREAM_QUEUE_HIGH_MS,
-                                    STREAM_REPORT_MS, STREAM_URGENT_GAP_MS, WARMUP_SEQ,
+                                    MAX_BANDWIDTH_KBPS, NEWEST_FRAME, PROBE_KBPS, REPORT_SPAN_MS, STREAM_BASELINE_S,
+                                    STREAM_QUEUE_HIGH_MS, STREAM_REPORT_MS, STREAM_URGENT_GAP_MS, WARMUP_SEQ,
                                     Clock, Frame, Hello, OutputConfig, PayloadKind, PoseMsg, Stats, decode_eye,
                                     decode_frame_level, decode_stream_rate)
 from pibr.protocol.pose import Pose
@@ -545,15 +545,18 @@ class Client:
     def _probe_kbps(self, nbytes: int, last) -> float | None:
         """The link's rate (kbit/s) the proxy bundle measured: its ``nbytes`` over the time from the
         Welcome's arrival to its last chunk's (``last``: (virtual us, loop s)), on the session's
-        clock (the virtual one as a relay stamps it); None without a time to measure (no relay on
-        the virtual clock: everything is stamped at once)."""
+        clock (the virtual one as a relay stamps it). On the virtual clock a bundle that took no
+        time crossed no modelled link (no relay, or a relay with no bandwidth trace): it has room
+        for any stream, MAX_BANDWIDTH_KBPS. None without a time to measure."""
         if last is None or self.conn.welcome_arrival is None:
             return None
         if self.cfg.clock == "virtual":
             seconds = (last[0] - self.conn.welcome_arrival[0]) / 1e6
+            if seconds <= 0 and nbytes > 0:
+                return MAX_BANDWIDTH_KBPS
         else:
             seconds = last[1] - self.conn.welcome_arrival[1]
-        return 8.0 * nbytes / seconds / 1e3 if seconds > 0 else None
+        return min(MAX_BANDWIDTH_KBPS, 8.0 * nbytes / seconds / 1e3) if seconds > 0 else None
 
     def _pose_history(self):
         """Where the frames' object transforms are kept (the proxies' rest transforms and boxes

@@ -70,7 +70,9 @@ probe`` the stream starts at :data:`PROBE_SHARE` of that rate instead, on the fi
 top whose floor fits it, and probes from there as on any link with room
 (:meth:`StreamAdaptation.probe`): a known rate is a start that does not queue, half of it leaves
 room for what one measure gets wrong, and a slow start is for a link nothing is known of. Without
-proxies, or on the virtual clock without a relay, nothing is measured. It is not the default:
+proxies nothing is measured; on the virtual clock a bundle that took no time crossed no modelled
+link (no relay, or one without a bandwidth trace), and the client reports MAX_BANDWIDTH_KBPS: the
+stream starts at the session's bitrate, as a static one does. It is not the default:
 measured on two evaluation windows and seven links it made the first seconds better in 12 of 14
 runs and the age p95 higher in 7 (docs/results/network-start.json).
 

@@ -417,6 +417,32 @@ async def test_the_link_measured_on_the_proxies_is_where_the_stream_starts(tmp_p
     assert first["foot"]["stream_kbps"] == 1600 / LADDER[-1][1] and first["foot"]["stream_view"] == 2
 
 
+@pytest.mark.gl
+async def test_a_bundle_that_took_no_time_starts_the_stream_at_its_bitrate(tmp_path):
+    """On the virtual clock with no modelled link (no relay) the proxy bundle arrives in no time:
+    the client reports a link with room for anything (MAX_BANDWIDTH_KBPS), and --adapt-start probe
+    starts the stream at the session's bitrate on the whole view, with no slow start."""
+    import json
+
+    from pibr.client.app import run_client
+    from pibr.client.config import ClientConfig
+    from pibr.client.recorder import read_records
+    from pibr.protocol.messages import MAX_BANDWIDTH_KBPS
+    from pibr.server.config import ServerConfig
+
+    from ..loopback import running_server
+
+    config = ServerConfig(port=0, scene="room", view_size=(192, 192), bitrate_kbps=16000, adapt="on",
+                          adapt_start="probe")
+    async with running_server(config) as (_, host, port):
+        await run_client(ClientConfig(host=host, port=port, trace="pred6dof-1", start_s=12.0, duration_s=0.5,
+                                      rate_hz=30.0, methods=("proxy",), out_dir=str(tmp_path), width=96, height=64,
+                                      progress="none"))
+    assert json.loads((tmp_path / "session.json").read_text())["proxies"]["probe_kbps"] == MAX_BANDWIDTH_KBPS
+    shown = [r for r in read_records(tmp_path / "proxy.records.csv") if r["frame_id"] >= 0]
+    assert shown and all(r["stream_kbps"] == 16000 and r["stream_view"] == 1 for r in shown)
+
+
 def test_the_adapting_streams_start_is_checked():
     from pibr.protocol.errors import ConfigError
     from pibr.server.config import ServerConfig
