@@ -38,7 +38,6 @@ import numpy as np
 from pibr.protocol import bounded_json
 from pibr.protocol.errors import ConfigError, JSONError
 from pibr.protocol.pose import Pose
-from pibr.protocol.stereo import EYES
 
 from .metrics import nearly_uniform, pixels_per_degree, tick_metrics
 from .results import write_result
@@ -432,13 +431,10 @@ def evaluate_run(run_dir: str, scene_spec: str | None = None, flip_every: int = 
 def _eye_frustums(client: dict, eyes) -> dict:
     """eye -> the (left, right, down, up) tangents the client showed it through (its
     ``eye_fov_deg``, protocol/frustum.py), None for a symmetric one of its ``fov_deg``."""
-    from pibr.protocol.frustum import eye_tangents
+    from pibr.protocol.frustum import eyes_tangents
 
-    eye_fov = client.get("eye_fov_deg")
-    if eye_fov is None:
-        return {eye: None for eye in eyes}
     try:
-        return {eye: eye_tangents(eye, eye_fov) if eye in EYES else None for eye in eyes}
+        return eyes_tangents(eyes, client.get("eye_fov_deg"))
     except ConfigError as exc:
         raise ConfigError(f"session.json: client.eye_fov_deg: {exc}") from None
 

@@ -35,7 +35,7 @@ import time
 import numpy as np
 
 from pibr.common.link import SessionSchedule
-from pibr.protocol.frustum import eye_tangents
+from pibr.protocol.frustum import eyes_tangents
 from pibr.protocol.stereo import CENTRE, DEFAULT_IPD_MM, EYES, eye_pose, frame_eyes
 
 from .results import write_result
@@ -239,7 +239,7 @@ def _run_scene(scene_name, windows, methods, modes, ipd_mm, schedule, view_size,
     scores = _Scores()
     ppd = pixels_per_degree(out_size[0], 90.0)
     # each eye's frustum (None: the symmetric 90 degrees) and camera rays
-    frustums = {CENTRE: None, **{e: None if eye_fov_deg is None else eye_tangents(e, eye_fov_deg) for e in EYES}}
+    frustums = eyes_tangents((CENTRE, *EYES), eye_fov_deg)
     rays_of = {e: camera_rays(*out_size, 90.0, f) for e, f in frustums.items()}
     interval_us = schedule.interval_us
     uniform = {}

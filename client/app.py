@@ -37,7 +37,7 @@ from pibr.common.priority import background_executor
 from pibr.common.quality import OFF, DeadlineController, read_cost_table
 from pibr.protocol.age_baseline import AgeBaseline
 from pibr.protocol.errors import ConfigError, MalformedMessage, UnexpectedMessage
-from pibr.protocol.frustum import eye_tangents
+from pibr.protocol.frustum import eyes_tangents
 from pibr.protocol.messages import (ARRIVAL_AGE_MS, DELIVERED_KBPS, DISPLAY_AGE_MS, FRAMES_DECODED, LINK_KBPS,
                                     MAX_BANDWIDTH_KBPS, NEWEST_FRAME, PROBE_KBPS, REPORT_SPAN_MS, STREAM_BASELINE_S,
                                     STREAM_QUEUE_HIGH_MS, STREAM_REPORT_MS, STREAM_URGENT_GAP_MS, WARMUP_SEQ,
@@ -164,8 +164,7 @@ class Client:
         self._eyes: tuple = EYES if config.stereo else (CENTRE,)
         self._slots: tuple = EYES if config.stereo in ("alternate", "per-eye") else (CENTRE,)
         #: eye -> the (left, right, down, up) tangents it sees through (--eye-fov-deg), None: symmetric
-        self._frustums: dict = {eye: eye_tangents(eye, config.eye_fov_deg) if config.eye_fov_deg and eye in EYES
-                                else None for eye in self._eyes}
+        self._frustums: dict = eyes_tangents(self._eyes, config.eye_fov_deg)
         self._shown: dict[str, _Decoded] = {}            # slot -> the newest decoded frame for it
         self.frames_received = 0
         self.missed = 0

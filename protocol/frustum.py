@@ -70,6 +70,13 @@ def equivalent_fov_deg(tangents: Tangents) -> float:
     return 2.0 * math.degrees(math.atan(half_and_centre(tangents)[0][0]))
 
 
+def eyes_tangents(eyes, eye_fov_deg) -> dict:
+    """eye -> its frustum's tangents for ``eye_fov_deg`` (:func:`eye_tangents`), None for the
+    head's centre or without ``eye_fov_deg`` (a symmetric frustum)."""
+    return {eye: None if eye_fov_deg is None or eye not in ("left", "right") else eye_tangents(eye, eye_fov_deg)
+            for eye in eyes}
+
+
 def check_tangents(tangents) -> Tangents:
     """``tangents`` as four floats (left < right, down < up, each edge within MAX_EDGE_DEG of the
     axis), or a ConfigError."""

@@ -141,9 +141,9 @@ def register(sub) -> None:
     p.add_argument("--adapt-start", choices=STARTS, default="foot",
                    help="with --adapt on, where the stream starts: foot (a frame every 4 ticks, the primary view at "
                         "half its side, the default) or probe (half the link's rate the client measured on the "
-                        "proxy bundle, when it asked for proxies; on the virtual clock with no modelled link, the session's "
-                        "bitrate; 'pibr bench network --adapt-start foot,probe' "
-                        "compares them: better first seconds, older frames when a link halves soon after)")
+                        "proxy bundle, when it asked for proxies; on the virtual clock with no modelled link, "
+                        "the session's bitrate; 'pibr bench network --adapt-start foot,probe' compares them: "
+                        "better first seconds, older frames when a link halves soon after)")
     p.add_argument("--silent-slot-s", type=float, default=2.0, metavar="S",
                    help="a session that has sent no pose S seconds after its Welcome gives its slot to a Hello "
                         "waiting for one (default 2; a running client sends a pose every tick)")

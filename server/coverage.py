@@ -20,6 +20,7 @@ import numpy as np
 from numba import njit
 
 from pibr.protocol.frustum import rays as frustum_rays
+from pibr.protocol.frustum import symmetric
 from pibr.protocol.pose import Pose
 from pibr.protocol.projection import EPS, FORWARD
 
@@ -99,15 +100,7 @@ def camera_rays(width: int, height: int, fov_deg: float, frustum=None) -> np.nda
     """Unit directions (width * height, 3) of a perspective camera's pixel centres, row 0 on top,
     in camera space (looking along -Z); ``fov_deg`` is horizontal, or ``frustum`` ((left, right,
     down, up) tangents, protocol/frustum.py) sets the view when given."""
-    if frustum is not None:
-        return frustum_rays(frustum, width, height)
-    tan_x = math.tan(math.radians(fov_deg) / 2)
-    tan_y = tan_x * height / width
-    xs = ((np.arange(width) + 0.5) / width * 2 - 1) * tan_x
-    ys = (1 - (np.arange(height) + 0.5) / height * 2) * tan_y
-    gx, gy = np.meshgrid(xs, ys)
-    d = np.stack([gx, gy, -np.ones_like(gx)], axis=-1).reshape(-1, 3)
-    return d / np.linalg.norm(d, axis=1, keepdims=True)
+    return frustum_rays(symmetric(fov_deg, width, height) if frustum is None else frustum, width, height)
 
 
 def displayed_points(rays: np.ndarray, pose: Pose, distance: np.ndarray):

@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import dataclasses
-import math
 
 import numpy as np
 
@@ -21,16 +20,13 @@ void main() { gl_Position = vec4(in_pos, 0.0, 1.0); }
 def output_tan_half(output: OutputConfig) -> tuple[float, float]:
     """Half the width and height of the output camera's image plane at distance 1 (for a
     symmetric frustum, tan of half its horizontal and vertical field of view)."""
-    if output.frustum is None:
-        tx = math.tan(math.radians(output.fov_deg) / 2.0)
-        return tx, tx * output.height / output.width
-    return half_and_centre(output.frustum)[0]
+    return half_and_centre(output.tangents())[0]
 
 
 def output_tan_centre(output: OutputConfig) -> tuple[float, float]:
     """Where the output camera's image centre lies on its image plane at distance 1: (0, 0) for
     a symmetric frustum (a ray through ndc (x, y) is (centre + (x, y) * tan_half, -1))."""
-    return (0.0, 0.0) if output.frustum is None else half_and_centre(output.frustum)[1]
+    return half_and_centre(output.tangents())[1]
 
 
 class Method:

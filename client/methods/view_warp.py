@@ -31,7 +31,6 @@ from pibr.protocol.pose import Pose
 from pibr.protocol.session import SessionConfig
 
 from ..frame_textures import has_extra_depth, rect_uniform
-from .base import output_tan_half
 
 #: Sky pixels are warped as a surface at this fraction of the scene's far distance.
 SKY_FRACTION = 0.9
@@ -91,16 +90,8 @@ void main() { f_color = vec4(atlas_rgb(u_color_rect, v_uv), 1.0); }
 
 
 def output_projection(output, near: float, far: float) -> np.ndarray:
-    """(4, 4) OpenGL perspective matrix of the output camera (its frustum's, when it has one)."""
-    if output.frustum is not None:
-        return frustum_projection(output.frustum, near, far)
-    tx, ty = output_tan_half(output)
-    m = np.zeros((4, 4))
-    m[0, 0], m[1, 1] = 1 / tx, 1 / ty
-    m[2, 2] = (far + near) / (near - far)
-    m[2, 3] = 2 * far * near / (near - far)
-    m[3, 2] = -1.0
-    return m
+    """(4, 4) OpenGL perspective matrix of the output camera."""
+    return frustum_projection(output.tangents(), near, far)
 
 
 _FLIP_Y = np.diag([1.0, -1.0, 1.0, 1.0])   # images are stored top row first

@@ -38,7 +38,20 @@ def test_the_symmetric_frustum_is_todays_camera():
     t = frustum.symmetric(90.0, 320, 180)
     assert t == (-1.0 * math.tan(math.pi / 4), math.tan(math.pi / 4), -math.tan(math.pi / 4) * 180 / 320,
                  math.tan(math.pi / 4) * 180 / 320)
+    # the rays as the camera made them before frustums (tangents of half the field of view)
+    tan_x = math.tan(math.pi / 4)
+    tan_y = tan_x * 180 / 320
+    xs = ((np.arange(320) + 0.5) / 320 * 2 - 1) * tan_x
+    ys = (1 - (np.arange(180) + 0.5) / 180 * 2) * tan_y
+    gx, gy = np.meshgrid(xs, ys)
+    d = np.stack([gx, gy, -np.ones_like(gx)], axis=-1).reshape(-1, 3)
+    assert np.array_equal(camera_rays(320, 180, 90.0), d / np.linalg.norm(d, axis=1, keepdims=True))
     assert np.array_equal(frustum.rays(t, 320, 180), camera_rays(320, 180, 90.0))
+    # ... and its projection matrix, to the bit
+    before = np.zeros((4, 4))
+    before[0, 0], before[1, 1] = 1 / tan_x, 1 / tan_y
+    before[2, 2], before[2, 3], before[3, 2] = (100.0 + 0.1) / (0.1 - 100.0), 2 * 100.0 * 0.1 / (0.1 - 100.0), -1.0
+    assert np.array_equal(frustum.projection(t, 0.1, 100.0), before)
     assert frustum.equivalent_fov_deg(t) == pytest.approx(90.0)
     assert OutputConfig(320, 180, 90.0).tangents() == t
 
